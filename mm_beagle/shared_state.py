@@ -1,0 +1,196 @@
+"""Shared memory between the 1 kHz poller process and the ROS node.
+
+The poller is the only writer. Per sensor it keeps monotone totals (counts,
+metres, lift estimates) and a ring buffer of single polls. The node reads
+without ever blocking the poller: the totals are published under a sequence
+lock (a version counter that is odd while a write is in progress; a reader
+retries until it sees the same even version before and after its copy).
+
+The memory is a ``multiprocessing`` RawArray made by the node before it
+spawns the poller, so both processes map the same pages and nothing needs
+to be unlinked afterwards.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+# int64 fields per sensor
+I_VERSION = 0
+I_SEQ = 1  # polls done for this sensor
+I_X_TOTAL = 2  # measured counts
+I_Y_TOTAL = 3
+I_LIFT_TOTAL = 4  # polls that reported the lift bit
+I_SPI_ERRORS = 5
+I_OVERFLOWS = 6
+I_STATE = 7  # see STATE_*
+I_CPI_X = 8
+I_CPI_Y = 9
+I_STAMP_NS = 10  # system time of the newest poll
+I_GEN_X = 11  # emulator ground truth: counts that entered the sensor's counter
+I_GEN_Y = 12
+I_REINITS = 13  # successful (re)initialisations
+I_LIFT_LOST_X = 14  # emulator ground truth: counts cleared by lifts
+I_LIFT_LOST_Y = 15
+N_INT = 16
+
+# float64 fields per sensor
+F_X_TOTAL_M = 0
+F_Y_TOTAL_M = 1
+F_X_EST_COUNTS = 2  # lift-gap estimates, counts (not in the measured totals)
+F_Y_EST_COUNTS = 3
+F_X_EST_M = 4
+F_Y_EST_M = 5
+N_FLOAT = 6
+
+# poller-wide int64 fields
+G_POLLS = 0
+G_LATE = 1  # poll periods longer than LATE_FACTOR x the nominal period
+G_OVERRUNS = 2  # poll slots skipped because the poller fell behind
+G_RUNNING = 3
+G_HEARTBEAT_NS = 4
+G_PERIOD_SUM_NS = 5
+N_GLOBAL = 8
+
+HIST_BINS = 20_000  # period histogram, 1 us bins; the last bin takes everything longer
+
+STATE_DOWN = 0
+STATE_UP = 1
+STATE_STARTING = 2
+STATE_NAMES = {STATE_DOWN: "down", STATE_UP: "up", STATE_STARTING: "starting"}
+
+FLAG_LIFT = 1
+FLAG_MOTION = 2
+FLAG_OVERFLOW = 4
+FLAG_SPI_ERROR = 8
+FLAG_SETTINGS_READ = 16
+
+LATE_FACTOR = 1.5
+
+
+@dataclass(frozen=True, slots=True)
+class Totals:
+    """A consistent snapshot of one sensor's monotone totals."""
+
+    seq: int
+    x_total: int
+    y_total: int
+    lift_total: int
+    spi_errors: int
+    overflows: int
+    state: int
+    cpi_x: int
+    cpi_y: int
+    stamp_ns: int
+    gen_x: int
+    gen_y: int
+    reinits: int
+    lift_lost_x: int
+    lift_lost_y: int
+    x_total_m: float
+    y_total_m: float
+    x_est_counts: float
+    y_est_counts: float
+    x_est_m: float
+    y_est_m: float
+
+    @classmethod
+    def zero(cls, stamp_ns: int = 0) -> Totals:
+        return cls(*([0] * 9), stamp_ns, *([0] * 5), *([0.0] * 6))
+
+
+class SharedState:
+    """Views onto one shared buffer; built identically in both processes."""
+
+    def __init__(self, buffer: object, n_sensors: int, ring_size: int) -> None:
+        self.n_sensors = n_sensors
+        self.ring_size = ring_size
+        mem = memoryview(buffer).cast("B")  # type: ignore[arg-type]
+        offset = 0
+
+        def take(dtype: type, shape: tuple[int, ...]) -> np.ndarray:
+            nonlocal offset
+            dt = np.dtype(dtype)
+            offset = (offset + 7) & ~7
+            count = int(np.prod(shape))
+            arr = np.frombuffer(mem, dtype=dt, count=count, offset=offset).reshape(shape)
+            offset += count * dt.itemsize
+            return arr
+
+        self.ints = take(np.int64, (n_sensors, N_INT))
+        self.floats = take(np.float64, (n_sensors, N_FLOAT))
+        self.glob = take(np.int64, (N_GLOBAL,))
+        self.hist = take(np.int64, (HIST_BINS,))
+        self.ring_stamp = take(np.int64, (n_sensors, ring_size))
+        self.ring_dx = take(np.int16, (n_sensors, ring_size))
+        self.ring_dy = take(np.int16, (n_sensors, ring_size))
+        self.ring_status = take(np.uint16, (n_sensors, ring_size))
+        self.ring_cpi = take(np.uint16, (n_sensors, ring_size))
+        self.ring_flags = take(np.uint8, (n_sensors, ring_size))
+        self.nbytes = offset
+
+    @staticmethod
+    def size(n_sensors: int, ring_size: int) -> int:
+        """Bytes needed for the layout (with alignment slack)."""
+        per_ring = 8 + 2 + 2 + 2 + 2 + 1
+        return (
+            8 * n_sensors * (N_INT + N_FLOAT)
+            + 8 * (N_GLOBAL + HIST_BINS)
+            + n_sensors * ring_size * per_ring
+            + 8 * 16
+        )
+
+    # --- reader side (the node) --------------------------------------------------------
+
+    def snapshot(self, i: int, timeout_s: float = 0.05) -> Totals:
+        """Consistent totals of sensor ``i``; retries while the poller writes."""
+        ints, floats = self.ints[i], self.floats[i]
+        deadline = time.monotonic() + timeout_s
+        while True:
+            v1 = int(ints[I_VERSION])
+            if not v1 & 1:
+                iv = ints.tolist()
+                fv = floats.tolist()
+                if int(ints[I_VERSION]) == v1:
+                    return Totals(*iv[1:N_INT], *fv)
+            if time.monotonic() > deadline:
+                raise TimeoutError("the poller process holds the shared state (is it hung?)")
+
+    def samples(
+        self, i: int, since_seq: int, max_samples: int
+    ) -> tuple[int, int, int, dict[str, np.ndarray]]:
+        """Polls ``since_seq`` onwards from the ring: (first_seq, next_seq, dropped, arrays)."""
+        n = self.ring_size
+        seq_now = self.snapshot(i).seq
+        first = max(since_seq, seq_now - n, 0)
+        limit = n if max_samples <= 0 else min(max_samples, n)
+        end = min(seq_now, first + limit)
+        idx = np.arange(first, end, dtype=np.int64) % n
+        arrays = {
+            "stamp_ns": self.ring_stamp[i][idx],
+            "dx": self.ring_dx[i][idx],
+            "dy": self.ring_dy[i][idx],
+            "status": self.ring_status[i][idx],
+            "cpi": self.ring_cpi[i][idx],
+            "flags": self.ring_flags[i][idx],
+        }
+        # Slots the poller overwrote while we copied are not trustworthy.
+        oldest_valid = self.snapshot(i).seq - n
+        if oldest_valid > first:
+            cut = min(oldest_valid - first, end - first)
+            arrays = {k: v[cut:] for k, v in arrays.items()}
+            first += cut
+        dropped = max(0, first - since_seq) if since_seq < first else 0
+        return first, end, dropped, arrays
+
+    def period_percentiles(self, *quantiles: float) -> list[float]:
+        """Poll period quantiles in microseconds from the histogram."""
+        hist = self.hist.copy()
+        total = int(hist.sum())
+        if total == 0:
+            return [float("nan")] * len(quantiles)
+        cum = np.cumsum(hist)
+        return [float(np.searchsorted(cum, q * total, side="left")) for q in quantiles]

@@ -1,0 +1,1 @@
+"""Mouse Monitor PC: pure math (no Qt, no ROS) and, later, the Qt monitor."""

@@ -1,0 +1,297 @@
+"""The PLN2033 driver: registers, displacement, CPI, power, reset, patch code.
+
+No ROS here. The driver talks to any :class:`~pln2033.bus.SpiBus`; it speaks
+the frame format of a :class:`~pln2033.regmap.RegisterMap`.
+
+Counter semantics (what the emulator implements and the node relies on):
+reading the status register latches the sensor's X/Y counters into the
+delta registers and clears the counters; reading a delta register returns
+the latched value and clears it. So a displacement read is always status,
+delta X, delta Y in one transfer (:meth:`PLN2033.read_motion`), and any
+other status read (a settings read) must hand its displacement on to the
+caller -- :meth:`PLN2033.read_all_registers` does, so no count is lost.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from .bus import SpiBus
+from .errors import (
+    InvalidCpiError,
+    PatchError,
+    Pln2033Error,
+    SensorNotRespondingError,
+    SpiError,
+)
+from .regmap import REGISTER_NAMES, RegisterMap
+
+INCH_M = 0.0254
+"""One inch in metres: counts / cpi * INCH_M = metres."""
+
+
+@dataclass(frozen=True, slots=True)
+class Motion:
+    """One displacement read: counts since the previous read, sensor frame.
+
+    ``dx`` is along the sensor's X axis (robot's right), ``dy`` along its Y
+    axis (robot's forward), both signed 16-bit counts.
+    """
+
+    dx: int
+    dy: int
+    status: int
+    lifted: bool
+    moved: bool
+    overflow: bool
+
+
+def _signed16(value: int) -> int:
+    return value - 0x10000 if value & 0x8000 else value
+
+
+class PLN2033:
+    """One PLN2033 sensor on one chip select."""
+
+    def __init__(self, bus: SpiBus, regmap: RegisterMap | None = None, name: str = "pln2033"):
+        self.bus = bus
+        self.map = regmap or RegisterMap.default()
+        self.name = name
+        m = self.map
+        a = m.addresses
+        # The motion burst is built once: it runs 1000 times a second.
+        self._motion_tx = [a["status"], 0, 0, a["delta_x_disp"], 0, 0, a["delta_y_disp"], 0, 0]
+        self._all_tx: list[int] = []
+        for reg in REGISTER_NAMES:
+            self._all_tx += [a[reg], 0, 0]
+        self._overflow_mask = m.status_overflow_x | m.status_overflow_y
+
+    # --- raw register access ------------------------------------------------------
+
+    def _xfer(self, tx: list[int]) -> list[int]:
+        rx = self.bus.xfer2(tx)
+        if len(rx) != len(tx):
+            raise SpiError(f"{self.name}: sent {len(tx)} bytes, received {len(rx)}")
+        return rx
+
+    def read_register(self, name: str) -> int:
+        """Read one 16-bit register by name (see REGISTER_NAMES).
+
+        Reading ``status`` or a delta register clears counters: use
+        :meth:`read_motion` or :meth:`read_all_registers` for those.
+        """
+        rx = self._xfer([self.map.addresses[name], 0, 0])
+        return (rx[1] << 8) | rx[2]
+
+    def write_register(self, name: str, value: int) -> None:
+        if not 0 <= value <= 0xFFFF:
+            raise ValueError(f"register value {value} does not fit 16 bits")
+        self._xfer([self.map.addresses[name] | self.map.write_flag, value >> 8, value & 0xFF])
+
+    # --- displacement ---------------------------------------------------------------
+
+    def _decode_status(self, status: int) -> None:
+        if status & self.map.status_reserved:
+            raise SensorNotRespondingError(
+                f"{self.name}: status register reads {status:#06x} (reserved bits set): "
+                "no PLN2033 is answering; check wiring, chip select and 3.3 V supply"
+            )
+
+    def read_motion(self) -> Motion:
+        """Status, delta X and delta Y in one transfer; clears the counters."""
+        rx = self.bus.xfer2(self._motion_tx)
+        if len(rx) != 9:
+            raise SpiError(f"{self.name}: sent 9 bytes, received {len(rx)}")
+        status = (rx[1] << 8) | rx[2]
+        if status & self.map.status_reserved:
+            self._decode_status(status)
+        m = self.map
+        return Motion(
+            dx=_signed16((rx[4] << 8) | rx[5]),
+            dy=_signed16((rx[7] << 8) | rx[8]),
+            status=status,
+            lifted=bool(status & m.status_lift),
+            moved=bool(status & m.status_motion),
+            overflow=bool(status & self._overflow_mask),
+        )
+
+    def read_all_registers(self) -> tuple[Motion, dict[str, int]]:
+        """All 13 registers in one transfer, plus the displacement that read cleared.
+
+        The caller must add the returned :class:`Motion` to its sums: the
+        status read cleared the sensor's counters.
+        """
+        rx = self._xfer(self._all_tx)
+        values = {
+            reg: (rx[3 * i + 1] << 8) | rx[3 * i + 2] for i, reg in enumerate(REGISTER_NAMES)
+        }
+        status = values["status"]
+        self._decode_status(status)
+        m = self.map
+        motion = Motion(
+            dx=_signed16(values["delta_x_disp"]),
+            dy=_signed16(values["delta_y_disp"]),
+            status=status,
+            lifted=bool(status & m.status_lift),
+            moved=bool(status & m.status_motion),
+            overflow=bool(status & self._overflow_mask),
+        )
+        return motion, values
+
+    # --- resolution -------------------------------------------------------------------
+
+    def _command(self, opcode: str, argument: int = 0) -> int:
+        self.write_register("command_low", argument)
+        self.write_register("command_high", self.map.commands[opcode])
+        return self.read_register("command_low")
+
+    def _check_cpi(self, cpi: int) -> None:
+        problem = self.map.cpi_problem(cpi)
+        if problem:
+            raise InvalidCpiError(problem)
+
+    def get_x_cpi(self) -> int:
+        return self.map.decode_cpi(self._command("get_x_cpi"))
+
+    def get_y_cpi(self) -> int:
+        return self.map.decode_cpi(self._command("get_y_cpi"))
+
+    def set_x_cpi(self, cpi: int) -> None:
+        self._check_cpi(cpi)
+        self._command("set_x_cpi", self.map.encode_cpi(cpi))
+        self._verify_cpi("X", cpi, self.get_x_cpi())
+
+    def set_y_cpi(self, cpi: int) -> None:
+        self._check_cpi(cpi)
+        self._command("set_y_cpi", self.map.encode_cpi(cpi))
+        self._verify_cpi("Y", cpi, self.get_y_cpi())
+
+    def set_cpi(self, cpi: int) -> None:
+        """Set X and Y to the same resolution (as the original did)."""
+        self._check_cpi(cpi)
+        self.set_x_cpi(cpi)
+        self.set_y_cpi(cpi)
+
+    def _verify_cpi(self, axis: str, wanted: int, got: int) -> None:
+        if got != wanted:
+            raise Pln2033Error(f"{self.name}: {axis} resolution reads back {got} CPI, set {wanted}")
+
+    # --- power, reset, presence ------------------------------------------------------
+
+    def soft_reset(self) -> None:
+        """Reset registers, DSP RAM and counters to their power-up state."""
+        self.write_register("system_control", self.map.soft_reset_bit)
+
+    def power_down(self) -> None:
+        value = self.read_register("power_control")
+        self.write_register("power_control", value | self.map.power_down_bit)
+
+    def power_up(self) -> None:
+        value = self.read_register("power_control")
+        self.write_register("power_control", value & ~self.map.power_down_bit & 0xFFFF)
+
+    def check_presence(self) -> None:
+        """Write a pattern to the memory pointer and read it back.
+
+        A missing, unpowered or miswired sensor reads back 0x0000 or 0xFFFF.
+        """
+        pattern = self.map.presence_pattern
+        self.write_register("memory_pointer", pattern)
+        got = self.read_register("memory_pointer")
+        self.write_register("memory_pointer", 0)
+        if got != pattern:
+            raise SensorNotRespondingError(
+                f"{self.name}: no PLN2033 answers (wrote {pattern:#06x} to the memory pointer, "
+                f"read back {got:#06x}); check wiring (MISO/MOSI/SCLK/CS), the 3.3 V supply "
+                "and that SPI runs in mode 1"
+            )
+
+    # --- vendor patch code -------------------------------------------------------------
+
+    def load_patch(self, words: Sequence[int]) -> None:
+        """Write the patch code into the DSP RAM, verify it, then enable it."""
+        self._check_patch(words)
+        self.write_register("memory_pointer", self.map.patch_start)
+        for word in words:
+            self.write_register("memory_data", word)
+        self.verify_patch(words)
+        value = self.read_register("system_control")
+        self.write_register("system_control", value | self.map.patch_enable_bit)
+
+    def verify_patch(self, words: Sequence[int]) -> None:
+        """Read the DSP RAM back and compare it with ``words``."""
+        self._check_patch(words)
+        self.write_register("memory_pointer", self.map.patch_start)
+        for i, word in enumerate(words):
+            got = self.read_register("memory_data")
+            if got != word:
+                raise PatchError(
+                    f"{self.name}: patch code verify failed at word {i} "
+                    f"(address {self.map.patch_start + i:#06x}): wrote {word:#06x}, "
+                    f"read {got:#06x}"
+                )
+
+    def _check_patch(self, words: Sequence[int]) -> None:
+        room = self.map.memory_words - self.map.patch_start
+        if not words:
+            raise PatchError("the patch code is empty")
+        if len(words) > room:
+            raise PatchError(f"the patch code has {len(words)} words; the DSP RAM holds {room}")
+        bad = [w for w in words if not 0 <= w <= 0xFFFF]
+        if bad:
+            raise PatchError(f"patch words must be 16-bit, got {bad[0]!r}")
+
+    # --- bring-up ---------------------------------------------------------------------------
+
+    def initialise(self, cpi: int, patch: Sequence[int] | None = None) -> None:
+        """The initial configuration: reset, presence check, patch, power up, CPI."""
+        self._check_cpi(cpi)
+        self.soft_reset()
+        self.check_presence()
+        if patch is not None:
+            self.load_patch(patch)
+        self.power_up()
+        self.set_cpi(cpi)
+        self.read_motion()  # start from clean counters
+
+
+_HEX_TOKEN = re.compile(r"(?:0x)?([0-9a-fA-F]{1,2})\b")
+
+
+def read_patch_file(path: str | Path) -> list[int]:
+    """Read the vendor patch code the user supplies.
+
+    Two formats: a text file of bytes in hex (``0x12, 0x34 ...``, the output
+    of the original's arrayConverter; ``//`` and ``#`` comments allowed), or
+    a raw binary file. Bytes pair up big-endian into 16-bit RAM words.
+    """
+    p = Path(path)
+    try:
+        raw = p.read_bytes()
+    except OSError as exc:
+        raise PatchError(f"cannot read patch file {p}: {exc.strerror or exc}") from exc
+    try:
+        text = raw.decode("ascii")
+    except UnicodeDecodeError:
+        data = raw
+    else:
+        lines = [re.split(r"//|#", line, maxsplit=1)[0] for line in text.splitlines()]
+        body = " ".join(lines)
+        tokens = [t for t in re.split(r"[\s,;{}]+", body) if t]
+        if not tokens:
+            raise PatchError(f"patch file {p} has no bytes")
+        data_list = []
+        for tok in tokens:
+            m = _HEX_TOKEN.fullmatch(tok)
+            if not m:
+                raise PatchError(f"patch file {p}: '{tok}' is not a hex byte (like 0x1f)")
+            data_list.append(int(m.group(1), 16))
+        data = bytes(data_list)
+    if len(data) % 2:
+        raise PatchError(f"patch file {p} has {len(data)} bytes; 16-bit words need an even count")
+    if not data:
+        raise PatchError(f"patch file {p} is empty")
+    return [(data[i] << 8) | data[i + 1] for i in range(0, len(data), 2)]
