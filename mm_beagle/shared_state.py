@@ -53,6 +53,7 @@ G_OVERRUNS = 2  # poll slots skipped because the poller fell behind
 G_RUNNING = 3
 G_HEARTBEAT_NS = 4
 G_PERIOD_SUM_NS = 5
+G_COMMANDS_SENT = 6  # the one field the node writes: bumped after each command it sends
 N_GLOBAL = 8
 
 HIST_BINS = 20_000  # period histogram, 1 us bins; the last bin takes everything longer

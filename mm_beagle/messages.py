@@ -1,0 +1,87 @@
+"""Turn poller totals into mm_interfaces messages (thin; no logic beyond deltas)."""
+
+from __future__ import annotations
+
+from array import array
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from mm_interfaces.msg import SensorData, SensorSettings
+
+from .shared_state import Totals
+
+INT32_MIN, INT32_MAX = -(2**31), 2**31 - 1
+
+
+def stamp(ns: int) -> Time:
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def _clamp32(v: int) -> int:
+    return max(INT32_MIN, min(INT32_MAX, v))
+
+
+def sensor_data(device: str, prev: Totals, now: Totals) -> SensorData:
+    """The displacement between two snapshots of one sensor's totals."""
+    interval = max(0.0, (now.stamp_ns - prev.stamp_ns) / 1e9)
+    x_disp = now.x_total_m - prev.x_total_m
+    y_disp = now.y_total_m - prev.y_total_m
+    return SensorData(
+        stamp=stamp(now.stamp_ns),
+        id=device,
+        x_disp=x_disp,
+        y_disp=y_disp,
+        x_speed=x_disp / interval if interval > 0 else 0.0,
+        y_speed=y_disp / interval if interval > 0 else 0.0,
+        x_counts=_clamp32(now.x_total - prev.x_total),
+        y_counts=_clamp32(now.y_total - prev.y_total),
+        cpi=now.cpi_y,
+        samples=now.seq - prev.seq,
+        lift_events=now.lift_total - prev.lift_total,
+        interval=interval,
+        seq=now.seq,
+        x_total_counts=now.x_total,
+        y_total_counts=now.y_total,
+        x_total_disp=now.x_total_m,
+        y_total_disp=now.y_total_m,
+        lift_events_total=now.lift_total,
+        x_lift_est_counts=now.x_est_counts - prev.x_est_counts,
+        y_lift_est_counts=now.y_est_counts - prev.y_est_counts,
+        x_lift_est_disp=now.x_est_m - prev.x_est_m,
+        y_lift_est_disp=now.y_est_m - prev.y_est_m,
+        x_lift_est_total_disp=now.x_est_m,
+        y_lift_est_total_disp=now.y_est_m,
+    )
+
+
+def sensor_settings(device: str, reply: dict) -> SensorSettings:
+    regs = reply["registers"]
+    msg = SensorSettings(spi_device=device)
+    for name, value in regs.items():
+        setattr(msg, f"{name}_register", int(value))
+    msg.x_cpi = int(reply["cpi_x"])
+    msg.y_cpi = int(reply["cpi_y"])
+    msg.cpi = msg.y_cpi if msg.x_cpi == msg.y_cpi else 0
+    msg.lifted = bool(reply["lifted"])
+    msg.motion = bool(reply["motion"])
+    return msg
+
+
+def as_array(typecode: str, values: np.ndarray) -> array:
+    """numpy -> array.array, the type rclpy takes for primitive sequences without copying per item."""
+    out = array(typecode)
+    out.frombytes(np.ascontiguousarray(values).tobytes())
+    return out
+
+
+def diagnostic(
+    name: str, device: str, level: bytes, message: str, values: dict[str, object]
+) -> DiagnosticStatus:
+    return DiagnosticStatus(
+        level=level,
+        name=name,
+        message=message,
+        hardware_id=device,
+        values=[KeyValue(key=k, value=str(v)) for k, v in values.items()],
+    )

@@ -1,0 +1,296 @@
+"""mm-beagle: the sensor node. Thin: the poller process does the sensor work.
+
+Services (private namespace, so /mm_beagle/... by default):
+  ~/get_sensor_data      read-and-clear sums (empty id = every sensor that is up)
+  ~/get_sensor_settings  all registers of one sensor, without losing counts
+  ~/set_resolution       CPI of one sensor (X and Y)
+  ~/get_samples          single polls from the ring buffer
+Topics: ~/sensor_data (SensorData, sensor-data QoS, `publish_rate` Hz) and
+/diagnostics (one status per sensor every `diagnostics_period` s).
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+import time
+
+import psutil
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from mm_interfaces.msg import SensorData
+from mm_interfaces.srv import GetSamples, GetSensorData, GetSensorSettings, SetResolution
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data
+
+from . import messages
+from . import shared_state as ss
+from .params import NodeSettings, declare
+from .poller_client import PollerClient, PollerError
+
+NODE_NAME = "mm_beagle"
+
+
+class BeagleNode(Node):
+    def __init__(self, **kwargs) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+        self.settings: NodeSettings = declare(self)
+        cfg = self.settings.poller
+        self.devices = cfg.devices
+        self.poller = PollerClient(cfg)
+        self.poller.start()
+        start = ss.Totals.zero(time.time_ns())
+        # Read-and-clear cursors: one for the services, one for the topic.
+        self._served = [start] * len(self.devices)
+        self._published = [start] * len(self.devices)
+        self._lock = threading.Lock()
+        self._poller_ps: psutil.Process | None = None
+        self._cpu_last: tuple[float, float] | None = None
+        self._diag_last: tuple[float, list[int], int] | None = None
+        self._states = [ss.STATE_STARTING] * len(self.devices)
+        self._last_errors = [""] * len(self.devices)
+
+        self.create_service(GetSensorData, "~/get_sensor_data", self.on_get_sensor_data)
+        self.create_service(GetSensorSettings, "~/get_sensor_settings", self.on_get_settings)
+        self.create_service(SetResolution, "~/set_resolution", self.on_set_resolution)
+        self.create_service(GetSamples, "~/get_samples", self.on_get_samples)
+        self.data_pub = self.create_publisher(SensorData, "~/sensor_data", qos_profile_sensor_data)
+        self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        if self.settings.publish_rate > 0:
+            self.create_timer(1.0 / self.settings.publish_rate, self.publish_data)
+        self.create_timer(self.settings.diagnostics_period, self.publish_diagnostics)
+        self.create_timer(0.05, self.relay_poller_events)
+        self.get_logger().info(
+            f"polling {', '.join(self.devices)} at {cfg.poll_rate:g} Hz "
+            f"(backend {cfg.backend}, {cfg.cpi} CPI); services under {self.get_fully_qualified_name()}/"
+        )
+
+    # --- helpers -------------------------------------------------------------------------
+
+    def _unknown_id(self, sensor_id: str) -> str:
+        return f"unknown sensor id '{sensor_id}'; known: {', '.join(self.devices)}"
+
+    def _is_up(self, i: int) -> bool:
+        return int(self.poller.state.ints[i][ss.I_STATE]) == ss.STATE_UP
+
+    def _down_message(self, i: int) -> str:
+        why = self._last_errors[i] or "starting up"
+        return f"sensor {self.devices[i]} is down ({why})"
+
+    # --- services ------------------------------------------------------------------------
+
+    def on_get_sensor_data(self, req, res):
+        if req.id:
+            i = self.poller.index(req.id)
+            if i is None:
+                res.success, res.message = False, self._unknown_id(req.id)
+                return res
+            if not self._is_up(i):
+                res.success, res.message = False, self._down_message(i)
+                return res
+            wanted = [i]
+        else:
+            wanted = [i for i in range(len(self.devices)) if self._is_up(i)]
+            down = [self.devices[i] for i in range(len(self.devices)) if i not in wanted]
+            if not wanted:
+                res.success, res.message = False, "no sensor is up: " + "; ".join(
+                    self._down_message(i) for i in range(len(self.devices))
+                )
+                return res
+            res.message = f"down: {', '.join(down)}" if down else ""
+        data = []
+        with self._lock:
+            for i in wanted:
+                now = self.poller.state.snapshot(i)
+                data.append(messages.sensor_data(self.devices[i], self._served[i], now))
+                self._served[i] = now
+        res.data = data
+        res.success = True
+        return res
+
+    def on_get_settings(self, req, res):
+        i = self.poller.index(req.id)
+        if i is None:
+            res.success, res.message = False, self._unknown_id(req.id)
+            return res
+        try:
+            status, payload = self.poller.command("settings", i)
+        except PollerError as exc:
+            res.success, res.message = False, str(exc)
+            return res
+        if status != "ok":
+            res.success, res.message = False, str(payload)
+            return res
+        res.settings = messages.sensor_settings(self.devices[i], payload)  # type: ignore[arg-type]
+        res.success = True
+        return res
+
+    def on_set_resolution(self, req, res):
+        i = self.poller.index(req.id)
+        if i is None:
+            res.success, res.message = False, self._unknown_id(req.id)
+            return res
+        try:
+            status, payload = self.poller.command("set_cpi", i, int(req.cpi))
+        except PollerError as exc:
+            res.success, res.message = False, str(exc)
+            return res
+        res.cpi = int(self.poller.state.ints[i][ss.I_CPI_Y])
+        if status != "ok":
+            res.success, res.message = False, str(payload)
+            return res
+        res.success = True
+        res.message = f"{self.devices[i]} set to {res.cpi} CPI"
+        self.get_logger().info(res.message)
+        return res
+
+    def on_get_samples(self, req, res):
+        i = self.poller.index(req.id)
+        if i is None:
+            res.success, res.message = False, self._unknown_id(req.id)
+            return res
+        seq_now = int(self.poller.state.ints[i][ss.I_SEQ])
+        if req.since_seq > seq_now:
+            res.success = False
+            res.message = f"since_seq {req.since_seq} is ahead of the newest poll ({seq_now})"
+            return res
+        first, nxt, dropped, arr = self.poller.state.samples(i, req.since_seq, req.max_samples)
+        res.first_seq, res.next_seq, res.dropped = first, nxt, dropped
+        res.cpi = int(arr["cpi"][-1]) if len(arr["cpi"]) else int(
+            self.poller.state.ints[i][ss.I_CPI_Y]
+        )
+        res.stamp_ns = messages.as_array("Q", arr["stamp_ns"])
+        res.dx = messages.as_array("h", arr["dx"])
+        res.dy = messages.as_array("h", arr["dy"])
+        res.status = messages.as_array("H", arr["status"])
+        res.flags = messages.as_array("B", arr["flags"])
+        res.success = True
+        if dropped:
+            res.message = f"{dropped} polls had already left the ring buffer"
+        return res
+
+    # --- periodic work -----------------------------------------------------------------------
+
+    def publish_data(self) -> None:
+        with self._lock:
+            for i, dev in enumerate(self.devices):
+                if not self._is_up(i):
+                    continue
+                now = self.poller.state.snapshot(i)
+                msg = messages.sensor_data(dev, self._published[i], now)
+                self._published[i] = now
+                self.data_pub.publish(msg)
+
+    def relay_poller_events(self) -> None:
+        log = self.get_logger()
+        for event in self.poller.drain_events():
+            kind = event[0]
+            if kind == "up":
+                i = self.poller.index(event[1])
+                if i is not None:
+                    self._last_errors[i] = ""
+                log.info(f"sensor {event[1]} up: {event[2]}")
+            elif kind == "down":
+                i = self.poller.index(event[1])
+                if i is not None:
+                    self._last_errors[i] = event[2]
+                log.error(f"sensor {event[1]} down: {event[2]}")
+            elif kind == "fatal":
+                log.fatal(f"poller stopped: {event[1]}")
+            else:
+                log.info(str(event[1]))
+        if not self.poller.alive and not getattr(self, "_reported_dead", False):
+            self._reported_dead = True
+            log.fatal("the poller process is gone; no sensor data will be served")
+
+    def poller_cpu_percent(self) -> float:
+        """CPU use of the poller process since the previous call (% of one core)."""
+        try:
+            if self._poller_ps is None:
+                self._poller_ps = psutil.Process(self.poller.process.pid)
+            t = self._poller_ps.cpu_times()
+        except (psutil.Error, ValueError):
+            return float("nan")
+        busy, wall = t.user + t.system, time.monotonic()
+        last, self._cpu_last = self._cpu_last, (busy, wall)
+        if last is None or wall <= last[1]:
+            return float("nan")
+        return 100.0 * (busy - last[0]) / (wall - last[1])
+
+    def publish_diagnostics(self) -> None:
+        state = self.poller.state
+        glob = state.glob
+        wall = time.monotonic()
+        seqs = [int(state.ints[i][ss.I_SEQ]) for i in range(len(self.devices))]
+        polls = int(glob[ss.G_POLLS])
+        last, self._diag_last = self._diag_last, (wall, seqs, polls)
+        p50, p99 = state.period_percentiles(0.5, 0.99)
+        cpu = self.poller_cpu_percent()
+        arr = DiagnosticArray()
+        arr.header.stamp = self.get_clock().now().to_msg()
+        for i, dev in enumerate(self.devices):
+            t = state.snapshot(i)
+            rate = (
+                (seqs[i] - last[1][i]) / (wall - last[0]) if last and wall > last[0] else float("nan")
+            )
+            values = {
+                "state": ss.STATE_NAMES.get(t.state, "?"),
+                "achieved_rate_hz": f"{rate:.1f}",
+                "period_p50_us": f"{p50:.0f}",
+                "period_p99_us": f"{p99:.0f}",
+                "late_polls": int(glob[ss.G_LATE]),
+                "overruns": int(glob[ss.G_OVERRUNS]),
+                "spi_errors": t.spi_errors,
+                "lift_events": t.lift_total,
+                "overflows": t.overflows,
+                "cpi": t.cpi_y,
+                "x_total_counts": t.x_total,
+                "y_total_counts": t.y_total,
+                "reinits": t.reinits,
+                "poller_cpu_percent": f"{cpu:.1f}",
+                "last_error": self._last_errors[i],
+            }
+            if self.settings.poller.backend == "sim":
+                values["sim_generated_x_counts"] = t.gen_x
+                values["sim_generated_y_counts"] = t.gen_y
+                values["sim_lift_lost_x_counts"] = t.lift_lost_x
+                values["sim_lift_lost_y_counts"] = t.lift_lost_y
+            if t.state != ss.STATE_UP:
+                level, text = DiagnosticStatus.ERROR, self._down_message(i)
+            elif t.spi_errors or t.overflows:
+                level, text = DiagnosticStatus.WARN, "up, with SPI errors or counter overflows"
+            else:
+                level, text = DiagnosticStatus.OK, "up"
+            arr.status.append(messages.diagnostic(f"mm_beagle: {dev}", dev, level, text, values))
+        self.diag_pub.publish(arr)
+
+    def shutdown(self) -> None:
+        self.poller.stop()
+
+
+def main(argv: list[str] | None = None) -> int:
+    rclpy.init(args=argv if argv is not None else sys.argv)
+    node = None
+    code = 0
+    try:
+        node = BeagleNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (ValueError, ParameterException) as exc:  # bad parameters: say what, exit non-zero
+        print(f"mm-beagle: {exc}", file=sys.stderr)
+        code = 2
+    finally:
+        if node is not None:
+            print("mm-beagle: shutting down, stopping the poller", file=sys.stderr)
+            node.shutdown()
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

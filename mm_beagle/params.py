@@ -1,0 +1,129 @@
+"""The node's parameters, declared in one place with descriptors and ranges."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.node import Node
+
+from .poller import PollerConfig, SimConfig, parse_fail_windows
+
+BACKENDS = ("spidev", "sim")
+
+
+def _int(desc: str, lo: int, hi: int, step: int = 0) -> ParameterDescriptor:
+    return ParameterDescriptor(
+        description=desc,
+        read_only=True,
+        integer_range=[IntegerRange(from_value=lo, to_value=hi, step=step)],
+    )
+
+
+def _float(desc: str, lo: float, hi: float) -> ParameterDescriptor:
+    return ParameterDescriptor(
+        description=desc,
+        read_only=True,
+        floating_point_range=[FloatingPointRange(from_value=lo, to_value=hi, step=0.0)],
+    )
+
+
+def _plain(desc: str) -> ParameterDescriptor:
+    return ParameterDescriptor(description=desc, read_only=True)
+
+
+# name -> (default, descriptor)
+PARAMETERS = {
+    "devices": (
+        ["/dev/spidev1.0", "/dev/spidev1.1"],
+        _plain("spidev device paths, one per sensor; they are also the sensor ids"),
+    ),
+    "backend": ("spidev", _plain("'spidev' (real sensors) or 'sim' (emulated PLN2033s)")),
+    "cpi": (1600, _int("resolution at start, counts per inch (X and Y)", 100, 6400, 100)),
+    "poll_rate": (1000.0, _float("sensor polls per second (Hz)", 10.0, 2000.0)),
+    "spi_speed_hz": (3_000_000, _int("SPI clock (Hz)", 100_000, 8_000_000)),
+    "register_map": ("", _plain("YAML file overriding the assumed register map ('' = defaults)")),
+    "patch_file": ("", _plain("vendor patch code to load into the DSP RAM ('' = none)")),
+    "realtime_priority": (
+        50,
+        _int("SCHED_FIFO priority of the poller process (0 = normal scheduling)", 0, 99),
+    ),
+    "retry_interval": (1.0, _float("seconds between attempts to bring a failed sensor up", 0.1, 60.0)),
+    "ring_size": (65536, _int("single polls kept per sensor for get_samples", 1024, 4_194_304)),
+    "publish_rate": (
+        50.0,
+        _float("rate of the sensor_data topic (Hz); 0 = no topic", 0.0, 1000.0),
+    ),
+    "diagnostics_period": (1.0, _float("seconds between /diagnostics messages", 0.1, 60.0)),
+    "sim_trajectory": (
+        "figure_eight",
+        _plain("sim backend: still | straight | figure_eight | square | round_trip"),
+    ),
+    "sim_speed": (0.2, _float("sim backend: robot speed (m/s)", 0.001, 5.0)),
+    "sim_loop": (True, _plain("sim backend: repeat the trajectory; false = stop after one lap")),
+    "sim_mounts": (
+        [0.049, -0.0395, 0.0, 0.049, 0.0395, 0.0],
+        _plain("sim backend: x, y, yaw (base_link m, rad) of each sensor, flattened"),
+    ),
+    "sim_lift_rate": (0.0, _float("sim backend: lifts per second per sensor", 0.0, 100.0)),
+    "sim_noise_counts": (0.0, _float("sim backend: count noise per sqrt(second)", 0.0, 1e6)),
+    "sim_fail_windows": (
+        [""],
+        _plain("sim backend: 'DEVICE@START-END' (s) windows in which a sensor fails"),
+    ),
+}
+
+
+@dataclass
+class NodeSettings:
+    poller: PollerConfig
+    publish_rate: float
+    diagnostics_period: float
+
+
+def declare(node: Node) -> NodeSettings:
+    """Declare every parameter and return validated settings; ValueError says what is wrong."""
+    for name, (default, desc) in PARAMETERS.items():
+        node.declare_parameter(name, default, desc)
+    p = {name: node.get_parameter(name).value for name in PARAMETERS}
+    devices = list(p["devices"])
+    if not devices or any(not d for d in devices) or len(set(devices)) != len(devices):
+        raise ValueError(f"'devices' must name distinct devices, got {devices}")
+    if p["backend"] not in BACKENDS:
+        raise ValueError(f"'backend' is '{p['backend']}'; allowed: {', '.join(BACKENDS)}")
+    mounts_flat = list(p["sim_mounts"])
+    if len(mounts_flat) % 3:
+        raise ValueError("'sim_mounts' needs x, y, yaw per sensor (a multiple of 3 numbers)")
+    mounts = [tuple(mounts_flat[i : i + 3]) for i in range(0, len(mounts_flat), 3)]
+    fails = [s for s in p["sim_fail_windows"] if s]
+    parse_fail_windows(fails, devices)  # validate now, with a clear message
+    sim = SimConfig(
+        trajectory=p["sim_trajectory"],
+        speed=p["sim_speed"],
+        loop=p["sim_loop"],
+        mounts=mounts,  # type: ignore[arg-type]
+        lift_rate=p["sim_lift_rate"],
+        noise_counts=p["sim_noise_counts"],
+        fail_windows=fails,
+    )
+    if p["backend"] == "sim":
+        from mm_pc.simulator import TRAJECTORIES
+
+        if sim.trajectory not in TRAJECTORIES:
+            raise ValueError(
+                f"'sim_trajectory' is '{sim.trajectory}'; allowed: {', '.join(TRAJECTORIES)}"
+            )
+    cfg = PollerConfig(
+        devices=devices,
+        backend=p["backend"],
+        cpi=p["cpi"],
+        poll_rate=p["poll_rate"],
+        spi_speed_hz=p["spi_speed_hz"],
+        register_map=p["register_map"],
+        patch_file=p["patch_file"],
+        realtime_priority=p["realtime_priority"],
+        retry_interval=p["retry_interval"],
+        ring_size=p["ring_size"],
+        sim=sim,
+    )
+    return NodeSettings(cfg, p["publish_rate"], p["diagnostics_period"])

@@ -1,0 +1,90 @@
+"""The node's handle on the poller process (no ROS here either).
+
+Starts the poller with the ``spawn`` method (a fresh interpreter: nothing of
+rclpy's threads is forked), shares the memory with it, sends commands over a
+pipe and waits for the reply with a timeout, and stops it cleanly.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import threading
+from multiprocessing.connection import Connection
+
+from . import shared_state as ss
+from .poller import PollerConfig, run_poller
+
+COMMAND_TIMEOUT_S = 2.0
+
+
+class PollerError(RuntimeError):
+    """The poller did not answer or is not running."""
+
+
+class PollerClient:
+    def __init__(self, cfg: PollerConfig) -> None:
+        self.cfg = cfg
+        ctx = mp.get_context("spawn")
+        n = len(cfg.devices)
+        self._buffer = ctx.RawArray("b", ss.SharedState.size(n, cfg.ring_size))
+        self.state = ss.SharedState(self._buffer, n, cfg.ring_size)
+        self._cmd, child_cmd = ctx.Pipe(duplex=True)
+        self.events, child_events = ctx.Pipe(duplex=False)
+        self.process = ctx.Process(
+            target=run_poller,
+            args=(cfg, self._buffer, child_cmd, child_events),
+            name="mm_beagle_poller",
+            daemon=True,
+        )
+        self._lock = threading.Lock()
+        self._child_ends: tuple[Connection, Connection] = (child_cmd, child_events)
+
+    def start(self) -> None:
+        self.process.start()
+        for end in self._child_ends:
+            end.close()  # only the child holds these now: EOF tells us it died
+
+    @property
+    def alive(self) -> bool:
+        return self.process.is_alive()
+
+    def index(self, device: str) -> int | None:
+        try:
+            return self.cfg.devices.index(device)
+        except ValueError:
+            return None
+
+    def command(self, *msg: object, timeout: float = COMMAND_TIMEOUT_S) -> tuple[str, object]:
+        """Send one command, wait for its reply: ("ok"|"invalid"|"error", payload)."""
+        with self._lock:
+            if not self.alive:
+                raise PollerError("the poller process is not running")
+            self._cmd.send(msg)
+            self.state.glob[ss.G_COMMANDS_SENT] += 1  # after the send: the poller then finds it
+            if not self._cmd.poll(timeout):
+                raise PollerError(f"the poller did not answer {msg[0]!r} within {timeout:g} s")
+            return self._cmd.recv()
+
+    def drain_events(self) -> list[tuple]:
+        """Events the poller sent since the last call (non-blocking)."""
+        out = []
+        try:
+            while self.events.poll():
+                out.append(self.events.recv())
+        except (EOFError, OSError):
+            pass
+        return out
+
+    def stop(self, timeout: float = 3.0) -> None:
+        """Ask the poller to stop; terminate it if it does not."""
+        if self.alive:
+            try:
+                self.command("stop", timeout=timeout)
+            except (PollerError, OSError, EOFError):
+                pass
+            self.process.join(timeout)
+            if self.process.is_alive():
+                self.process.terminate()
+                self.process.join(1.0)
+        self._cmd.close()
+        self.events.close()
