@@ -91,7 +91,9 @@ class SpidevBus:
             self._dev.max_speed_hz = speed_hz
         except OSError as exc:
             self._dev.close()
-            raise SpiError(f"cannot configure {path} (mode 1, 8 bit): {exc.strerror or exc}") from exc
+            raise SpiError(
+                f"cannot configure {path} (mode 1, 8 bit): {exc.strerror or exc}"
+            ) from exc
 
     def xfer2(self, data: list[int]) -> list[int]:
         try:

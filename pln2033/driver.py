@@ -240,7 +240,11 @@ class PLN2033:
             raise PatchError("the patch code is empty")
         if len(words) > room:
             raise PatchError(f"the patch code has {len(words)} words; the DSP RAM holds {room}")
-        bad = [w for w in words if not 0 <= w <= 0xFFFF]
+        bad = [
+            w
+            for w in words
+            if isinstance(w, bool) or not isinstance(w, int) or not 0 <= w <= 0xFFFF
+        ]
         if bad:
             raise PatchError(f"patch words must be 16-bit, got {bad[0]!r}")
 
@@ -259,6 +263,9 @@ class PLN2033:
 
 
 _HEX_TOKEN = re.compile(r"(?:0x)?([0-9a-fA-F]{1,2})\b")
+# Control characters no hex text file holds: a file with any is raw binary,
+# even when all its bytes are below 0x80 (and so decode as ASCII).
+_BINARY_CHARS = re.compile(r"[\x00-\x08\x0e-\x1f\x7f]")
 
 
 def read_patch_file(path: str | Path) -> list[int]:
@@ -276,6 +283,8 @@ def read_patch_file(path: str | Path) -> list[int]:
     try:
         text = raw.decode("ascii")
     except UnicodeDecodeError:
+        text = None
+    if text is None or _BINARY_CHARS.search(text):
         data = raw
     else:
         lines = [re.split(r"//|#", line, maxsplit=1)[0] for line in text.splitlines()]

@@ -169,6 +169,9 @@ class EmulatedPLN2033:
         if self.lift_windows and self._lifted_between(t0, now):
             if not self._lifted:
                 self._start_lift()
+            # A window that ends inside this interval leaves the sensor down again:
+            # the lift is reported by the next status read, not by every read after.
+            self._lifted = now < self.lift_windows[self._lift_idx][1]
             return
         self._lifted = False
         if not self.powered:

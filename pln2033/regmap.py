@@ -117,14 +117,25 @@ class RegisterMap:
         addresses = {name: _u16(regs[name], f"registers.{name}", mask) for name in REGISTER_NAMES}
         if len(set(addresses.values())) != len(addresses):
             raise RegisterMapError(f"two registers share an address: {addresses}")
+        write_flag = _u16(d["frame"]["write_flag"], "frame.write_flag", 0xFF)
+        if not write_flag or write_flag & mask:
+            raise RegisterMapError(
+                f"'frame.write_flag' ({write_flag:#04x}) must be a non-zero bit outside "
+                f"'frame.address_mask' ({mask:#04x}), or reads and writes are confused"
+            )
         cpi = d["cpi"]
         cpi_min, cpi_max, step = (_u16(cpi[k], f"cpi.{k}") for k in ("min", "max", "step"))
         if not (0 < cpi_min <= cpi_max and step > 0):
             raise RegisterMapError(f"cpi range is empty: min={cpi_min} max={cpi_max} step={step}")
+        if cpi_min % step:
+            raise RegisterMapError(
+                f"'cpi.min' ({cpi_min}) must be a multiple of 'cpi.step' ({step}): "
+                "the sensor's code is cpi / step"
+            )
         status = d["status_bits"]
-        return cls(
+        regmap = cls(
             addresses=addresses,
-            write_flag=_u16(d["frame"]["write_flag"], "frame.write_flag", 0xFF),
+            write_flag=write_flag,
             address_mask=mask,
             status_motion=_u16(status["motion"], "status_bits.motion"),
             status_lift=_u16(status["lift"], "status_bits.lift"),
@@ -145,6 +156,10 @@ class RegisterMap:
             patch_start=_u16(d["memory"]["patch_start"], "memory.patch_start"),
             presence_pattern=_u16(d["presence_check"]["pattern"], "presence_check.pattern"),
         )
+        problem = regmap.cpi_problem(regmap.cpi_default)
+        if problem:
+            raise RegisterMapError(f"'cpi.default' is not a valid resolution: {problem}")
+        return regmap
 
     # --- the CPI encoding -------------------------------------------------------
 
