@@ -7,6 +7,7 @@ from array import array
 import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+
 from mm_interfaces.msg import SensorData, SensorSettings
 
 from .shared_state import Totals
@@ -69,7 +70,7 @@ def sensor_settings(device: str, reply: dict) -> SensorSettings:
 
 
 def as_array(typecode: str, values: np.ndarray) -> array:
-    """numpy -> array.array, the type rclpy takes for primitive sequences without copying per item."""
+    """numpy -> array.array: rclpy takes it for a primitive sequence without a per-item check."""
     out = array(typecode)
     out.frombytes(np.ascontiguousarray(values).tobytes())
     return out

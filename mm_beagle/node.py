@@ -11,6 +11,7 @@ Topics: ~/sensor_data (SensorData, sensor-data QoS, `publish_rate` Hz) and
 
 from __future__ import annotations
 
+import signal
 import sys
 import threading
 import time
@@ -18,12 +19,14 @@ import time
 import psutil
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from mm_interfaces.msg import SensorData
-from mm_interfaces.srv import GetSamples, GetSensorData, GetSensorSettings, SetResolution
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
+from rclpy.signals import SignalHandlerOptions
+
+from mm_interfaces.msg import SensorData
+from mm_interfaces.srv import GetSamples, GetSensorData, GetSensorSettings, SetResolution
 
 from . import messages
 from . import shared_state as ss
@@ -40,7 +43,6 @@ class BeagleNode(Node):
         cfg = self.settings.poller
         self.devices = cfg.devices
         self.poller = PollerClient(cfg)
-        self.poller.start()
         start = ss.Totals.zero(time.time_ns())
         # Read-and-clear cursors: one for the services, one for the topic.
         self._served = [start] * len(self.devices)
@@ -51,6 +53,9 @@ class BeagleNode(Node):
         self._diag_last: tuple[float, list[int], int] | None = None
         self._states = [ss.STATE_STARTING] * len(self.devices)
         self._last_errors = [""] * len(self.devices)
+        self.fatal = ""
+        self.poller.start()
+        self._wait_for_first_bring_up(timeout=10.0)
 
         self.create_service(GetSensorData, "~/get_sensor_data", self.on_get_sensor_data)
         self.create_service(GetSensorSettings, "~/get_sensor_settings", self.on_get_settings)
@@ -61,13 +66,24 @@ class BeagleNode(Node):
         if self.settings.publish_rate > 0:
             self.create_timer(1.0 / self.settings.publish_rate, self.publish_data)
         self.create_timer(self.settings.diagnostics_period, self.publish_diagnostics)
-        self.create_timer(0.05, self.relay_poller_events)
+        self.create_timer(0.2, self.relay_poller_events)
         self.get_logger().info(
             f"polling {', '.join(self.devices)} at {cfg.poll_rate:g} Hz "
-            f"(backend {cfg.backend}, {cfg.cpi} CPI); services under {self.get_fully_qualified_name()}/"
+            f"(backend {cfg.backend}, {cfg.cpi} CPI); "
+            f"services under {self.get_fully_qualified_name()}/"
         )
 
     # --- helpers -------------------------------------------------------------------------
+
+    def _wait_for_first_bring_up(self, timeout: float) -> None:
+        """Advertise the services only once every sensor is up or has failed once."""
+        ints = self.poller.state.ints
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline and self.poller.alive:
+            if all(int(ints[i][ss.I_STATE]) != ss.STATE_STARTING for i in range(len(self.devices))):
+                break
+            time.sleep(0.02)
+        self.relay_poller_events()
 
     def _unknown_id(self, sensor_id: str) -> str:
         return f"unknown sensor id '{sensor_id}'; known: {', '.join(self.devices)}"
@@ -95,8 +111,10 @@ class BeagleNode(Node):
             wanted = [i for i in range(len(self.devices)) if self._is_up(i)]
             down = [self.devices[i] for i in range(len(self.devices)) if i not in wanted]
             if not wanted:
-                res.success, res.message = False, "no sensor is up: " + "; ".join(
-                    self._down_message(i) for i in range(len(self.devices))
+                res.success, res.message = (
+                    False,
+                    "no sensor is up: "
+                    + "; ".join(self._down_message(i) for i in range(len(self.devices))),
                 )
                 return res
             res.message = f"down: {', '.join(down)}" if down else ""
@@ -158,8 +176,8 @@ class BeagleNode(Node):
             return res
         first, nxt, dropped, arr = self.poller.state.samples(i, req.since_seq, req.max_samples)
         res.first_seq, res.next_seq, res.dropped = first, nxt, dropped
-        res.cpi = int(arr["cpi"][-1]) if len(arr["cpi"]) else int(
-            self.poller.state.ints[i][ss.I_CPI_Y]
+        res.cpi = (
+            int(arr["cpi"][-1]) if len(arr["cpi"]) else int(self.poller.state.ints[i][ss.I_CPI_Y])
         )
         res.stamp_ns = messages.as_array("Q", arr["stamp_ns"])
         res.dx = messages.as_array("h", arr["dx"])
@@ -199,11 +217,14 @@ class BeagleNode(Node):
                 log.error(f"sensor {event[1]} down: {event[2]}")
             elif kind == "fatal":
                 log.fatal(f"poller stopped: {event[1]}")
+                self.fatal = str(event[1])
             else:
                 log.info(str(event[1]))
-        if not self.poller.alive and not getattr(self, "_reported_dead", False):
-            self._reported_dead = True
-            log.fatal("the poller process is gone; no sensor data will be served")
+        if not self.poller.alive:
+            # Without the poller the node has nothing to serve: stop, exit non-zero.
+            self.fatal = self.fatal or "the poller process is gone"
+            log.fatal(f"{self.fatal}; shutting down")
+            self.context.try_shutdown()
 
     def poller_cpu_percent(self) -> float:
         """CPU use of the poller process since the previous call (% of one core)."""
@@ -233,10 +254,13 @@ class BeagleNode(Node):
         for i, dev in enumerate(self.devices):
             t = state.snapshot(i)
             rate = (
-                (seqs[i] - last[1][i]) / (wall - last[0]) if last and wall > last[0] else float("nan")
+                (seqs[i] - last[1][i]) / (wall - last[0])
+                if last and wall > last[0]
+                else float("nan")
             )
             values = {
                 "state": ss.STATE_NAMES.get(t.state, "?"),
+                "polls": t.seq,
                 "achieved_rate_hz": f"{rate:.1f}",
                 "period_p50_us": f"{p50:.0f}",
                 "period_p99_us": f"{p99:.0f}",
@@ -270,15 +294,36 @@ class BeagleNode(Node):
         self.poller.stop()
 
 
+def _stop_on_signals() -> None:
+    """SIGINT/SIGTERM end the spin by shutting the context down; a second one is ignored.
+
+    (rclpy's own handler also re-raises KeyboardInterrupt later, which could
+    land in the middle of stopping the poller.)
+    """
+
+    def handler(signum, _frame) -> None:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        rclpy.try_shutdown()
+
+    signal.signal(signal.SIGINT, handler)
+    signal.signal(signal.SIGTERM, handler)
+
+
 def main(argv: list[str] | None = None) -> int:
-    rclpy.init(args=argv if argv is not None else sys.argv)
+    rclpy.init(
+        args=argv if argv is not None else sys.argv,
+        signal_handler_options=SignalHandlerOptions.NO,
+    )
+    _stop_on_signals()
     node = None
     code = 0
     try:
         node = BeagleNode()
         rclpy.spin(node)
+        code = 1 if node.fatal else 0
     except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        code = 1 if node is not None and node.fatal else 0
     except (ValueError, ParameterException) as exc:  # bad parameters: say what, exit non-zero
         print(f"mm-beagle: {exc}", file=sys.stderr)
         code = 2

@@ -48,7 +48,10 @@ PARAMETERS = {
         50,
         _int("SCHED_FIFO priority of the poller process (0 = normal scheduling)", 0, 99),
     ),
-    "retry_interval": (1.0, _float("seconds between attempts to bring a failed sensor up", 0.1, 60.0)),
+    "retry_interval": (
+        1.0,
+        _float("seconds between attempts to bring a failed sensor up", 0.1, 60.0),
+    ),
     "ring_size": (65536, _int("single polls kept per sensor for get_samples", 1024, 4_194_304)),
     "publish_rate": (
         50.0,
@@ -61,6 +64,12 @@ PARAMETERS = {
     ),
     "sim_speed": (0.2, _float("sim backend: robot speed (m/s)", 0.001, 5.0)),
     "sim_loop": (True, _plain("sim backend: repeat the trajectory; false = stop after one lap")),
+    "sim_duration": (
+        0.0,
+        _float(
+            "sim backend: seconds of motion, then stand still (0 = the path as it is)", 0.0, 1e6
+        ),
+    ),
     "sim_mounts": (
         [0.049, -0.0395, 0.0, 0.049, 0.0395, 0.0],
         _plain("sim backend: x, y, yaw (base_link m, rad) of each sensor, flattened"),
@@ -101,6 +110,7 @@ def declare(node: Node) -> NodeSettings:
         trajectory=p["sim_trajectory"],
         speed=p["sim_speed"],
         loop=p["sim_loop"],
+        duration=p["sim_duration"],
         mounts=mounts,  # type: ignore[arg-type]
         lift_rate=p["sim_lift_rate"],
         noise_counts=p["sim_noise_counts"],

@@ -30,6 +30,7 @@ from . import shared_state as ss
 from .lift_gap import LiftGapEstimator
 
 ERRORS_BEFORE_DOWN = 3  # consecutive failed polls before a sensor is declared down
+HEALTH_CHECK_S = 1.0  # how often the CPI is read back to catch a chip that reset itself
 
 
 @dataclass
@@ -39,6 +40,7 @@ class SimConfig:
     trajectory: str = "figure_eight"
     speed: float = 0.2  # m/s
     loop: bool = True  # repeat the path; False = stand still after one lap
+    duration: float = 0.0  # s of motion (the path repeated or cut to fit); 0 = as the path is
     mounts: list[tuple[float, float, float]] = field(default_factory=list)  # base_link x, y, yaw
     lift_rate: float = 0.0  # lifts per second per sensor
     lift_duration: float = 0.01  # s
@@ -62,7 +64,9 @@ class PollerConfig:
     sim: SimConfig = field(default_factory=SimConfig)
 
 
-def parse_fail_windows(specs: list[str], devices: list[str]) -> dict[str, list[tuple[float, float]]]:
+def parse_fail_windows(
+    specs: list[str], devices: list[str]
+) -> dict[str, list[tuple[float, float]]]:
     """``["/dev/spidev1.1@0-2.5"]`` -> {"/dev/spidev1.1": [(0.0, 2.5)]}; errors name the format."""
     out: dict[str, list[tuple[float, float]]] = {d: [] for d in devices}
     for spec in specs:
@@ -86,6 +90,8 @@ def _make_sim_buses(cfg: PollerConfig, t0: float) -> dict[str, object]:
     """One emulated PLN2033 per device, driven by the ground-truth simulator."""
     import random
 
+    import numpy as np
+
     from mm_pc import simulator
     from pln2033.emulator import EmulatedPLN2033
     from pln2033.motion import SampledPath
@@ -93,13 +99,18 @@ def _make_sim_buses(cfg: PollerConfig, t0: float) -> dict[str, object]:
     sim = cfg.sim
     mounts = [simulator.SensorMount(*m) for m in sim.mounts] or list(simulator.DEFAULT_MOUNTS)
     v, w = simulator.trajectory(sim.trajectory, sim.speed)
+    loop = sim.loop
+    if sim.duration > 0:  # repeat or cut the path to this long, then stand still
+        n = max(1, round(sim.duration / simulator.DT))
+        v, w = np.resize(v, n), np.resize(w, n)
+        loop = False
     fails = parse_fail_windows(sim.fail_windows, cfg.devices)
     regmap = RegisterMap.load(cfg.register_map) if cfg.register_map else None
     buses: dict[str, object] = {}
     for i, dev in enumerate(cfg.devices):
         mount = mounts[i % len(mounts)]
         cx, cy = simulator.cumulative_sensor_path(v, w, simulator.DT, mount)
-        path = SampledPath(cx, cy, simulator.DT, t_start=t0, loop=sim.loop)
+        path = SampledPath(cx, cy, simulator.DT, t_start=t0, loop=loop)
         lifts = []
         if sim.lift_rate > 0:
             rng = random.Random(sim.seed * 1000 + i)
@@ -154,6 +165,7 @@ class Channel:
         self.driver: PLN2033 | None = None
         self.bus: object | None = None
         self.cpi_x = self.cpi_y = 0
+        self.cpi_wanted = 0  # the CPI the chip should have: configured, then as commanded
         self.seq = 0
         self.consecutive_errors = 0
         self.next_retry = 0.0
@@ -239,10 +251,10 @@ class Poller:
         self.state = state
         self.commands = commands
         self.events = events
-        self.channels = [
-            Channel(i, d, state, cfg.ring_size) for i, d in enumerate(cfg.devices)
-        ]
-        self.regmap = RegisterMap.load(cfg.register_map) if cfg.register_map else RegisterMap.default()
+        self.channels = [Channel(i, d, state, cfg.ring_size) for i, d in enumerate(cfg.devices)]
+        self.regmap = (
+            RegisterMap.load(cfg.register_map) if cfg.register_map else RegisterMap.default()
+        )
         self.patch = read_patch_file(cfg.patch_file) if cfg.patch_file else None
         self.t0 = time.monotonic()
         self.sim_buses = _make_sim_buses(cfg, self.t0) if cfg.backend == "sim" else {}
@@ -265,8 +277,10 @@ class Poller:
             if ch.bus is None:
                 ch.bus = self.sim_buses.get(ch.device) or _open_spidev(ch.device, self.cfg)
             driver = PLN2033(ch.bus, self.regmap, name=ch.device)  # type: ignore[arg-type]
-            driver.initialise(self.cfg.cpi, self.patch)
+            ch.cpi_wanted = ch.cpi_wanted or self.cfg.cpi
+            driver.initialise(ch.cpi_wanted, self.patch)
             ch.set_cpi_cache(driver.get_x_cpi(), driver.get_y_cpi())
+            driver.read_motion()  # counts from before this point belong to the start-up
         except (Pln2033Error, ValueError, OSError) as exc:
             self.mark_down(ch, now, f"start-up failed: {exc}")
             return
@@ -276,7 +290,12 @@ class Poller:
         if stats is not None and ch.sim_stats is None:
             # Counts before the first initialisation were discarded on purpose.
             ch.sim_stats = stats
-            ch.sim_base = (stats.counted_x, stats.counted_y, stats.lift_cleared_x, stats.lift_cleared_y)
+            ch.sim_base = (
+                stats.counted_x,
+                stats.counted_y,
+                stats.lift_cleared_x,
+                stats.lift_cleared_y,
+            )
         ch.ints[ss.I_REINITS] += 1
         ch.ints[ss.I_STATE] = ss.STATE_UP
         self.emit("up", ch.device, f"initialised at {ch.cpi_x} CPI")
@@ -313,6 +332,22 @@ class Poller:
         ch.consecutive_errors = 0
         ch.record(stamp_ns, m)
 
+    def check_health(self, ch: Channel, now: float) -> None:
+        """Read the CPI back: a chip that lost power mid-run comes back at its default.
+
+        Its counts since the last poll are gone either way; re-initialising at
+        once keeps the next counts at the right scale (and reloads the patch).
+        """
+        if ch.driver is None:
+            return
+        try:
+            x, y = ch.driver.get_x_cpi(), ch.driver.get_y_cpi()
+        except Pln2033Error:
+            return  # the polls count SPI errors; they decide about "down"
+        if (x, y) != (ch.cpi_x, ch.cpi_y):
+            self.mark_down(ch, now, f"the sensor reset itself (CPI reads {x}/{y}, set {ch.cpi_x})")
+            self.try_init(ch, now)
+
     # --- commands from the node ---
 
     def serve_command(self, msg: tuple) -> object:
@@ -327,8 +362,16 @@ class Poller:
             if kind == "settings":
                 motion, regs = ch.driver.read_all_registers()
                 ch.record(time.time_ns(), motion, ss.FLAG_SETTINGS_READ)
-                return ("ok", {"registers": regs, "cpi_x": ch.cpi_x, "cpi_y": ch.cpi_y,
-                               "lifted": motion.lifted, "motion": motion.moved})
+                return (
+                    "ok",
+                    {
+                        "registers": regs,
+                        "cpi_x": ch.cpi_x,
+                        "cpi_y": ch.cpi_y,
+                        "lifted": motion.lifted,
+                        "motion": motion.moved,
+                    },
+                )
             if kind == "set_cpi":
                 cpi = msg[2]
                 problem = self.regmap.cpi_problem(cpi)
@@ -337,6 +380,7 @@ class Poller:
                 # Drain the counters at the old CPI first, so every count keeps its scale.
                 ch.record(time.time_ns(), ch.driver.read_motion())
                 ch.driver.set_cpi(cpi)
+                ch.cpi_wanted = cpi
                 ch.set_cpi_cache(ch.driver.get_x_cpi(), ch.driver.get_y_cpi())
                 return ("ok", ch.cpi_y)
         except InvalidCpiError as exc:
@@ -364,7 +408,12 @@ class Poller:
     def run(self) -> None:
         cfg = self.cfg
         glob, hist = memoryview(self.state.glob), memoryview(self.state.hist)
-        g_polls, g_late, g_sum, g_beat = ss.G_POLLS, ss.G_LATE, ss.G_PERIOD_SUM_NS, ss.G_HEARTBEAT_NS
+        g_polls, g_late, g_sum, g_beat = (
+            ss.G_POLLS,
+            ss.G_LATE,
+            ss.G_PERIOD_SUM_NS,
+            ss.G_HEARTBEAT_NS,
+        )
         g_cmd = ss.G_COMMANDS_SENT
         wall_ns, sleep = time.time_ns, time.sleep
         period_ns = round(1e9 / cfg.poll_rate)
@@ -376,6 +425,8 @@ class Poller:
         glob[ss.G_RUNNING] = 1
         clock = time.perf_counter_ns
         next_t = clock()
+        health_ns = int(HEALTH_CHECK_S * 1e9)
+        next_health = next_t + health_ns
         last = 0
         channels = self.channels
         while self.running:
@@ -394,6 +445,10 @@ class Poller:
                 self.poll(ch, stamp, mono)
             glob[g_polls] += 1
             glob[g_beat] = t
+            if t >= next_health:
+                next_health = t + health_ns
+                for ch in channels:
+                    self.check_health(ch, mono)
             if glob[g_cmd] != self.commands_seen:
                 self.commands_seen = glob[g_cmd]
                 self.handle_commands()
@@ -424,14 +479,13 @@ def _tune_process(priority: int) -> str:
             note.append(f"SCHED_FIFO priority {priority}")
         except (PermissionError, OSError, AttributeError) as exc:
             note.append(
-                f"no real-time priority ({exc}); run as root or grant CAP_SYS_NICE for steadier polls"
+                f"no real-time priority ({exc}); "
+                "run as root or grant CAP_SYS_NICE for steadier polls"
             )
     return ", ".join(note)
 
 
-def run_poller(
-    cfg: PollerConfig, buffer: object, commands: Connection, events: Connection
-) -> None:
+def run_poller(cfg: PollerConfig, buffer: object, commands: Connection, events: Connection) -> None:
     """Entry point of the poller process."""
     # Ctrl-C goes to the whole process group; the node decides when we stop.
     signal.signal(signal.SIGINT, signal.SIG_IGN)

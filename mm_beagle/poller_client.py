@@ -7,6 +7,7 @@ pipe and waits for the reply with a timeout, and stops it cleanly.
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing as mp
 import threading
 from multiprocessing.connection import Connection
@@ -28,6 +29,7 @@ class PollerClient:
         n = len(cfg.devices)
         self._buffer = ctx.RawArray("b", ss.SharedState.size(n, cfg.ring_size))
         self.state = ss.SharedState(self._buffer, n, cfg.ring_size)
+        self.state.ints[:, ss.I_STATE] = ss.STATE_STARTING  # zeroed memory would read "down"
         self._cmd, child_cmd = ctx.Pipe(duplex=True)
         self.events, child_events = ctx.Pipe(duplex=False)
         self.process = ctx.Process(
@@ -78,10 +80,8 @@ class PollerClient:
     def stop(self, timeout: float = 3.0) -> None:
         """Ask the poller to stop; terminate it if it does not."""
         if self.alive:
-            try:
+            with contextlib.suppress(PollerError, OSError, EOFError):
                 self.command("stop", timeout=timeout)
-            except (PollerError, OSError, EOFError):
-                pass
             self.process.join(timeout)
             if self.process.is_alive():
                 self.process.terminate()

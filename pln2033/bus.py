@@ -23,15 +23,16 @@ MIN_SPEED_HZ = 100_000
 _DEVICE_RE = re.compile(r"^/dev/spidev(\d+)\.(\d+)$")
 
 OVERLAY_HINT = (
-    "On a BeagleBone Black enable SPI1 with both chip selects through a device-tree "
-    "overlay (e.g. uboot_overlay_addr0=BB-SPIDEV1-00A0.dtbo in /boot/uEnv.txt) and "
-    "disable HDMI (disable_uboot_overlay_video=1), which shares the SPI1 pins; "
-    "then reboot. See docs/hardware-setup.md."
+    "On a BeagleBone Black enable SPI1 through a device-tree overlay "
+    "(uboot_overlay_addr4=BB-SPIDEV1-00A0.dtbo in /boot/uEnv.txt), turn off HDMI audio "
+    "and video, which share the SPI1 pins (disable_uboot_overlay_audio=1, "
+    "disable_uboot_overlay_video=1), make P9_42 the second chip select "
+    "(config-pin P9_42 spi_cs), then reboot. See docs/hardware-setup.md"
 )
 PERMISSION_HINT = (
     "Run as a member of the 'spi' group (sudo usermod -aG spi $USER, then log in "
     "again) or add a udev rule: SUBSYSTEM==\"spidev\", GROUP=\"spi\", MODE=\"0660\". "
-    "See docs/hardware-setup.md."
+    "See docs/hardware-setup.md"
 )
 
 

@@ -65,6 +65,7 @@ class SampledPath:
         self.loop = loop
         self._n = len(self._x) - 1  # number of intervals
         self.duration = self._n * dt
+        self._cache: tuple[float, float, float] = (t_start, 0.0, 0.0)  # consecutive calls share a t
 
     def position(self, t: float) -> tuple[float, float]:
         """Cumulative position at time t (metres, sensor frame)."""
@@ -89,8 +90,10 @@ class SampledPath:
         return x0, y0
 
     def displacement(self, t0: float, t1: float) -> tuple[float, float]:
-        x0, y0 = self.position(t0)
+        ct, cx, cy = self._cache
+        x0, y0 = (cx, cy) if ct == t0 else self.position(t0)
         x1, y1 = self.position(t1)
+        self._cache = (t1, x1, y1)
         return x1 - x0, y1 - y0
 
 

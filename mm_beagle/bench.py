@@ -1,0 +1,204 @@
+"""mm-bench: benchmarks that print one JSON object.
+
+mm-bench poll --seconds S --json
+    mm-beagle on emulated sensors (separate process) while two client
+    processes call get_sensor_data at 100 Hz each. Reports the poll rate and
+    period, the poller's CPU use, count conservation per client and the
+    service round-trip time. Also a bare sleep loop measured in the same run
+    (``baseline_sleep_p99_us``): on a virtual machine the wake-up latency of
+    an idle vCPU dominates the period tail, and the ratio tells code from host.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import os
+import platform
+import sys
+import time
+
+import numpy as np
+import psutil
+
+from .harness import BeagleClient, beagle_process, use_isolated_ros_env
+
+
+def sleep_loop_periods(seconds: float, period_s: float = 0.001) -> np.ndarray:
+    """Periods (us) of a bare absolute-deadline sleep loop: the host's floor."""
+    periods = []
+    nxt = last = time.perf_counter_ns()
+    end = last + int(seconds * 1e9)
+    step = int(period_s * 1e9)
+    while last < end:
+        nxt += step
+        time.sleep(max(0.0, (nxt - time.perf_counter_ns()) / 1e9))
+        t = time.perf_counter_ns()
+        periods.append(t - last)
+        last = t
+    return np.array(periods) / 1e3
+
+
+def _client(name: str, seconds: float, rate: float, conn) -> None:
+    """One client process: get_sensor_data(id='') at ``rate`` Hz, then a final read."""
+    import rclpy
+
+    client = BeagleClient(name)
+    client.wait(20)
+    rtts, sums, totals, seqs, failures = [], {}, {}, [], 0
+    conn.send("ready")
+    conn.recv()  # start together
+    period = 1.0 / rate
+    t_next = time.monotonic()
+    end = t_next + seconds
+
+    def one_call() -> None:
+        nonlocal failures
+        t0 = time.perf_counter()
+        res = client.call("get_sensor_data", id="")
+        rtts.append((time.perf_counter() - t0) * 1e3)
+        if not res.success:
+            failures += 1
+        for d in res.data:
+            sx, sy = sums.get(d.id, (0, 0))
+            sums[d.id] = (sx + d.x_counts, sy + d.y_counts)
+            totals[d.id] = (d.x_total_counts, d.y_total_counts)
+        if res.data:
+            seqs.append((time.monotonic(), res.data[0].seq))
+
+    while time.monotonic() < end:
+        one_call()
+        t_next += period
+        time.sleep(max(0.0, t_next - time.monotonic()))
+    (t_a, seq_a), (t_b, seq_b) = seqs[0], seqs[-1]
+    conn.send("done")
+    conn.recv()  # final read once the robot stands still
+    one_call()
+    rtts.pop()
+    conn.send(
+        {
+            "rtts": rtts,
+            "sums": sums,
+            "totals": totals,
+            "failures": failures,
+            "rate_hz": (seq_b - seq_a) / (t_b - t_a),
+        }
+    )
+    client.close()
+    rclpy.shutdown()
+
+
+def _poller_process(node_pid: int) -> psutil.Process:
+    for child in psutil.Process(node_pid).children():
+        if any("spawn_main" in part for part in child.cmdline()):
+            return child
+    raise RuntimeError("the poller process of mm_beagle was not found")
+
+
+def bench_poll(seconds: float, rate: float, n_clients: int) -> dict:
+    import rclpy
+
+    baseline = sleep_loop_periods(2.0)
+    use_isolated_ros_env()
+    motion_s = max(1.0, seconds - 2.0)
+    params = {"backend": "sim", "sim_trajectory": "figure_eight", "sim_duration": motion_s}
+    ctx = mp.get_context("spawn")
+    with beagle_process(params, env=dict(os.environ)) as proc:
+        client = BeagleClient("mm_bench")
+        if not client.wait(30):
+            raise RuntimeError("mm_beagle did not come up")
+        pipes, procs = [], []
+        for k in range(n_clients):
+            a, b = ctx.Pipe()
+            p = ctx.Process(target=_client, args=(f"mm_bench_client_{k}", seconds, rate, b))
+            p.start()
+            pipes.append(a)
+            procs.append(p)
+        for a in pipes:
+            a.recv()
+        poller = _poller_process(proc.pid)
+        cpu0, wall0 = poller.cpu_times(), time.monotonic()
+        for a in pipes:
+            a.send("go")
+        for a in pipes:
+            a.recv()
+        cpu1, wall1 = poller.cpu_times(), time.monotonic()
+        time.sleep(max(0.0, motion_s + 1.5 - seconds))  # the robot stands still by now
+        for a in pipes:
+            a.send("final")
+        results = [a.recv() for a in pipes]
+        for p in procs:
+            p.join(10)
+        final = client.diagnostics(newer_than=time.monotonic())
+        client.close()
+        rclpy.shutdown()
+
+    devices = sorted(final)
+    generated = {
+        d: (int(final[d]["sim_generated_x_counts"]), int(final[d]["sim_generated_y_counts"]))
+        for d in devices
+    }
+
+    def served_by(r: dict) -> dict:
+        return {d: tuple(r["totals"].get(d, (0, 0))) for d in devices}
+
+    def lost(served: dict) -> int:
+        return sum(abs(generated[d][k] - served[d][k]) for d in devices for k in (0, 1))
+
+    rc_sum = {
+        d: tuple(sum(r["sums"].get(d, (0, 0))[k] for r in results) for k in (0, 1)) for d in devices
+    }
+    rtts = np.array([x for r in results for x in r["rtts"]])
+    base_p50, base_p99 = np.percentile(baseline, [50, 99])
+    return {
+        "benchmark": "poll",
+        "seconds": seconds,
+        "clients": n_clients,
+        "client_rate_hz": rate,
+        "rate_hz": round(min(r["rate_hz"] for r in results), 1),
+        "period_p50_us": float(final[devices[0]]["period_p50_us"]),
+        "period_p99_us": float(final[devices[0]]["period_p99_us"]),
+        "late_polls": int(final[devices[0]]["late_polls"]),
+        "polls": int(final[devices[0]]["polls"]),
+        "cpu_percent": round(
+            100 * ((cpu1.user + cpu1.system) - (cpu0.user + cpu0.system)) / (wall1 - wall0), 2
+        ),
+        "counts_generated": sum(abs(v) for g in generated.values() for v in g),
+        "counts_served": [sum(abs(v) for s in served_by(r).values() for v in s) for r in results],
+        "counts_lost": max(lost(served_by(r)) for r in results),
+        "read_and_clear_counts_lost": lost(rc_sum),
+        "failed_requests": sum(r["failures"] for r in results),
+        "requests": len(rtts),
+        "service_rtt_p50_ms": round(float(np.percentile(rtts, 50)), 3),
+        "service_rtt_p99_ms": round(float(np.percentile(rtts, 99)), 3),
+        "baseline_sleep_p50_us": round(float(base_p50), 1),
+        "baseline_sleep_p99_us": round(float(base_p99), 1),
+        "machine": {
+            "cpus": os.cpu_count(),
+            "python": platform.python_version(),
+            "platform": platform.platform(),
+            "load_avg_1min": round(os.getloadavg()[0], 2),
+        },
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="mm-bench", description=__doc__.split("\n\n")[0])
+    sub = parser.add_subparsers(dest="what", required=True)
+    poll = sub.add_parser("poll", help="the 1 kHz poller under two 100 Hz clients")
+    poll.add_argument("--seconds", type=float, default=10.0)
+    poll.add_argument("--rate", type=float, default=100.0, help="requests per second per client")
+    poll.add_argument("--clients", type=int, default=2)
+    poll.add_argument("--json", action="store_true", help="print JSON only (the default)")
+    args = parser.parse_args(argv)
+    if args.what == "poll":
+        if not args.seconds >= 3 or not args.rate > 0 or args.clients < 1:
+            parser.error("need --seconds >= 3, --rate > 0, --clients >= 1")
+        result = bench_poll(args.seconds, args.rate, args.clients)
+    print(json.dumps(result, indent=None if args.json else 2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

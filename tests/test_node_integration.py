@@ -1,0 +1,303 @@
+"""mm-beagle as a real process, talked to over real ROS 2 services and topics.
+
+The node runs with the sim backend (emulated PLN2033s behind the real driver);
+the test talks to it from its own client node in this process.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import psutil
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+from rclpy.qos import qos_profile_sensor_data  # noqa: E402
+
+from mm_beagle.harness import BeagleClient, beagle_process, node_command  # noqa: E402
+from mm_interfaces.msg import SensorData  # noqa: E402
+
+S0, S1 = "/dev/spidev1.0", "/dev/spidev1.1"
+BAD_CPIS = [0, 99, 150, 6401, 65535, 1234]
+
+pytestmark = pytest.mark.ros
+
+
+@pytest.fixture(scope="module")
+def client():
+    c = BeagleClient("mm_test_client")
+    yield c
+    c.close()
+
+
+@pytest.fixture(scope="module")
+def node(client, tmp_path_factory):
+    """One node for the module: sensor 2 fails for its first 4 s, then comes up."""
+    log = tmp_path_factory.mktemp("node") / "mm_beagle.log"
+    params = {
+        "backend": "sim",
+        "sim_trajectory": "figure_eight",
+        "sim_fail_windows": [f"{S1}@0-4"],
+        "retry_interval": 0.5,
+        "publish_rate": 20.0,
+        "diagnostics_period": 0.5,
+    }
+    with beagle_process(params, env=dict(os.environ), log_path=str(log)) as proc:
+        assert client.wait(30), f"services did not come up; log:\n{log.read_text()}"
+        yield proc, log
+
+
+def totals(res, device):
+    (d,) = [d for d in res.data if d.id == device]
+    return d
+
+
+def test_services_live_under_the_private_namespace(node, client):
+    names = dict(client.node.get_service_names_and_types())
+    for srv in ("get_sensor_data", "get_sensor_settings", "set_resolution", "get_samples"):
+        assert f"/mm_beagle/{srv}" in names
+
+
+def test_failed_sensor_is_reported_and_the_other_keeps_working(node, client):
+    res = client.call("get_sensor_data", id=S1)
+    if res.success:  # the module fixture may have started more than 4 s ago
+        pytest.skip("sensor 2 already recovered")
+    assert "down" in res.message and S1 in res.message
+    assert not res.data
+    both = client.call("get_sensor_data", id="")
+    assert both.success
+    assert [d.id for d in both.data] == [S0]
+    assert S1 in both.message
+
+
+def test_failed_sensor_recovers(node, client):
+    deadline = time.monotonic() + 15
+    while time.monotonic() < deadline:
+        res = client.call("get_sensor_data", id=S1)
+        if res.success:
+            break
+        time.sleep(0.2)
+    assert res.success, res.message
+    assert res.data[0].id == S1
+
+
+def test_read_and_clear_and_totals_agree(node, client):
+    test_failed_sensor_recovers(node, client)
+    first = client.call("get_sensor_data", id="")
+    assert first.success and len(first.data) == 2
+    sums = {d.id: [0, 0] for d in first.data}
+    base = {d.id: (d.x_total_counts, d.y_total_counts) for d in first.data}
+    for _ in range(30):
+        time.sleep(0.01)
+        res = client.call("get_sensor_data", id="")
+        for d in res.data:
+            sums[d.id][0] += d.x_counts
+            sums[d.id][1] += d.y_counts
+            assert d.samples > 0 and d.interval > 0
+            assert d.cpi == 1600
+    for d in res.data:
+        assert sums[d.id] == [d.x_total_counts - base[d.id][0], d.y_total_counts - base[d.id][1]]
+        # metres follow the counts at 1600 CPI
+        assert d.y_total_disp == pytest.approx(
+            d.y_total_counts * 0.0254 / 1600, rel=1e-9, abs=1e-12
+        )
+    # the robot drives forward: sensor Y counts grow
+    assert all(sums[k][1] > 0 for k in sums)
+
+
+def test_unknown_id_is_rejected_and_changes_nothing(node, client):
+    before = totals(client.call("get_sensor_data", id=""), S0)
+    for bad in ("/dev/spidev9.9", "spidev1.0", " ", "/dev/spidev1.0 "):
+        res = client.call("get_sensor_data", id=bad)
+        assert not res.success and not res.data
+        assert "unknown sensor id" in res.message and S0 in res.message and S1 in res.message
+        for srv, extra in (
+            ("get_sensor_settings", {}),
+            ("set_resolution", {"cpi": 800}),
+            ("get_samples", {"since_seq": 0}),
+        ):
+            r = client.call(srv, id=bad, **extra)
+            assert not r.success and "unknown sensor id" in r.message
+    after = totals(client.call("get_sensor_data", id=""), S0)
+    assert after.cpi == 1600
+    # read-and-clear after the bad calls still covers the whole interval
+    assert after.seq - before.seq == after.samples
+
+
+@pytest.mark.parametrize("cpi", BAD_CPIS)
+def test_bad_cpi_is_rejected_and_changes_nothing(node, client, cpi):
+    res = client.call("set_resolution", id=S0, cpi=cpi)
+    assert not res.success
+    assert "100..6400" in res.message
+    assert res.cpi == 1600
+    settings = client.call("get_sensor_settings", id=S0)
+    assert settings.success and settings.settings.cpi == 1600
+
+
+def test_set_resolution_reads_back_and_scales_metres(node, client):
+    res = client.call("set_resolution", id=S0, cpi=800)
+    assert res.success and res.cpi == 800, res.message
+    try:
+        s = client.call("get_sensor_settings", id=S0).settings
+        assert (s.cpi, s.x_cpi, s.y_cpi) == (800, 800, 800)
+        client.call("get_sensor_data", id=S0)
+        time.sleep(0.2)
+        d = client.call("get_sensor_data", id=S0).data[0]
+        assert d.cpi == 800
+        assert d.y_disp == pytest.approx(d.y_counts * 0.0254 / 800, rel=1e-9, abs=1e-12)
+        other = client.call("get_sensor_settings", id=S1).settings
+        assert other.cpi == 1600
+    finally:
+        assert client.call("set_resolution", id=S0, cpi=1600).success
+
+
+def test_settings_read_does_not_eat_counts(node, client):
+    """Many settings reads between two data reads: the totals still follow every poll."""
+    client.call("get_sensor_data", id=S0)
+    for _ in range(20):
+        s = client.call("get_sensor_settings", id=S0)
+        assert s.success and s.settings.spi_device == S0
+        assert s.settings.mode_status_register == 1
+    samples_before = client.call("get_samples", id=S0, since_seq=0)
+    d = client.call("get_sensor_data", id=S0).data[0]
+    # every poll in the ring (settings reads included) adds up to the totals
+    res = client.call("get_samples", id=S0, since_seq=samples_before.first_seq)
+    assert res.success
+    assert res.dropped == 0
+    assert res.next_seq >= d.seq
+
+
+def test_get_samples_chain_covers_every_poll_once(node, client):
+    first = client.call("get_samples", id=S0, since_seq=0, max_samples=1)
+    start_seq = first.next_seq
+    d0 = client.call("get_sensor_data", id=S0).data[0]
+    seq, dx_sum, dy_sum, n = start_seq, 0, 0, 0
+    time.sleep(0.3)
+    d1 = client.call("get_sensor_data", id=S0).data[0]
+    while seq < d1.seq:
+        res = client.call("get_samples", id=S0, since_seq=seq, max_samples=100)
+        assert res.success and res.first_seq == seq and res.dropped == 0
+        assert len(res.dx) == len(res.dy) == len(res.stamp_ns) == res.next_seq - seq
+        assert list(res.stamp_ns) == sorted(res.stamp_ns)
+        take = min(len(res.dx), d1.seq - seq)
+        dx_sum += sum(res.dx[:take])
+        dy_sum += sum(res.dy[:take])
+        n += take
+        seq += take
+    # counts of the polls after start_seq up to d1.seq == totals difference
+    start_totals_x = d0.x_total_counts - sum(
+        client.call("get_samples", id=S0, since_seq=start_seq, max_samples=d0.seq - start_seq).dx
+    )
+    assert d1.x_total_counts - start_totals_x == dx_sum
+    assert n == d1.seq - start_seq
+    assert dy_sum > 0
+
+
+def test_get_samples_rejects_a_future_seq(node, client):
+    res = client.call("get_samples", id=S0, since_seq=2**63)
+    assert not res.success and "ahead of the newest poll" in res.message
+
+
+def test_topic_carries_sensor_data(node, client):
+    got: list[SensorData] = []
+    sub = client.node.create_subscription(
+        SensorData, "/mm_beagle/sensor_data", got.append, qos_profile_sensor_data
+    )
+    deadline = time.monotonic() + 10
+    while len({m.id for m in got}) < 2 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    client.node.destroy_subscription(sub)
+    assert {m.id for m in got} == {S0, S1}
+    for m in got:
+        assert m.samples > 0 and m.interval > 0
+
+
+def test_diagnostics_per_sensor(node, client):
+    diag = client.diagnostics(newer_than=time.monotonic())
+    assert set(diag) == {S0, S1}
+    for values in diag.values():
+        assert values["state"] == "up"
+        assert float(values["achieved_rate_hz"]) > 500
+        for key in ("period_p99_us", "late_polls", "spi_errors", "lift_events", "cpi"):
+            assert key in values
+    assert int(diag[S1]["reinits"]) == 1  # came up after its fail window
+    assert "down" not in diag[S0]["last_error"]
+
+
+def _start(params: dict, namespace: str = "/standalone") -> subprocess.Popen:
+    """A node of its own, in a namespace apart from the module's node."""
+    return subprocess.Popen(
+        node_command(params, namespace),
+        env=dict(os.environ),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_clean_shutdown_stops_the_poller(sig):
+    proc = _start({"backend": "sim", "devices": [S0]}, namespace=f"/shutdown{int(sig)}")
+    c = BeagleClient(f"mm_shutdown_{int(sig)}", namespace=f"/shutdown{int(sig)}/mm_beagle")
+    try:
+        assert c.wait(30)
+        kids = psutil.Process(proc.pid).children()
+        assert kids
+        proc.send_signal(sig)
+        out, _ = proc.communicate(timeout=15)
+        assert proc.returncode == 0, out
+        assert "stopping the poller" in out
+        _, alive = psutil.wait_procs(kids, timeout=5)
+        assert not alive
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        c.close()
+
+
+@pytest.mark.parametrize(
+    ("params", "expect"),
+    [
+        ({"cpi": 150}, "cpi"),
+        ({"cpi": 6401}, "cpi"),
+        ({"backend": "usb"}, "allowed: spidev, sim"),
+        ({"backend": "sim", "sim_trajectory": "zigzag"}, "allowed:"),
+        ({"backend": "sim", "sim_fail_windows": ["/dev/spidev1.0@5-1"]}, "START < END"),
+        ({"backend": "sim", "sim_mounts": [0.1, 0.2]}, "multiple of 3"),
+        ({"poll_rate": 0.0}, "poll_rate"),
+    ],
+)
+def test_bad_parameters_exit_with_a_clear_message(params, expect):
+    proc = _start(params)
+    out, _ = proc.communicate(timeout=30)
+    assert proc.returncode != 0
+    assert expect in out
+
+
+def test_missing_spidev_device_is_reported_not_fatal():
+    """Real backend, no BBB here: the node stays up and says what to do."""
+    proc = _start({"backend": "spidev", "devices": ["/dev/spidev9.0"], "retry_interval": 0.2})
+    c = BeagleClient("mm_spidev_client", namespace="/standalone/mm_beagle")
+    try:
+        assert c.wait(30)
+        res = c.call("get_sensor_data", id="/dev/spidev9.0")
+        assert not res.success
+        assert "does not exist" in res.message and "overlay" in res.message
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=15)
+        c.close()
+
+
+def test_node_importable_without_running():
+    out = subprocess.run(
+        [sys.executable, "-c", "import mm_beagle.node, mm_beagle.poller; print('ok')"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert out.stdout.strip() == "ok", out.stderr
