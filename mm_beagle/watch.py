@@ -1,0 +1,138 @@
+"""mm-watch: a live text view of what mm-beagle serves.
+
+Listens to the node's sensor_data topic (so it never takes counts away from
+service clients) and /diagnostics, and redraws a small table twice a second:
+per sensor the poll rate, speed, distance travelled, CPI, lifts and state.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import threading
+import time
+from dataclasses import dataclass
+
+
+@dataclass
+class SensorView:
+    """What the view shows of one sensor (SI units; printed in mm and m)."""
+
+    samples: int = 0
+    interval: float = 0.0
+    x_speed: float = 0.0
+    y_speed: float = 0.0
+    x_total: float = 0.0
+    y_total: float = 0.0
+    cpi: int = 0
+    lifts: int = 0
+    lift_est: float = 0.0
+
+    def update(self, msg) -> None:
+        self.samples += msg.samples
+        self.interval += msg.interval
+        self.x_speed, self.y_speed = msg.x_speed, msg.y_speed
+        self.x_total, self.y_total = msg.x_total_disp, msg.y_total_disp
+        self.cpi = msg.cpi
+        self.lifts = msg.lift_events_total
+        self.lift_est = math.hypot(msg.x_lift_est_total_disp, msg.y_lift_est_total_disp)
+
+    def take_rate(self) -> float:
+        """Polls per second since the previous call."""
+        rate = self.samples / self.interval if self.interval > 0 else float("nan")
+        self.samples, self.interval = 0, 0.0
+        return rate
+
+
+HEADER = (
+    f"{'sensor':<16}{'state':>7}{'polls/s':>9}{'vx mm/s':>9}{'vy mm/s':>9}"
+    f"{'x m':>9}{'y m':>9}{'CPI':>6}{'lifts':>7}{'lift est m':>11}"
+)
+
+
+def format_row(device: str, view: SensorView, state: str, rate: float) -> str:
+    return (
+        f"{device:<16}{state:>7}{rate:>9.0f}{view.x_speed * 1e3:>9.1f}{view.y_speed * 1e3:>9.1f}"
+        f"{view.x_total:>9.3f}{view.y_total:>9.3f}{view.cpi:>6}{view.lifts:>7}{view.lift_est:>11.4f}"
+    )
+
+
+def run(duration: float, namespace: str, refresh: float, out=sys.stdout) -> int:
+    """Show the view for ``duration`` s (0 = until Ctrl-C). Returns messages received."""
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import qos_profile_sensor_data
+
+    from mm_interfaces.msg import SensorData
+
+    if not rclpy.ok():
+        rclpy.init()
+    node = rclpy.create_node("mm_watch")
+    lock = threading.Lock()
+    views: dict[str, SensorView] = {}
+    states: dict[str, str] = {}
+    received = 0
+
+    def on_data(msg) -> None:
+        nonlocal received
+        with lock:
+            views.setdefault(msg.id, SensorView()).update(msg)
+            received += 1
+
+    def on_diag(msg) -> None:
+        with lock:
+            for s in msg.status:
+                values = {kv.key: kv.value for kv in s.values}
+                if "state" in values:
+                    states[s.hardware_id] = values["state"]
+
+    node.create_subscription(
+        SensorData, f"{namespace}/sensor_data", on_data, qos_profile_sensor_data
+    )
+    node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 10)
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    end = time.monotonic() + duration if duration > 0 else math.inf
+    tty = out.isatty()
+    try:
+        while time.monotonic() < end:
+            time.sleep(refresh)
+            with lock:
+                rows = [
+                    format_row(dev, v, states.get(dev, "?"), v.take_rate())
+                    for dev, v in sorted(views.items())
+                ]
+            if tty:
+                out.write("\x1b[H\x1b[2J")  # redraw in place on a terminal
+            stamp = time.strftime("%H:%M:%S")
+            if rows:
+                out.write(f"{stamp}  {namespace}/sensor_data\n{HEADER}\n" + "\n".join(rows) + "\n")
+            else:
+                out.write(f"{stamp}  waiting for {namespace}/sensor_data ...\n")
+            out.flush()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        executor.shutdown(timeout_sec=1.0)
+        node.destroy_node()
+    return received
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="mm-watch", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--duration", type=float, default=0.0, help="seconds; 0 = until Ctrl-C")
+    parser.add_argument("--namespace", default="/mm_beagle", help="the node's namespace/name")
+    parser.add_argument("--refresh", type=float, default=0.5, help="seconds between redraws")
+    args = parser.parse_args(argv)
+    if args.duration < 0 or args.refresh <= 0:
+        parser.error("--duration must be >= 0 and --refresh > 0")
+    received = run(args.duration, args.namespace, args.refresh)
+    return 0 if received or args.duration == 0 else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

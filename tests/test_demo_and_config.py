@@ -1,0 +1,69 @@
+"""The shipped parameter file, the demo and the live view."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+pytest.importorskip("rclpy")
+from mm_beagle.params import PARAMETERS
+from mm_beagle.watch import HEADER, SensorView, format_row
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_params_file_lists_every_parameter_with_its_default():
+    data = yaml.safe_load((ROOT / "mm_beagle/config/mm_beagle.yaml").read_text())
+    params = data["mm_beagle"]["ros__parameters"]
+    assert set(params) == set(PARAMETERS)
+    for name, (default, _desc) in PARAMETERS.items():
+        assert params[name] == default, name
+
+
+def test_watch_row_shows_mm_per_s_and_metres():
+    view = SensorView(x_speed=0.0123, y_speed=-0.2, x_total=1.5, y_total=-2.25, cpi=800, lifts=3)
+    row = format_row("/dev/spidev1.0", view, "up", 999.6)
+    assert row.split() == [
+        "/dev/spidev1.0",
+        "up",
+        "1000",
+        "12.3",
+        "-200.0",
+        "1.500",
+        "-2.250",
+        "800",
+        "3",
+        "0.0000",
+    ]
+    assert len(row) == len(HEADER)  # the columns line up under the header
+
+
+@pytest.mark.ros
+def test_demo_runs_and_shows_both_sensors():
+    out = subprocess.run(
+        [sys.executable, "-m", "mm_beagle.demo", "--duration", "3"],
+        capture_output=True,
+        text=True,
+        timeout=90,
+        env=dict(os.environ),
+    )
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert "/dev/spidev1.0       up" in out.stdout
+    assert "/dev/spidev1.1       up" in out.stdout
+    assert "SensorData messages received" in out.stdout
+
+
+def test_bench_rejects_bad_arguments():
+    out = subprocess.run(
+        [sys.executable, "-m", "mm_beagle.bench", "poll", "--seconds", "1"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert out.returncode == 2
+    assert "--seconds >= 3" in out.stderr
