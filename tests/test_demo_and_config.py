@@ -46,7 +46,7 @@ def test_watch_row_shows_mm_per_s_and_metres():
 @pytest.mark.ros
 def test_demo_runs_and_shows_both_sensors():
     out = subprocess.run(
-        [sys.executable, "-m", "mm_beagle.demo", "--duration", "3"],
+        [sys.executable, "-m", "mm_beagle.demo", "--duration", "6"],
         capture_output=True,
         text=True,
         timeout=90,
