@@ -20,7 +20,7 @@ import psutil
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from rclpy.signals import SignalHandlerOptions
@@ -128,40 +128,41 @@ class BeagleNode(Node):
         res.success = True
         return res
 
-    def on_get_settings(self, req, res):
-        i = self.poller.index(req.id)
+    def _poller_command(self, res, sensor_id: str, kind: str, *args) -> tuple[int, object]:
+        """Run a poller command for one sensor id: (index, payload), or (-1, None) on failure.
+
+        On failure ``res`` already carries success=false and the reason.
+        """
+        i = self.poller.index(sensor_id)
         if i is None:
-            res.success, res.message = False, self._unknown_id(req.id)
-            return res
+            res.success, res.message = False, self._unknown_id(sensor_id)
+            return -1, None
         try:
-            status, payload = self.poller.command("settings", i)
+            status, payload = self.poller.command(kind, i, *args)
         except PollerError as exc:
             res.success, res.message = False, str(exc)
-            return res
+            return -1, None
         if status != "ok":
             res.success, res.message = False, str(payload)
-            return res
-        res.settings = messages.sensor_settings(self.devices[i], payload)  # type: ignore[arg-type]
-        res.success = True
+            return -1, None
+        return i, payload
+
+    def on_get_settings(self, req, res):
+        i, payload = self._poller_command(res, req.id, "settings")
+        if i >= 0:
+            res.settings = messages.sensor_settings(self.devices[i], payload)  # type: ignore[arg-type]
+            res.success = True
         return res
 
     def on_set_resolution(self, req, res):
-        i = self.poller.index(req.id)
-        if i is None:
-            res.success, res.message = False, self._unknown_id(req.id)
-            return res
-        try:
-            status, payload = self.poller.command("set_cpi", i, int(req.cpi))
-        except PollerError as exc:
-            res.success, res.message = False, str(exc)
-            return res
-        res.cpi = int(self.poller.state.ints[i][ss.I_CPI_Y])
-        if status != "ok":
-            res.success, res.message = False, str(payload)
-            return res
-        res.success = True
-        res.message = f"{self.devices[i]} set to {res.cpi} CPI"
-        self.get_logger().info(res.message)
+        i, _ = self._poller_command(res, req.id, "set_cpi", int(req.cpi))
+        known = self.poller.index(req.id)
+        if known is not None:  # the CPI in force, whether or not the request succeeded
+            res.cpi = int(self.poller.state.ints[known][ss.I_CPI_Y])
+        if i >= 0:
+            res.success = True
+            res.message = f"{self.devices[i]} set to {res.cpi} CPI"
+            self.get_logger().info(res.message)
         return res
 
     def on_get_samples(self, req, res):
@@ -294,20 +295,23 @@ class BeagleNode(Node):
         self.poller.stop()
 
 
-def _stop_on_signals() -> None:
-    """SIGINT/SIGTERM end the spin by shutting the context down; a second one is ignored.
+def _stop_on_signals() -> threading.Event:
+    """SIGINT/SIGTERM set the returned event; the spin loop checks it.
 
-    (rclpy's own handler also re-raises KeyboardInterrupt later, which could
-    land in the middle of stopping the poller.)
+    The handler must not call into rclpy: it can run while the main thread
+    holds the context's lock (inside Context.ok()), and try_shutdown() would
+    then wait for that same lock forever. rclpy's own handler is not used
+    either, since it re-raises KeyboardInterrupt later, possibly in the middle
+    of stopping the poller.
     """
+    stop = threading.Event()
 
     def handler(signum, _frame) -> None:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)
-        rclpy.try_shutdown()
+        stop.set()
 
     signal.signal(signal.SIGINT, handler)
     signal.signal(signal.SIGTERM, handler)
+    return stop
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -315,12 +319,15 @@ def main(argv: list[str] | None = None) -> int:
         args=argv if argv is not None else sys.argv,
         signal_handler_options=SignalHandlerOptions.NO,
     )
-    _stop_on_signals()
+    stop = _stop_on_signals()
     node = None
     code = 0
     try:
         node = BeagleNode()
-        rclpy.spin(node)
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        while not stop.is_set() and rclpy.ok():
+            executor.spin_once(timeout_sec=0.1)
         code = 1 if node.fatal else 0
     except (KeyboardInterrupt, ExternalShutdownException):
         code = 1 if node is not None and node.fatal else 0

@@ -301,3 +301,20 @@ def test_node_importable_without_running():
         timeout=60,
     )
     assert out.stdout.strip() == "ok", out.stderr
+
+
+@pytest.mark.parametrize("delay", [0.0, 0.37, 1.1])
+def test_ctrl_c_at_any_moment_stops_the_node(delay):
+    """SIGINT landing anywhere (a signal inside rclpy's context lock once deadlocked)."""
+    proc = _start({"backend": "sim", "devices": [S0]}, namespace=f"/ctrlc{int(delay * 100)}")
+    try:
+        time.sleep(2.0 + delay)  # inside start-up, or while spinning
+        proc.send_signal(signal.SIGINT)
+        time.sleep(0.05)
+        proc.send_signal(signal.SIGINT)  # an impatient second Ctrl-C
+        out, _ = proc.communicate(timeout=15)
+        assert proc.returncode == 0, out
+        assert "Traceback" not in out
+    finally:
+        if proc.poll() is None:
+            proc.kill()
