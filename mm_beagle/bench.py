@@ -89,6 +89,51 @@ def _client(name: str, seconds: float, rate: float, conn) -> None:
     rclpy.shutdown()
 
 
+def _echo_server(seconds: float) -> None:
+    """A trivial GetSensorData server: the round-trip floor of rclpy on this host."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    from mm_interfaces.srv import GetSensorData
+
+    def answer(_req, res):
+        res.success = True
+        return res
+
+    rclpy.init()
+    node = rclpy.create_node("mm_beagle", namespace="/mm_bench_echo")
+    node.create_service(GetSensorData, "~/get_sensor_data", answer)
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        executor.spin_once(timeout_sec=0.1)
+    node.destroy_node()
+    rclpy.shutdown()
+
+
+def baseline_rtt(n: int = 300, rate: float = 100.0) -> np.ndarray:
+    """Round trips (ms) to the trivial server, same client pattern as the bench."""
+    ctx = mp.get_context("spawn")
+    server = ctx.Process(target=_echo_server, args=(n / rate + 30.0,), daemon=True)
+    server.start()
+    client = BeagleClient("mm_bench_echo_client", namespace="/mm_bench_echo/mm_beagle")
+    try:
+        if not client.clients["get_sensor_data"].wait_for_service(timeout_sec=30):
+            raise RuntimeError("the echo server did not come up")
+        rtts = []
+        for _ in range(n):
+            t0 = time.perf_counter()
+            client.call("get_sensor_data", id="")
+            rtts.append((time.perf_counter() - t0) * 1e3)
+            time.sleep(1.0 / rate)
+    finally:
+        client.close()
+        server.terminate()
+        server.join(5)
+    return np.array(rtts)
+
+
 def _poller_process(node_pid: int) -> psutil.Process:
     for child in psutil.Process(node_pid).children():
         if any("spawn_main" in part for part in child.cmdline()):
@@ -101,6 +146,7 @@ def bench_poll(seconds: float, rate: float, n_clients: int) -> dict:
 
     baseline = sleep_loop_periods(2.0)
     use_isolated_ros_env()
+    echo = baseline_rtt()
     motion_s = max(1.0, seconds - 2.0)
     params = {"backend": "sim", "sim_trajectory": "figure_eight", "sim_duration": motion_s}
     ctx = mp.get_context("spawn")
@@ -172,6 +218,8 @@ def bench_poll(seconds: float, rate: float, n_clients: int) -> dict:
         "requests": len(rtts),
         "service_rtt_p50_ms": round(float(np.percentile(rtts, 50)), 3),
         "service_rtt_p99_ms": round(float(np.percentile(rtts, 99)), 3),
+        "baseline_rtt_p50_ms": round(float(np.percentile(echo, 50)), 3),
+        "baseline_rtt_p99_ms": round(float(np.percentile(echo, 99)), 3),
         "baseline_sleep_p50_us": round(float(base_p50), 1),
         "baseline_sleep_p99_us": round(float(base_p99), 1),
         "machine": {
