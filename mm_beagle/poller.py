@@ -170,7 +170,8 @@ class Channel:
         self.consecutive_errors = 0
         self.next_retry = 0.0
         self.last_error = ""
-        self.gap = LiftGapEstimator()
+        self.gap = LiftGapEstimator()  # in counts
+        self.gap_m = LiftGapEstimator()  # in metres: right across a CPI change
         self.sim_stats = None  # the emulator's ground truth, sim backend only
         self.sim_base = (0, 0, 0, 0)
         self.ints[ss.I_STATE] = ss.STATE_STARTING
@@ -180,7 +181,12 @@ class Channel:
         return self.driver is not None
 
     def record(self, stamp_ns: int, m: Motion | None, extra_flags: int = 0) -> None:
-        """Add one read to the totals and the ring (under the sequence lock)."""
+        """Add one read to the totals and the ring (under the sequence lock).
+
+        ``extra_flags`` marks reads made for a command (settings, the drain
+        before a CPI change): they take no poll slot, so they do not lengthen
+        a lift gap.
+        """
         ints, floats = self.ints, self.floats
         slot = self.seq % self.n
         stamps, rdx, rdy, rstatus, rcpi, rflags = self.ring
@@ -208,13 +214,8 @@ class Channel:
                 ints[ss.I_LIFT_TOTAL] += 1
             if m.overflow:
                 ints[ss.I_OVERFLOWS] += 1
-            est = self.gap.update(dx, dy, m.lifted)
-            if est is not None:
-                ex, ey = est
-                floats[ss.F_X_EST_COUNTS] += ex
-                floats[ss.F_Y_EST_COUNTS] += ey
-                floats[ss.F_X_EST_M] += ex * INCH_M / self.cpi_x
-                floats[ss.F_Y_EST_M] += ey * INCH_M / self.cpi_y
+            if not (extra_flags and m.lifted):  # a command's read covers no poll slot
+                self._update_lift_gap(dx, dy, m.lifted)
         stamps[slot] = stamp_ns
         rcpi[slot] = self.cpi_y
         rflags[slot] = flags | extra_flags
@@ -226,9 +227,20 @@ class Channel:
             base = self.sim_base
             ints[ss.I_GEN_X] = stats.counted_x - base[0]
             ints[ss.I_GEN_Y] = stats.counted_y - base[1]
-            ints[ss.I_LIFT_LOST_X] = stats.lift_cleared_x - base[2]
-            ints[ss.I_LIFT_LOST_Y] = stats.lift_cleared_y - base[3]
+            ints[ss.I_LIFT_LOST_X] = stats.lift_cleared_x + round(stats.lift_motion_x) - base[2]
+            ints[ss.I_LIFT_LOST_Y] = stats.lift_cleared_y + round(stats.lift_motion_y) - base[3]
         ints[ss.I_VERSION] += 1  # even: consistent
+
+    def _update_lift_gap(self, dx: int, dy: int, lifted: bool) -> None:
+        """Feed one poll to the estimators; add their estimate when a gap closes."""
+        est = self.gap.update(dx, dy, lifted)
+        est_m = self.gap_m.update(dx * INCH_M / self.cpi_x, dy * INCH_M / self.cpi_y, lifted)
+        if est is not None and est_m is not None:
+            floats = self.floats
+            floats[ss.F_X_EST_COUNTS] += est[0]
+            floats[ss.F_Y_EST_COUNTS] += est[1]
+            floats[ss.F_X_EST_M] += est_m[0]
+            floats[ss.F_Y_EST_M] += est_m[1]
 
     def set_cpi_cache(self, x: int, y: int) -> None:
         self.cpi_x, self.cpi_y = x, y
@@ -293,8 +305,8 @@ class Poller:
             ch.sim_base = (
                 stats.counted_x,
                 stats.counted_y,
-                stats.lift_cleared_x,
-                stats.lift_cleared_y,
+                stats.lift_cleared_x + round(stats.lift_motion_x),
+                stats.lift_cleared_y + round(stats.lift_motion_y),
             )
         ch.ints[ss.I_REINITS] += 1
         ch.ints[ss.I_STATE] = ss.STATE_UP
@@ -331,6 +343,15 @@ class Poller:
             return
         ch.consecutive_errors = 0
         ch.record(stamp_ns, m)
+
+    def _resync_cpi(self, ch: Channel) -> None:
+        """After a failed command the chip may be half-changed: take its CPI as it is."""
+        if ch.driver is None:
+            return
+        try:
+            ch.set_cpi_cache(ch.driver.get_x_cpi(), ch.driver.get_y_cpi())
+        except Pln2033Error:
+            self.mark_down(ch, time.monotonic(), "CPI unknown after a failed command")
 
     def check_health(self, ch: Channel, now: float) -> None:
         """Read the CPI back: a chip that lost power mid-run comes back at its default.
@@ -387,6 +408,7 @@ class Poller:
             return ("invalid", str(exc))
         except Pln2033Error as exc:
             ch.ints[ss.I_SPI_ERRORS] += 1
+            self._resync_cpi(ch)
             return ("error", f"sensor {ch.device}: {exc}")
         return ("error", f"unknown command {kind!r}")
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import multiprocessing as mp
 import threading
+import time
 from multiprocessing.connection import Connection
 
 from . import shared_state as ss
@@ -39,6 +40,7 @@ class PollerClient:
             daemon=True,
         )
         self._lock = threading.Lock()
+        self._abandoned = 0  # commands that timed out; their late replies are dropped
         self._child_ends: tuple[Connection, Connection] = (child_cmd, child_events)
 
     def start(self) -> None:
@@ -63,9 +65,16 @@ class PollerClient:
                 raise PollerError("the poller process is not running")
             self._cmd.send(msg)
             self.state.glob[ss.G_COMMANDS_SENT] += 1  # after the send: the poller then finds it
-            if not self._cmd.poll(timeout):
-                raise PollerError(f"the poller did not answer {msg[0]!r} within {timeout:g} s")
-            return self._cmd.recv()
+            deadline = time.monotonic() + timeout
+            # The poller answers in order: replies to commands we gave up on come first.
+            while True:
+                if not self._cmd.poll(max(0.0, deadline - time.monotonic())):
+                    self._abandoned += 1
+                    raise PollerError(f"the poller did not answer {msg[0]!r} within {timeout:g} s")
+                reply = self._cmd.recv()
+                if not self._abandoned:
+                    return reply
+                self._abandoned -= 1  # a late answer to an earlier command: drop it
 
     def drain_events(self) -> list[tuple]:
         """Events the poller sent since the last call (non-blocking)."""

@@ -194,4 +194,8 @@ class SharedState:
         if total == 0:
             return [float("nan")] * len(quantiles)
         cum = np.cumsum(hist)
-        return [float(np.searchsorted(cum, q * total, side="left")) for q in quantiles]
+        # the first bin holding the ceil(q * total)-th period (at least the first one)
+        return [
+            float(np.searchsorted(cum, max(1.0, np.ceil(q * total)), side="left"))
+            for q in quantiles
+        ]

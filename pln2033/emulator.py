@@ -39,6 +39,8 @@ class EmulatorStats:
     counted_y: int = 0
     lift_cleared_x: int = 0  # counts the lift cleared before anyone read them
     lift_cleared_y: int = 0
+    lift_motion_x: float = 0.0  # counts the motion during lifts would have made
+    lift_motion_y: float = 0.0
     overwritten_x: int = 0  # latched counts lost to a second status read
     overwritten_y: int = 0
     overflow_events: int = 0
@@ -99,6 +101,7 @@ class EmulatedPLN2033:
         self._rng = random.Random(seed)
         self._t = clock()
         self._in_fault_window = False
+        self._fault_end = 0.0
         self._lifted = False
         self._lift_idx = 0
         a = self.map.addresses
@@ -170,6 +173,8 @@ class EmulatedPLN2033:
         if self.lift_windows and self._lifted_between(t0, now):
             if not self._lifted:
                 self._start_lift()
+            self.stats.lift_motion_x += dxm * self.cpi_x / INCH_M
+            self.stats.lift_motion_y += dym * self.cpi_y / INCH_M
             # A window that ends inside this interval leaves the sensor down again:
             # the lift is reported by the next status read, not by every read after.
             self._lifted = now < self.lift_windows[self._lift_idx][1]
@@ -253,11 +258,14 @@ class EmulatedPLN2033:
         for start, end, mode in self.fault_windows:
             if start <= now < end:
                 self._in_fault_window = True
+                self._fault_end = end
                 return mode
         if self._in_fault_window:
             self._in_fault_window = False
             if self.reset_after_fault:
                 self._power_on()  # the chip lost power: registers, RAM, counters gone
+                # and it counted nothing before power came back at the window's end
+                self._t = max(self._t, self._fault_end)
         return None
 
     def _read(self, addr: int) -> int:

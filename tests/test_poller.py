@@ -335,14 +335,6 @@ def test_lift_estimate_within_20_percent_at_constant_speed(lift_ms):
     assert (t.x_total, t.y_total) == measured(rig.emus[0])
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="BUG (sim ground truth): I_LIFT_LOST_X/Y (diagnostic sim_lift_lost_*_counts) come "
-    "from EmulatorStats.lift_cleared_*, which only counts what the counters held when the "
-    "lift began; at 1 kHz every poll has just emptied them, and the motion during the lift "
-    "(an interval overlapping a lift 'counts nothing') is recorded nowhere -- so the ground "
-    "truth says 0 counts were lost while hundreds were",
-)
 def test_sim_lift_lost_ground_truth_counts_what_a_lift_ate():
     lifts = [(T0 + 0.5, T0 + 0.52)]
     rig = Rig([{"motion": ConstantVelocity(0.0, 0.3), "lift_windows": lifts}], cpi=1600)
@@ -354,13 +346,6 @@ def test_sim_lift_lost_ground_truth_counts_what_a_lift_ate():
     assert t.lift_lost_y == pytest.approx(lost, abs=2 * 0.3 * 1600 / INCH_M / 1000)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="BUG: every record() while lifted adds one poll to the lift gap, including the "
-    "zero-length reads of commands (settings read, the set_cpi drain read); the estimate "
-    "G * (a + b) / 2 then grows by a whole poll's counts per command served during a lift "
-    "(here 10 settings reads during a 20-poll lift: +50%)",
-)
 def test_settings_reads_during_a_lift_do_not_inflate_the_estimate():
     lifts = [(T0 + 0.5, T0 + 0.52)]
     rig = Rig([{"motion": ConstantVelocity(0.0, 0.3), "lift_windows": lifts}], cpi=1600)
@@ -373,13 +358,6 @@ def test_settings_reads_during_a_lift_do_not_inflate_the_estimate():
     assert t.y_est_counts == pytest.approx(lost, rel=0.1)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="BUG: a lift gap that spans a CPI change is interpolated from a count before the "
-    "change (old CPI) and one after (new CPI) as if both were at the new CPI: "
-    "F_Y_EST_M = G * (a + b) / 2 * 0.0254 / new_cpi, so 1600 -> 3200 in a 20 ms lift at "
-    "0.3 m/s estimates 4.8 mm for 6.0 mm lost",
-)
 def test_lift_estimate_across_a_cpi_change_keeps_each_count_at_its_scale():
     lifts = [(T0 + 0.5, T0 + 0.52)]
     rig = Rig([{"motion": ConstantVelocity(0.0, 0.3), "lift_windows": lifts}], cpi=1600)
@@ -615,13 +593,6 @@ def test_set_cpi_spi_error_is_reported():
     assert rig.channels[0].cpi_wanted == 1600
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="BUG: set_cpi that fails half-way (X set and verified, then an SPI error on Y) "
-    "returns 'error' but leaves the chip at X=3200/Y=1600 while the CPI cache (I_CPI_X) "
-    "still says 1600, so every X count after it is converted to metres at the wrong "
-    "scale (2x) until the next 1 s health check re-initialises the sensor",
-)
 def test_set_cpi_failing_half_way_keeps_the_scale_right():
     rig = Rig([{"motion": ConstantVelocity(0.1, 0.2)}], bus_class=FailingBus)
     emu, ch = rig.emus[0], rig.channels[0]
@@ -882,14 +853,6 @@ def test_health_check_of_a_down_sensor_does_nothing():
     assert rig.emus[0].stats.transfers == transfers and rig.events() == []
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="BUG (emulator): leaving a fault window with reset_after_fault=True calls "
-    "_power_on() but keeps self._t at the last good transfer, so the next advance() counts "
-    "the motion of the whole window -- while the chip was unreachable/unpowered -- into the "
-    "fresh counters at the power-on CPI (tests/test_pln2033_emulator.py::"
-    "test_fault_window_raise_then_power_cycle asserts this 0.7 s instead of 0.1 s)",
-)
 def test_power_cycled_chip_counts_only_motion_after_power_on():
     clock = FakeClock(0.0)
     emu = EmulatedPLN2033(

@@ -326,14 +326,25 @@ def test_period_percentiles_last_bin_takes_the_long_tail():
     assert state.period_percentiles(0.25, 0.5) == [999.0, float(ss.HIST_BINS - 1)]
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="BUG: period_percentiles(0.0) returns 0 us (searchsorted of 0 in the cumulative "
-    "histogram with side='left' hits the leading empty bins) instead of the shortest "
-    "period that occurred",
-)
 def test_period_percentile_zero_is_the_minimum():
     state = make_state(1, 8)
     state.hist[1000] = 90
     state.hist[5000] = 10
     assert state.period_percentiles(0.0) == [1000.0]
+
+
+def test_late_reply_is_not_taken_for_the_next_commands_answer():
+    """A reply that arrives after its command timed out must not answer the next one."""
+    from mm_beagle.poller import PollerConfig
+    from mm_beagle.poller_client import PollerClient, PollerError
+
+    client = PollerClient(PollerConfig(devices=["/dev/spidev1.0"], ring_size=1024))
+    poller_end = client._child_ends[0]
+    client.process = type("Alive", (), {"is_alive": lambda self: True})()  # no real process
+    with pytest.raises(PollerError, match="did not answer 'settings'"):
+        client.command("settings", 0, timeout=0.05)
+    poller_end.recv()
+    poller_end.send(("ok", "late settings"))  # the late answer to the first command
+    poller_end.send(("ok", 800))  # the answer to the second
+    assert client.command("set_cpi", 0, 800, timeout=1.0) == ("ok", 800)
+    assert poller_end.recv() == ("set_cpi", 0, 800)
