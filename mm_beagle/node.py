@@ -36,6 +36,10 @@ from .poller_client import PollerClient, PollerError
 NODE_NAME = "mm_beagle"
 
 
+class StartupError(RuntimeError):
+    """The poller could not start (its message says why)."""
+
+
 class BeagleNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
@@ -54,6 +58,7 @@ class BeagleNode(Node):
         self._states = [ss.STATE_STARTING] * len(self.devices)
         self._last_errors = [""] * len(self.devices)
         self.fatal = ""
+        self._diag_errors = [(0, 0)] * len(self.devices)
         self.poller.start()
         self._wait_for_first_bring_up(timeout=10.0)
 
@@ -83,10 +88,19 @@ class BeagleNode(Node):
             if all(int(ints[i][ss.I_STATE]) != ss.STATE_STARTING for i in range(len(self.devices))):
                 break
             time.sleep(0.02)
-        self.relay_poller_events()
+        for event in self.poller.drain_events():
+            if event[0] == "fatal":  # e.g. an unreadable patch file or register map
+                self.poller.stop()
+                raise StartupError(str(event[1]))
+            self._relay(event)
+        if not self.poller.alive:
+            raise StartupError("the poller process died while starting")
 
     def _unknown_id(self, sensor_id: str) -> str:
-        return f"unknown sensor id '{sensor_id}'; known: {', '.join(self.devices)}"
+        known = ", ".join(self.devices)
+        if not sensor_id:
+            return f"this service needs a sensor id; known: {known}"
+        return f"unknown sensor id '{sensor_id}'; known: {known}"
 
     def _is_up(self, i: int) -> bool:
         return int(self.poller.state.ints[i][ss.I_STATE]) == ss.STATE_UP
@@ -203,29 +217,33 @@ class BeagleNode(Node):
                 self.data_pub.publish(msg)
 
     def relay_poller_events(self) -> None:
-        log = self.get_logger()
         for event in self.poller.drain_events():
-            kind = event[0]
-            if kind == "up":
-                i = self.poller.index(event[1])
-                if i is not None:
-                    self._last_errors[i] = ""
-                log.info(f"sensor {event[1]} up: {event[2]}")
-            elif kind == "down":
-                i = self.poller.index(event[1])
-                if i is not None:
-                    self._last_errors[i] = event[2]
-                log.error(f"sensor {event[1]} down: {event[2]}")
-            elif kind == "fatal":
-                log.fatal(f"poller stopped: {event[1]}")
-                self.fatal = str(event[1])
-            else:
-                log.info(str(event[1]))
+            self._relay(event)
         if not self.poller.alive:
             # Without the poller the node has nothing to serve: stop, exit non-zero.
             self.fatal = self.fatal or "the poller process is gone"
-            log.fatal(f"{self.fatal}; shutting down")
+            self.get_logger().fatal(f"{self.fatal}; shutting down")
             self.context.try_shutdown()
+
+    def _relay(self, event: tuple) -> None:
+        """Log one poller event and keep what the services need from it."""
+        log = self.get_logger()
+        kind = event[0]
+        if kind == "up":
+            i = self.poller.index(event[1])
+            if i is not None:
+                self._last_errors[i] = ""
+            log.info(f"sensor {event[1]} up: {event[2]}")
+        elif kind == "down":
+            i = self.poller.index(event[1])
+            if i is not None:
+                self._last_errors[i] = event[2]
+            log.error(f"sensor {event[1]} down: {event[2]}")
+        elif kind == "fatal":
+            log.fatal(f"poller stopped: {event[1]}")
+            self.fatal = str(event[1])
+        else:
+            log.info(str(event[1]))
 
     def poller_cpu_percent(self) -> float:
         """CPU use of the poller process since the previous call (% of one core)."""
@@ -284,11 +302,16 @@ class BeagleNode(Node):
                 values["sim_lift_lost_y_counts"] = t.lift_lost_y
             if t.state != ss.STATE_UP:
                 level, text = DiagnosticStatus.ERROR, self._down_message(i)
-            elif t.spi_errors or t.overflows:
-                level, text = DiagnosticStatus.WARN, "up, with SPI errors or counter overflows"
+            elif (t.spi_errors, t.overflows) != self._diag_errors[i]:
+                level, text = (
+                    DiagnosticStatus.WARN,
+                    "SPI errors or counter overflows since last report",
+                )
             else:
                 level, text = DiagnosticStatus.OK, "up"
-            arr.status.append(messages.diagnostic(f"mm_beagle: {dev}", dev, level, text, values))
+            self._diag_errors[i] = (t.spi_errors, t.overflows)
+            name = f"{self.get_name()}: {dev}"
+            arr.status.append(messages.diagnostic(name, dev, level, text, values))
         self.diag_pub.publish(arr)
 
     def shutdown(self) -> None:
@@ -331,7 +354,7 @@ def main(argv: list[str] | None = None) -> int:
         code = 1 if node.fatal else 0
     except (KeyboardInterrupt, ExternalShutdownException):
         code = 1 if node is not None and node.fatal else 0
-    except (ValueError, ParameterException) as exc:  # bad parameters: say what, exit non-zero
+    except (ValueError, ParameterException, StartupError) as exc:  # say what, exit non-zero
         print(f"mm-beagle: {exc}", file=sys.stderr)
         code = 2
     finally:

@@ -2,7 +2,8 @@
 
 Listens to the node's sensor_data topic (so it never takes counts away from
 service clients) and /diagnostics, and redraws a small table twice a second:
-per sensor the poll rate, speed, distance travelled, CPI, lifts and state.
+per sensor the poll rate, speed, distance travelled, CPI, polls that saw the
+lift bit ("lifted") and the distance estimated for the lift gaps, and state.
 """
 
 from __future__ import annotations
@@ -47,7 +48,7 @@ class SensorView:
 
 HEADER = (
     f"{'sensor':<16}{'state':>7}{'polls/s':>9}{'vx mm/s':>9}{'vy mm/s':>9}"
-    f"{'x m':>9}{'y m':>9}{'CPI':>6}{'lifts':>7}{'lift est m':>11}"
+    f"{'x m':>9}{'y m':>9}{'CPI':>6}{'lifted':>7}{'lift est m':>11}"
 )
 
 

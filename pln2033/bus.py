@@ -24,10 +24,10 @@ _DEVICE_RE = re.compile(r"^/dev/spidev(\d+)\.(\d+)$")
 
 OVERLAY_HINT = (
     "On a BeagleBone Black enable SPI1 through a device-tree overlay "
-    "(uboot_overlay_addr4=BB-SPIDEV1-00A0.dtbo in /boot/uEnv.txt), turn off HDMI audio "
-    "and video, which share the SPI1 pins (disable_uboot_overlay_audio=1, "
-    "disable_uboot_overlay_video=1), make P9_42 the second chip select "
-    "(config-pin P9_42 spi_cs), then reboot. See docs/hardware-setup.md"
+    "(uboot_overlay_addr4=BB-SPIDEV1-00A0.dtbo in /boot/uEnv.txt) and turn HDMI off, "
+    "whose audio pins are SPI1's (disable_uboot_overlay_audio=1, "
+    "disable_uboot_overlay_video=1); reboot; then, after each boot, make P9_42 the "
+    "second chip select (config-pin P9_42 spi_cs). See docs/hardware-setup.md"
 )
 PERMISSION_HINT = (
     "Run as a member of the 'spi' group (sudo usermod -aG spi $USER, then log in "

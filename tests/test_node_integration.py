@@ -197,6 +197,17 @@ def test_get_samples_chain_covers_every_poll_once(node, client):
     assert dy_sum > 0
 
 
+def test_services_for_one_sensor_say_an_id_is_needed(node, client):
+    for srv, extra in (
+        ("get_sensor_settings", {}),
+        ("set_resolution", {"cpi": 800}),
+        ("get_samples", {"since_seq": 0}),
+    ):
+        res = client.call(srv, id="", **extra)
+        assert not res.success
+        assert "needs a sensor id" in res.message and S0 in res.message
+
+
 def test_get_samples_rejects_a_future_seq(node, client):
     res = client.call("get_samples", id=S0, since_seq=2**63)
     assert not res.success and "ahead of the newest poll" in res.message
@@ -269,13 +280,16 @@ def test_clean_shutdown_stops_the_poller(sig):
         ({"backend": "sim", "sim_fail_windows": ["/dev/spidev1.0@5-1"]}, "START < END"),
         ({"backend": "sim", "sim_mounts": [0.1, 0.2]}, "multiple of 3"),
         ({"poll_rate": 0.0}, "poll_rate"),
+        ({"backend": "sim", "patch_file": "/nonexistent/patch.txt"}, "cannot read patch file"),
+        ({"backend": "sim", "register_map": "/nonexistent/map.yaml"}, "cannot read register map"),
     ],
 )
 def test_bad_parameters_exit_with_a_clear_message(params, expect):
     proc = _start(params)
     out, _ = proc.communicate(timeout=30)
-    assert proc.returncode != 0
+    assert proc.returncode == 2, out
     assert expect in out
+    assert "Traceback" not in out
 
 
 def test_missing_spidev_device_is_reported_not_fatal():
