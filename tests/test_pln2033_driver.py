@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 
 import pytest
+from fakes import FakeClock
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -32,15 +33,6 @@ from pln2033.motion import ConstantVelocity, Stationary
 ALLOWED = "allowed: 100..6400 in steps of 100"
 ALLOWED_CPI = list(range(100, 6401, 100))
 
-
-class FakeClock:
-    """A manual clock: tests set ``t``; the emulator calls it."""
-
-    def __init__(self, t: float = 0.0) -> None:
-        self.t = t
-
-    def __call__(self) -> float:
-        return self.t
 
 
 class ZeroBus:

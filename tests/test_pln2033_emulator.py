@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 
 import pytest
+from fakes import FakeClock
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -25,15 +26,6 @@ from pln2033.motion import ConstantVelocity, Stationary
 
 MAP = RegisterMap.default()
 
-
-class FakeClock:
-    """A manual clock: tests set ``t``; the emulator calls it."""
-
-    def __init__(self, t: float = 0.0) -> None:
-        self.t = t
-
-    def __call__(self) -> float:
-        return self.t
 
 
 def make(motion=None, **kw):

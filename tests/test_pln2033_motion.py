@@ -6,6 +6,7 @@ import itertools
 import math
 
 import pytest
+from fakes import FakeClock
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -14,15 +15,6 @@ from pln2033.motion import ConstantVelocity, Rotated, SampledPath, Stationary
 
 MAP = RegisterMap.default()
 
-
-class FakeClock:
-    """A manual clock: tests set ``t``; the emulator calls it."""
-
-    def __init__(self, t: float = 0.0) -> None:
-        self.t = t
-
-    def __call__(self) -> float:
-        return self.t
 
 
 def approx2(xy, abs=1e-12):

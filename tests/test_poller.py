@@ -15,6 +15,7 @@ from multiprocessing import Pipe
 
 import numpy as np
 import pytest
+from fakes import FakeClock
 
 from mm_beagle import poller as poller_mod
 from mm_beagle import shared_state as ss
@@ -36,13 +37,6 @@ PERIOD = 1e-3
 # matter how the float clock rounds, for a few dozen polls
 TEN_PER_MS = 0.254 * 1.00001
 
-
-class FakeClock:
-    def __init__(self, t: float = 0.0) -> None:
-        self.t = t
-
-    def __call__(self) -> float:
-        return self.t
 
 
 class Rig:
