@@ -14,29 +14,16 @@ axes follow the seed: sensor +y = robot forward, sensor +x = robot right.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
+
+from .geometry import DEFAULT_MOUNTS, SensorMount
+
+__all__ = ["DEFAULT_MOUNTS", "SensorMount"]
 
 DT = 0.001  # s, one 1 kHz poll
 
 
-@dataclass(frozen=True)
-class SensorMount:
-    """Where a sensor sits on the robot: base_link metres and radians.
-
-    ``yaw`` is the mounting error: the sensor's axes are turned ``yaw``
-    (CCW) from the ideal (sensor +y along base_link +x).
-    """
-
-    x: float
-    y: float
-    yaw: float = 0.0
-
-
-#: The original robot: axis 7.9 cm; sensor 1 (/dev/spidev1.0) 3.95 cm right and
-#: 4.9 cm forward of the axle centre, sensor 2 mirrored to the left.
-DEFAULT_MOUNTS = (SensorMount(0.049, -0.0395), SensorMount(0.049, 0.0395))
 DEFAULT_AXIS_LENGTH = 0.079
 
 
