@@ -207,6 +207,8 @@ class BeagleNode(Node):
     # --- periodic work -----------------------------------------------------------------------
 
     def publish_data(self) -> None:
+        if self.data_pub.get_subscription_count() == 0:
+            return  # nobody listens: build nothing; the cursor keeps the interval exact
         with self._lock:
             for i, dev in enumerate(self.devices):
                 if not self._is_up(i):
