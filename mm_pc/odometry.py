@@ -1,0 +1,408 @@
+"""Robot pose from mouse-sensor displacements: four methods, one interface.
+
+Frames and units (see ``docs/pose-math.md`` for the derivations):
+
+* Pose: ``odom`` -> ``base_link`` per REP 103/105, x and y in metres, yaw in
+  radians, CCW positive. Yaw is kept *continuous* (not wrapped to (-pi, pi]):
+  two left circles end at yaw = 4*pi, so turns can be counted; use
+  :attr:`Pose2D.yaw_wrapped` for display.
+* Sensor input: per request interval, the displacement each sensor counted in
+  its *own* frame, in metres: (dX, dY) with X to the robot's right and Y
+  forward (the seed's axes), *as reported*, i.e. still turned by the mount's
+  yaw error. Every method first undoes ``mount.yaw`` (calibrated input usually
+  has yaw 0, so this is then the identity).
+* Body increment of one interval: (a, b, c) = (forward m, left m, dtheta rad)
+  in the base_link frame at the *start* of the interval, for a twist held
+  constant over the interval (a = vx*dt, b = vy*dt, c = omega*dt).
+
+A mouse sensor integrates the floor's velocity in its own body-fixed frame, so
+for a constant twist the counts of one interval are exactly
+``dX = -(b + c*px)``, ``dY = a - c*py`` for a sensor at base_link (px, py).
+The methods differ only in how they get (a, b, c) from the counts and how they
+advance the pose:
+
+``exact`` (default)
+    One sensor, no lateral slip (b = 0): c = -dX/sy, a = dY + (sx/sy)*dX with
+    the seed's (sx, sy) = (right, forward) = (-py, px). Pose advanced on the
+    arc (chord a*sinc(c/2) at heading yaw + c/2): exact for a constant twist
+    at any request rate.
+``seed-approach1``
+    The original ``move()``: |c| from the arc length, the turn's sign from
+    the sign of dX (mirrored for the right-front sensor), forward =
+    sign(dY)*(|Vs| - |Vr|) (subtracts lengths); rotate, then forward. Kept
+    only to compare.
+``seed-approach2``
+    The seed's v/omega formulation with time stamps: v = a/dt, omega = c/dt
+    (exact split), pose advanced by one Euler step (x += v*dt*cos(yaw),
+    yaw += omega*dt). dt cancels; the only difference to ``exact`` is the
+    Euler step, whose heading lags by c/2 per interval.
+``two-sensor``
+    Least squares for (a, b, c) from all sensors (2 equations each), no
+    no-slip assumption; lateral slip b is estimated and the residual norm
+    (metres) is reported per sample. Pose advanced on the arc.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .geometry import SensorMount
+
+__all__ = [
+    "DEFAULT_METHOD",
+    "METHODS",
+    "Odometry",
+    "Pose2D",
+    "Sample",
+    "arc_poses",
+]
+
+DEFAULT_METHOD = "exact"
+
+
+@dataclass(frozen=True)
+class Pose2D:
+    """Planar pose of base_link in odom: x, y in metres, yaw in rad (CCW+, continuous)."""
+
+    x: float = 0.0
+    y: float = 0.0
+    yaw: float = 0.0
+
+    @property
+    def yaw_wrapped(self) -> float:
+        """Yaw wrapped into [-pi, pi) (rad)."""
+        return (self.yaw + math.pi) % (2 * math.pi) - math.pi
+
+    def as_array(self) -> np.ndarray:
+        """``np.array([x, y, yaw])``."""
+        return np.array([self.x, self.y, self.yaw], dtype=float)
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One request interval: what the Beagle node served for it.
+
+    ``dt``: length of the interval in seconds (> 0).
+    ``d``: per sensor, in mount order, the sensor-frame displacement
+    (dX right, dY forward) in metres counted during the interval.
+    """
+
+    dt: float
+    d: tuple[tuple[float, float], ...]
+
+    @classmethod
+    def of(cls, dt: float, *displacements: Sequence[float]) -> Sample:
+        """``Sample.of(0.01, (dx1, dy1), (dx2, dy2))``."""
+        return cls(float(dt), tuple((float(p[0]), float(p[1])) for p in displacements))
+
+
+# --- shared kinematics ---------------------------------------------------------------
+
+
+def _sinc_half(c: np.ndarray) -> np.ndarray:
+    """sin(c/2)/(c/2), 1 at c = 0 (numpy's sinc is sin(pi x)/(pi x))."""
+    return np.sinc(c / (2 * np.pi))
+
+
+def arc_poses(
+    start: Sequence[float], a: np.ndarray, b: np.ndarray, c: np.ndarray
+) -> np.ndarray:
+    """Poses after each body increment (a fwd m, b left m, c rad), constant twist each.
+
+    The displacement of a constant twist over one interval, seen in odom, is
+    the body vector (a, b) shortened by sinc(c/2) and turned to the mid-interval
+    heading yaw + c/2. Returns an (N, 3) array of (x, y, yaw) after each step.
+    """
+    x0, y0, yaw0 = (float(v) for v in start)
+    yaw_end = np.cumsum(np.concatenate([[yaw0], c]))[1:]
+    heading = yaw_end - c / 2
+    k = _sinc_half(c)
+    ca, sa = np.cos(heading), np.sin(heading)
+    dx = k * (a * ca - b * sa)
+    dy = k * (a * sa + b * ca)
+    x = np.cumsum(np.concatenate([[x0], dx]))[1:]
+    y = np.cumsum(np.concatenate([[y0], dy]))[1:]
+    return np.stack([x, y, yaw_end], axis=1)
+
+
+def _euler_poses(
+    start: Sequence[float], fwd: np.ndarray, c: np.ndarray, heading_after_turn: bool
+) -> np.ndarray:
+    """Poses for straight-line steps: turn by c and move ``fwd`` along one heading.
+
+    ``heading_after_turn``: move along the heading after the turn (the seed's
+    rotate() then forward()); otherwise along the heading before it (Euler).
+    """
+    x0, y0, yaw0 = (float(v) for v in start)
+    yaw_end = np.cumsum(np.concatenate([[yaw0], c]))[1:]
+    heading = yaw_end if heading_after_turn else yaw_end - c
+    x = np.cumsum(np.concatenate([[x0], fwd * np.cos(heading)]))[1:]
+    y = np.cumsum(np.concatenate([[y0], fwd * np.sin(heading)]))[1:]
+    return np.stack([x, y, yaw_end], axis=1)
+
+
+# --- methods -----------------------------------------------------------------------------
+#
+# A method turns ideal-frame displacements d (N, n_sensors, 2) and dt (N,) into
+# poses (N, 3) from a start pose, plus a per-sample residual (N,) or None.
+
+
+class _Method:
+    name = ""
+    uses_all_sensors = False
+
+    def __init__(self, mounts: tuple[SensorMount, ...], sensor: int) -> None:
+        self.mounts = mounts
+        self.sensor = sensor
+
+    def poses(self, start, dt: np.ndarray, d: np.ndarray):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+
+class _OneSensor(_Method):
+    """Shared set-up of the one-sensor methods: the seed's sx, sy, yaw observable."""
+
+    def __init__(self, mounts, sensor):
+        super().__init__(mounts, sensor)
+        m = mounts[sensor]
+        self.sx, self.sy = m.right, m.forward
+        if self.sy == 0:
+            raise ValueError(
+                f"sensor {sensor} at base_link ({m.x} m, {m.y} m) lies on the axle line "
+                "(0 m forward of the axle centre): a turn moves it only forward, so one "
+                "sensor cannot tell turning from driving and yaw is unobservable; "
+                "mount it forward or behind the axle, or use method 'two-sensor'"
+            )
+
+    def split(self, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Exact no-slip split: forward a (m) and dtheta c (rad) per interval."""
+        dx, dy = d[:, self.sensor, 0], d[:, self.sensor, 1]
+        c = -dx / self.sy
+        a = dy + (self.sx / self.sy) * dx
+        return a, c
+
+
+class _Exact(_OneSensor):
+    name = "exact"
+
+    def poses(self, start, dt, d):
+        a, c = self.split(d)
+        return arc_poses(start, a, np.zeros_like(a), c), None
+
+
+class _SeedApproach2(_OneSensor):
+    name = "seed-approach2"
+
+    def poses(self, start, dt, d):
+        a, c = self.split(d)
+        v, omega = a / dt, c / dt  # the seed's speeds from its time stamps
+        return _euler_poses(start, v * dt, omega * dt, heading_after_turn=False), None
+
+
+class _SeedApproach1(_OneSensor):
+    """The original move(), read with rotate(+) = CCW (REP 103)."""
+
+    name = "seed-approach1"
+
+    def __init__(self, mounts, sensor):
+        super().__init__(mounts, sensor)
+        m = mounts[sensor]
+        self.m = m.slope  # -sx/sy
+        self.radius = m.radius
+
+    def poses(self, start, dt, d):
+        dx, dy = d[:, self.sensor, 0], d[:, self.sensor, 1]
+        vx_r = dx
+        vy_r = dx * self.m
+        vdist_r = np.hypot(vx_r, vy_r)
+        rotate_angle = vdist_r / self.radius
+        c = np.where(dx >= 0, rotate_angle, -rotate_angle)
+        vdist_rf = np.hypot(dx, dy)
+        vdist_f = vdist_rf - vdist_r
+        fwd = np.where(dy < 0, -vdist_f, vdist_f)
+        return _euler_poses(start, fwd, c, heading_after_turn=True), None
+
+
+class _TwoSensor(_Method):
+    name = "two-sensor"
+    uses_all_sensors = True
+
+    def __init__(self, mounts, sensor):
+        super().__init__(mounts, sensor)
+        if len(mounts) < 2:
+            raise ValueError(
+                f"method 'two-sensor' needs at least 2 sensor mounts, got {len(mounts)}"
+            )
+        rows = []
+        for m in mounts:
+            rows.append([0.0, -1.0, -m.x])  # dX = -(b + c*px)
+            rows.append([1.0, 0.0, -m.y])  # dY = a - c*py
+        a_mat = np.array(rows)
+        if np.linalg.matrix_rank(a_mat) < 3:
+            raise ValueError(
+                "method 'two-sensor': the sensors sit at the same point "
+                f"({[(m.x, m.y) for m in mounts]}), so (vx, vy, omega) is not determined"
+            )
+        self.a_mat = a_mat
+        self.pinv = np.linalg.pinv(a_mat)  # (3, 2n)
+
+    def solve(self, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Least-squares body increments (N, 3) = (a, b, c) and residual norms (N,) in m."""
+        meas = d.reshape(d.shape[0], -1)  # (N, 2n): dX1, dY1, dX2, dY2, ...
+        abc = meas @ self.pinv.T
+        resid = np.linalg.norm(abc @ self.a_mat.T - meas, axis=1)
+        return abc, resid
+
+    def poses(self, start, dt, d):
+        abc, resid = self.solve(d)
+        return arc_poses(start, abc[:, 0], abc[:, 1], abc[:, 2]), resid
+
+
+METHODS: dict[str, type[_Method]] = {
+    cls.name: cls for cls in (_Exact, _SeedApproach1, _SeedApproach2, _TwoSensor)
+}
+
+
+# --- the integrator ----------------------------------------------------------------------
+
+
+class Odometry:
+    """Integrates per-request sensor displacements into an odom -> base_link pose.
+
+    ``mounts``: the sensor mounts in sample order (base_link metres, yaw = the
+    mounting error still present in the input; 0 for calibrated input).
+    ``method``: a key of :data:`METHODS`. ``sensor``: which mount the
+    one-sensor methods use (default 0, the first). ``pose``: start pose.
+    """
+
+    def __init__(
+        self,
+        mounts: Sequence[SensorMount],
+        method: str = DEFAULT_METHOD,
+        sensor: int = 0,
+        pose: Pose2D | None = None,
+    ) -> None:
+        mounts = tuple(mounts)
+        if not mounts:
+            raise ValueError("Odometry needs at least one sensor mount")
+        for i, m in enumerate(mounts):
+            if not all(math.isfinite(v) for v in (m.x, m.y, m.yaw)):
+                raise ValueError(f"sensor mount {i} ({m}) has a non-finite value")
+        if method not in METHODS:
+            raise ValueError(f"unknown odometry method {method!r}; known: {sorted(METHODS)}")
+        if not (isinstance(sensor, int) and 0 <= sensor < len(mounts)):
+            raise ValueError(
+                f"sensor index must be an integer in 0..{len(mounts) - 1}, got {sensor!r}"
+            )
+        self.mounts = mounts
+        self.method = method
+        self._impl = METHODS[method](mounts, sensor)
+        yaws = np.array([m.yaw for m in mounts])
+        self._cos, self._sin = np.cos(yaws), np.sin(yaws)
+        self._has_yaw = bool(np.any(yaws != 0))
+        self._pose = np.zeros(3)
+        #: residual norm (m) of the last update; None for one-sensor methods.
+        self.residual: float | None = None
+        self.reset(pose)
+
+    @property
+    def n_sensors(self) -> int:
+        return len(self.mounts)
+
+    @property
+    def pose(self) -> Pose2D:
+        """The current pose (odom -> base_link)."""
+        return Pose2D(*(float(v) for v in self._pose))
+
+    def reset(self, pose: Pose2D | None = None) -> None:
+        """Back to ``pose`` (default: the origin), residual cleared."""
+        p = np.zeros(3) if pose is None else np.array([pose.x, pose.y, pose.yaw], dtype=float)
+        if not np.all(np.isfinite(p)):
+            raise ValueError(f"reset pose must be finite, got {pose}")
+        self._pose = p
+        self.residual = None
+
+    # -- input checks and the mount-yaw undo ------------------------------------------
+
+    def _check(self, dt: np.ndarray, d: np.ndarray) -> None:
+        n = self.n_sensors
+        if d.ndim != 3 or d.shape[1:] != (n, 2):
+            raise ValueError(
+                f"expected displacements of shape (N, {n}, 2) (one (dX, dY) per sensor, "
+                f"{n} sensor(s) in mount order), got shape {d.shape}"
+            )
+        if dt.shape != (d.shape[0],):
+            raise ValueError(f"expected {d.shape[0]} interval lengths dt, got shape {dt.shape}")
+        if not np.all(np.isfinite(dt)) or not np.all(dt > 0):
+            bad = dt[~(np.isfinite(dt) & (dt > 0))][0]
+            raise ValueError(f"dt must be a finite number of seconds > 0, got {bad}")
+        if not np.all(np.isfinite(d)):
+            idx = np.argwhere(~np.isfinite(d))[0]
+            raise ValueError(
+                f"displacement of sensor {idx[1]} ({'dX' if idx[2] == 0 else 'dY'}) in "
+                f"sample {idx[0]} is {d[tuple(idx)]}; it must be a finite number of metres"
+            )
+
+    def _unturn(self, d: np.ndarray) -> np.ndarray:
+        """Undo each mount's yaw: reported = R(-yaw)·ideal, so ideal = R(yaw)·reported."""
+        if not self._has_yaw:
+            return d
+        x, y = d[..., 0], d[..., 1]
+        return np.stack([self._cos * x - self._sin * y, self._sin * x + self._cos * y], axis=-1)
+
+    # -- public API ---------------------------------------------------------------------
+
+    def update(self, sample: Sample) -> Pose2D:
+        """Advance by one request interval; returns the new pose.
+
+        Raises ValueError (state unchanged) for dt <= 0, a non-finite value or
+        the wrong number of sensors.
+        """
+        try:
+            dt = np.array([sample.dt], dtype=float)
+            d = np.asarray(sample.d, dtype=float)[None, ...]
+        except (TypeError, ValueError) as e:
+            raise ValueError(
+                f"a sample needs dt (s) and one (dX, dY) pair (m) per sensor: {e}"
+            ) from None
+        if d.ndim != 3 or d.shape[1] != self.n_sensors:
+            got = d.shape[1] if d.ndim == 3 else "malformed"
+            raise ValueError(
+                f"sample has {got} sensor displacement(s), this odometry has "
+                f"{self.n_sensors} mount(s); give one (dX, dY) pair per sensor in mount order"
+            )
+        self._check(dt, d)
+        poses, resid = self._impl.poses(self._pose, dt, self._unturn(d))
+        self._pose = poses[-1].copy()
+        self.residual = None if resid is None else float(resid[0])
+        return self.pose
+
+    def integrate(self, dt, d, return_residual: bool = False):
+        """Vectorised :meth:`update` over N intervals; advances the state the same way.
+
+        ``dt``: seconds, scalar or shape (N,). ``d``: metres, shape
+        (N, n_sensors, 2), sensor frame as reported. Returns the (N, 3) poses
+        (x m, y m, yaw rad) after each interval; with ``return_residual`` also
+        the (N,) residual norms in metres (NaN for one-sensor methods).
+        """
+        d = np.asarray(d, dtype=float)
+        if d.ndim != 3:
+            raise ValueError(
+                f"expected displacements of shape (N, {self.n_sensors}, 2), got shape {d.shape}"
+            )
+        dt = np.broadcast_to(np.asarray(dt, dtype=float), (d.shape[0],)) if np.ndim(dt) == 0 \
+            else np.asarray(dt, dtype=float)
+        self._check(dt, d)
+        if d.shape[0] == 0:
+            poses, resid = np.empty((0, 3)), np.empty(0)
+        else:
+            poses, resid = self._impl.poses(self._pose, dt, self._unturn(d))
+            self._pose = poses[-1].copy()
+            self.residual = None if resid is None else float(resid[-1])
+        if return_residual:
+            return poses, (np.full(len(poses), np.nan) if resid is None else resid)
+        return poses
