@@ -108,9 +108,7 @@ def _sinc_half(c: np.ndarray) -> np.ndarray:
     return np.sinc(c / (2 * np.pi))
 
 
-def arc_poses(
-    start: Sequence[float], a: np.ndarray, b: np.ndarray, c: np.ndarray
-) -> np.ndarray:
+def arc_poses(start: Sequence[float], a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     """Poses after each body increment (a fwd m, b left m, c rad), constant twist each.
 
     The displacement of a constant twist over one interval, seen in odom, is
@@ -394,8 +392,11 @@ class Odometry:
             raise ValueError(
                 f"expected displacements of shape (N, {self.n_sensors}, 2), got shape {d.shape}"
             )
-        dt = np.broadcast_to(np.asarray(dt, dtype=float), (d.shape[0],)) if np.ndim(dt) == 0 \
+        dt = (
+            np.broadcast_to(np.asarray(dt, dtype=float), (d.shape[0],))
+            if np.ndim(dt) == 0
             else np.asarray(dt, dtype=float)
+        )
         self._check(dt, d)
         if d.shape[0] == 0:
             poses, resid = np.empty((0, 3)), np.empty(0)
