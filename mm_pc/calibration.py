@@ -38,7 +38,8 @@ from __future__ import annotations
 import math
 import numbers
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -92,7 +93,6 @@ class SensorCalibration:
     angle_offset: float = 0.0
     distance: float = 0.0
     scale: float = 1.0
-    _cs: tuple[float, float] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         a = _finite_number("angle_offset", self.angle_offset)
@@ -107,7 +107,11 @@ class SensorCalibration:
         object.__setattr__(self, "angle_offset", a)
         object.__setattr__(self, "distance", d)
         object.__setattr__(self, "scale", s)
-        object.__setattr__(self, "_cs", (math.cos(a), math.sin(a)))
+
+    @cached_property
+    def _cs(self) -> tuple[float, float]:
+        """(scale * cos, scale * sin) of the offset, computed once."""
+        return self.scale * math.cos(self.angle_offset), self.scale * math.sin(self.angle_offset)
 
     @classmethod
     def identity(cls) -> SensorCalibration:
@@ -130,8 +134,6 @@ class SensorCalibration:
         x = np.asarray(dx, dtype=float)
         y = np.asarray(dy, dtype=float)
         c, s = self._cs
-        c *= self.scale
-        s *= self.scale
         xr = c * x - s * y
         yr = s * x + c * y
         if xr.ndim == 0:
