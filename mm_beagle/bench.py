@@ -1,5 +1,11 @@
 """mm-bench: benchmarks that print one JSON object.
 
+mm-bench pose --json
+    Every odometry method of mm_pc.odometry on the same simulated runs
+    (figure eight, meander; 1 kHz and 15 Hz requests; noise-free and noisy):
+    final/heading/RMS error, calibration error, update/integrate samples/s.
+    See mm_pc.bench_pose.
+
 mm-bench poll --seconds S --json
     mm-beagle on emulated sensors (separate process) while two client
     processes call get_sensor_data at 100 Hz each. Reports the poll rate and
@@ -239,8 +245,14 @@ def main(argv: list[str] | None = None) -> int:
     poll.add_argument("--rate", type=float, default=100.0, help="requests per second per client")
     poll.add_argument("--clients", type=int, default=2)
     poll.add_argument("--json", action="store_true", help="print JSON only (the default)")
+    pose = sub.add_parser("pose", help="accuracy and speed of every odometry method (simulated)")
+    pose.add_argument("--json", action="store_true", help="print JSON only (the default)")
     args = parser.parse_args(argv)
-    if args.what == "poll":
+    if args.what == "pose":
+        from mm_pc.bench_pose import bench_pose
+
+        result = bench_pose()
+    elif args.what == "poll":
         if not args.seconds >= 3 or not args.rate > 0 or args.clients < 1:
             parser.error("need --seconds >= 3, --rate > 0, --clients >= 1")
         result = bench_poll(args.seconds, args.rate, args.clients)
