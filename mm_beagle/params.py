@@ -70,6 +70,10 @@ PARAMETERS = {
             "sim backend: seconds of motion, then stand still (0 = the path as it is)", 0.0, 1e6
         ),
     ),
+    "sim_start_delay": (
+        0.0,
+        _float("sim backend: seconds standing still before the path starts", 0.0, 3600.0),
+    ),
     "sim_mounts": (
         [0.049, -0.0395, 0.0, 0.049, 0.0395, 0.0],
         _plain("sim backend: x, y, yaw (base_link m, rad) of each sensor, flattened"),
@@ -111,6 +115,7 @@ def declare(node: Node) -> NodeSettings:
         speed=p["sim_speed"],
         loop=p["sim_loop"],
         duration=p["sim_duration"],
+        start_delay=p["sim_start_delay"],
         mounts=mounts,  # type: ignore[arg-type]
         lift_rate=p["sim_lift_rate"],
         noise_counts=p["sim_noise_counts"],

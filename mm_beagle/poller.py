@@ -41,6 +41,7 @@ class SimConfig:
     speed: float = 0.2  # m/s
     loop: bool = True  # repeat the path; False = stand still after one lap
     duration: float = 0.0  # s of motion (the path repeated or cut to fit); 0 = as the path is
+    start_delay: float = 0.0  # s standing still before the path starts
     mounts: list[tuple[float, float, float]] = field(default_factory=list)  # base_link x, y, yaw
     lift_rate: float = 0.0  # lifts per second per sensor
     lift_duration: float = 0.01  # s
@@ -104,6 +105,9 @@ def _make_sim_buses(cfg: PollerConfig, t0: float) -> dict[str, object]:
         n = max(1, round(sim.duration / simulator.DT))
         v, w = np.resize(v, n), np.resize(w, n)
         loop = False
+    if sim.start_delay > 0:
+        still = np.zeros(round(sim.start_delay / simulator.DT))
+        v, w = np.concatenate([still, v]), np.concatenate([still, w])
     fails = parse_fail_windows(sim.fail_windows, cfg.devices)
     regmap = RegisterMap.load(cfg.register_map) if cfg.register_map else None
     buses: dict[str, object] = {}
