@@ -260,22 +260,21 @@ class _SeedApproach1(_OneSensor):
         m = mounts[sensor]
         self.m = m.slope  # -sx/sy
         self.radius = m.radius
+        self.hyp_m = math.hypot(1.0, self.m)
 
     def poses(self, start, dt, d):
         dx, dy = d[:, self.sensor, 0], d[:, self.sensor, 1]
-        vx_r = dx
-        vy_r = dx * self.m
-        vdist_r = np.hypot(vx_r, vy_r)
+        # Vx_r = dX, Vy_r = dX*m, Vdist_r = hypot(Vx_r, Vy_r) = |dX|*hypot(1, m)
+        vdist_r = np.abs(dx) * self.hyp_m
         rotate_angle = vdist_r / self.radius
-        c = np.where(dx >= 0, rotate_angle, -rotate_angle)
-        vdist_rf = np.hypot(dx, dy)
-        vdist_f = vdist_rf - vdist_r
+        c = np.where(dx >= 0, rotate_angle, -rotate_angle)  # the seed's turn sign
+        vdist_f = np.hypot(dx, dy) - vdist_r  # Vdist_rf - Vdist_r: lengths subtracted
         fwd = np.where(dy < 0, -vdist_f, vdist_f)
         return _euler_poses(start, fwd, c, heading_after_turn=True), None
 
     def step(self, pose, dt, d):
         dx, dy = d[self.sensor]
-        vdist_r = math.hypot(dx, dx * self.m)
+        vdist_r = abs(dx) * self.hyp_m
         c = vdist_r / self.radius if dx >= 0 else -vdist_r / self.radius
         fwd = math.hypot(dx, dy) - vdist_r
         if dy < 0:
