@@ -71,6 +71,9 @@ class BeagleNode(Node):
         if self.settings.publish_rate > 0:
             self.create_timer(1.0 / self.settings.publish_rate, self.publish_data)
         self.create_timer(self.settings.diagnostics_period, self.publish_diagnostics)
+        self.onboard = None
+        if self.settings.odometry.rate > 0:
+            self._start_onboard_odometry()
         self.create_timer(0.2, self.relay_poller_events)
         self.get_logger().info(
             f"polling {', '.join(self.devices)} at {cfg.poll_rate:g} Hz "
@@ -218,6 +221,39 @@ class BeagleNode(Node):
                 self._published[i] = now
                 self.data_pub.publish(msg)
 
+    def _start_onboard_odometry(self) -> None:
+        """Optional: integrate every 1 kHz poll here and publish ~/odom (same math, same msg)."""
+        from nav_msgs.msg import Odometry as OdometryMsg
+
+        from mm_pc.odometry_node import odometry_message
+        from mm_pc.uncertainty import PoseUncertainty
+
+        from .onboard_odometry import OnboardOdometry
+
+        o = self.settings.odometry
+        self.onboard = OnboardOdometry(o, self.devices, self.poller.state)
+        uncertainty = PoseUncertainty()
+        pub = self.create_publisher(OdometryMsg, "~/odom", 10)
+
+        def tick() -> None:
+            step = self.onboard.step()
+            if step is not None:
+                before, after, dt, stamp_ns, cpi = step
+                pub.publish(
+                    odometry_message(
+                        before,
+                        after,
+                        dt,
+                        messages.stamp(stamp_ns),
+                        cpi,
+                        uncertainty,
+                        o.odom_frame,
+                        o.base_frame,
+                    )
+                )
+
+        self.create_timer(1.0 / o.rate, tick)
+
     def relay_poller_events(self) -> None:
         for event in self.poller.drain_events():
             self._relay(event)
@@ -356,7 +392,7 @@ def main(argv: list[str] | None = None) -> int:
         code = 1 if node.fatal else 0
     except (KeyboardInterrupt, ExternalShutdownException):
         code = 1 if node is not None and node.fatal else 0
-    except (ValueError, ParameterException, StartupError) as exc:  # say what, exit non-zero
+    except (ValueError, OSError, ParameterException, StartupError) as exc:  # say what, exit 2
         print(f"mm-beagle: {exc}", file=sys.stderr)
         code = 2
     finally:

@@ -58,6 +58,19 @@ PARAMETERS = {
         _float("rate of the sensor_data topic (Hz); 0 = no topic", 0.0, 1000.0),
     ),
     "diagnostics_period": (1.0, _float("seconds between /diagnostics messages", 0.1, 60.0)),
+    "odometry_rate": (
+        0.0,
+        _float("rate of the node's own 1 kHz odometry on ~/odom (Hz); 0 = off", 0.0, 200.0),
+    ),
+    "odometry_method": ("exact", _plain("pose method: exact | two-sensor | seed-approach1 | ...")),
+    "odometry_sensor": (0, _int("which sensor the one-sensor methods use", 0, 15)),
+    "mounts": (
+        [0.049, -0.0395, 0.0, 0.049, 0.0395, 0.0],
+        _plain("odometry: x, y, yaw (base_link m, rad) of each sensor, flattened"),
+    ),
+    "calibration_file": ("", _plain("odometry: YAML calibration to apply ('' = none)")),
+    "odom_frame": ("odom", _plain("odometry: frame_id")),
+    "base_frame": ("base_link", _plain("odometry: child_frame_id")),
     "sim_trajectory": (
         "figure_eight",
         _plain("sim backend: still | straight | figure_eight | square | round_trip"),
@@ -88,10 +101,24 @@ PARAMETERS = {
 
 
 @dataclass
+class OdometrySettings:
+    """The node's own odometry (off when rate == 0)."""
+
+    rate: float
+    method: str
+    sensor: int
+    mounts: list[tuple[float, float, float]]
+    calibration_file: str
+    odom_frame: str
+    base_frame: str
+
+
+@dataclass
 class NodeSettings:
     poller: PollerConfig
     publish_rate: float
     diagnostics_period: float
+    odometry: OdometrySettings
 
 
 def declare(node: Node) -> NodeSettings:
@@ -141,4 +168,18 @@ def declare(node: Node) -> NodeSettings:
         ring_size=p["ring_size"],
         sim=sim,
     )
-    return NodeSettings(cfg, p["publish_rate"], p["diagnostics_period"])
+    flat = list(p["mounts"])
+    if len(flat) != 3 * len(devices):
+        raise ValueError(
+            f"'mounts' needs x, y, yaw for each of the {len(devices)} devices, got {len(flat)}"
+        )
+    odometry = OdometrySettings(
+        rate=p["odometry_rate"],
+        method=p["odometry_method"],
+        sensor=p["odometry_sensor"],
+        mounts=[tuple(flat[i : i + 3]) for i in range(0, len(flat), 3)],  # type: ignore[misc]
+        calibration_file=p["calibration_file"],
+        odom_frame=p["odom_frame"],
+        base_frame=p["base_frame"],
+    )
+    return NodeSettings(cfg, p["publish_rate"], p["diagnostics_period"], odometry)

@@ -88,6 +88,41 @@ def yaw_to_quaternion(yaw: float) -> tuple[float, float, float, float]:
     return 0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)
 
 
+def odometry_message(
+    before: Pose2D,
+    after: Pose2D,
+    dt: float,
+    stamp,
+    cpi: int,
+    uncertainty: PoseUncertainty,
+    odom_frame: str,
+    base_frame: str,
+) -> OdometryMsg:
+    """nav_msgs/Odometry for the step ``before`` -> ``after`` over ``dt`` s.
+
+    The twist is the body-frame increment (x forward, y left, yaw) divided by
+    dt; ``uncertainty`` is advanced by the step. Shared by mm-odometry and
+    mm-beagle's own 1 kHz odometry.
+    """
+    c, s = math.cos(before.yaw), math.sin(before.yaw)
+    ddx, ddy = after.x - before.x, after.y - before.y
+    fwd, left = c * ddx + s * ddy, -s * ddx + c * ddy
+    turned = after.yaw - before.yaw
+    uncertainty.add(math.hypot(fwd, left), turned)
+    msg = OdometryMsg()
+    msg.header.stamp = stamp
+    msg.header.frame_id = odom_frame
+    msg.child_frame_id = base_frame
+    msg.pose.pose.position.x, msg.pose.pose.position.y = after.x, after.y
+    o = msg.pose.pose.orientation
+    o.x, o.y, o.z, o.w = yaw_to_quaternion(after.yaw)
+    msg.pose.covariance = uncertainty.pose_covariance()
+    msg.twist.twist.linear.x, msg.twist.twist.linear.y = fwd / dt, left / dt
+    msg.twist.twist.angular.z = turned / dt
+    msg.twist.covariance = twist_covariance(max(cpi, 1), dt)
+    return msg
+
+
 class OdometryNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("mm_odometry", **kwargs)
@@ -167,24 +202,16 @@ class OdometryNode(Node):
         self.publish_odometry(before, after, dt, by_id[self.devices[self.p["sensor"]]])
 
     def publish_odometry(self, before: Pose2D, after: Pose2D, dt: float, data) -> None:
-        # body-frame increment of this interval (x forward, y left), then the twist
-        c, s = math.cos(before.yaw), math.sin(before.yaw)
-        ddx, ddy = after.x - before.x, after.y - before.y
-        fwd, left = c * ddx + s * ddy, -s * ddx + c * ddy
-        turned = after.yaw - before.yaw
-        self.uncertainty.add(math.hypot(fwd, left), turned)
-        msg = OdometryMsg()
-        msg.header.stamp = data.stamp
-        msg.header.frame_id = self.p["odom_frame"]
-        msg.child_frame_id = self.p["base_frame"]
-        msg.pose.pose.position.x, msg.pose.pose.position.y = after.x, after.y
-        q = yaw_to_quaternion(after.yaw)
-        o = msg.pose.pose.orientation
-        o.x, o.y, o.z, o.w = q
-        msg.pose.covariance = self.uncertainty.pose_covariance()
-        msg.twist.twist.linear.x, msg.twist.twist.linear.y = fwd / dt, left / dt
-        msg.twist.twist.angular.z = turned / dt
-        msg.twist.covariance = twist_covariance(max(data.cpi, 1), dt)
+        msg = odometry_message(
+            before,
+            after,
+            dt,
+            data.stamp,
+            data.cpi,
+            self.uncertainty,
+            self.p["odom_frame"],
+            self.p["base_frame"],
+        )
         self.odom_pub.publish(msg)
         ps = PoseStamped()
         ps.header = msg.header

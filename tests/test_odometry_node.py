@@ -114,3 +114,58 @@ def test_uncertainty_grows_with_distance_and_turn():
         PoseUncertainty(q_pos=-1.0)
     with pytest.raises(ValueError, match="cpi and dt"):
         twist_covariance(0, 0.1)
+
+
+@pytest.mark.parametrize("method", ["exact", "two-sensor"])
+def test_beagle_onboard_odometry_integrates_every_poll(method, tmp_path):
+    """mm-beagle's own ~/odom (odometry_rate > 0): the same run, integrated at 1 kHz."""
+    beagle = {
+        "backend": "sim",
+        "sim_trajectory": "straight",
+        "sim_start_delay": 3.0,
+        "sim_duration": 2.0,
+        "odometry_rate": 20.0,
+        "odometry_method": method,
+    }
+    with beagle_process(beagle, env=dict(os.environ), log_path=str(tmp_path / "beagle.log")):
+        client = BeagleClient(f"onboard_{method.replace('-', '_')}")
+        assert client.wait(30)
+        got: list[Odometry] = []
+        client.node.create_subscription(Odometry, "/mm_beagle/odom", got.append, 10)
+        try:
+            deadline = time.monotonic() + 20
+            final = None
+            while time.monotonic() < deadline and final is None:
+                time.sleep(0.2)
+                last = got[-1] if got else None
+                stopped = last is not None and last.twist.twist.linear.x == 0
+                if stopped and last.pose.pose.position.x > 0.39:
+                    final = last
+            assert final is not None, (tmp_path / "beagle.log").read_text()[-2000:]
+            assert final.pose.pose.position.x == pytest.approx(0.4, abs=0.002)
+            assert final.pose.pose.position.y == pytest.approx(0.0, abs=0.002)
+        finally:
+            client.close()
+
+
+def test_beagle_rejects_bad_odometry_settings():
+    from mm_beagle.harness import node_command
+
+    for params, expect in (
+        ({"backend": "sim", "odometry_rate": 10.0, "odometry_method": "guess"}, "guess"),
+        ({"backend": "sim", "mounts": [0.1, 0.2]}, "'mounts' needs x, y, yaw"),
+        (
+            {"backend": "sim", "odometry_rate": 10.0, "calibration_file": "/nonexistent.yaml"},
+            "nonexistent.yaml",
+        ),
+    ):
+        out = subprocess.run(
+            node_command(params, "/bad_odo"),
+            capture_output=True,
+            text=True,
+            timeout=60,
+            env=dict(os.environ),
+        )
+        assert out.returncode == 2, out.stdout + out.stderr
+        assert expect in out.stdout + out.stderr
+        assert "Traceback" not in out.stdout + out.stderr
