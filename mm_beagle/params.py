@@ -73,7 +73,7 @@ PARAMETERS = {
     "base_frame": ("base_link", _plain("odometry: child_frame_id")),
     "sim_trajectory": (
         "figure_eight",
-        _plain("sim backend: still | straight | figure_eight | square | round_trip"),
+        _plain("sim backend: still | straight | figure_eight | square | round_trip | meander"),
     ),
     "sim_speed": (0.2, _float("sim backend: robot speed (m/s)", 0.001, 5.0)),
     "sim_loop": (True, _plain("sim backend: repeat the trajectory; false = stop after one lap")),
