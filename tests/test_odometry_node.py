@@ -153,7 +153,7 @@ def test_beagle_rejects_bad_odometry_settings():
 
     for params, expect in (
         ({"backend": "sim", "odometry_rate": 10.0, "odometry_method": "guess"}, "guess"),
-        ({"backend": "sim", "mounts": [0.1, 0.2]}, "'mounts' needs x, y, yaw"),
+        ({"backend": "sim", "odometry_rate": 10.0, "mounts": [0.1, 0.2]}, "'mounts' needs x, y"),
         (
             {"backend": "sim", "odometry_rate": 10.0, "calibration_file": "/nonexistent.yaml"},
             "nonexistent.yaml",
