@@ -11,7 +11,6 @@ Topics: ~/sensor_data (SensorData, sensor-data QoS, `publish_rate` Hz) and
 
 from __future__ import annotations
 
-import signal
 import sys
 import threading
 import time
@@ -20,13 +19,13 @@ import psutil
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
-from rclpy.signals import SignalHandlerOptions
 
 from mm_interfaces.msg import SensorData
 from mm_interfaces.srv import GetSamples, GetSensorData, GetSensorSettings, SetResolution
+from mm_pc import ros_spin
 
 from . import messages
 from . import shared_state as ss
@@ -356,39 +355,13 @@ class BeagleNode(Node):
         self.poller.stop()
 
 
-def _stop_on_signals() -> threading.Event:
-    """SIGINT/SIGTERM set the returned event; the spin loop checks it.
-
-    The handler must not call into rclpy: it can run while the main thread
-    holds the context's lock (inside Context.ok()), and try_shutdown() would
-    then wait for that same lock forever. rclpy's own handler is not used
-    either, since it re-raises KeyboardInterrupt later, possibly in the middle
-    of stopping the poller.
-    """
-    stop = threading.Event()
-
-    def handler(signum, _frame) -> None:
-        stop.set()
-
-    signal.signal(signal.SIGINT, handler)
-    signal.signal(signal.SIGTERM, handler)
-    return stop
-
-
 def main(argv: list[str] | None = None) -> int:
-    rclpy.init(
-        args=argv if argv is not None else sys.argv,
-        signal_handler_options=SignalHandlerOptions.NO,
-    )
-    stop = _stop_on_signals()
+    stop = ros_spin.init(argv)
     node = None
     code = 0
     try:
         node = BeagleNode()
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        while not stop.is_set() and rclpy.ok():
-            executor.spin_once(timeout_sec=0.1)
+        ros_spin.spin_until(node, stop)
         code = 1 if node.fatal else 0
     except (KeyboardInterrupt, ExternalShutdownException):
         code = 1 if node is not None and node.fatal else 0

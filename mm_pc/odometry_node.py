@@ -17,9 +17,7 @@ Frame ids, rates, method and geometry are parameters.
 from __future__ import annotations
 
 import math
-import signal
 import sys
-import threading
 
 import rclpy
 from geometry_msgs.msg import PoseStamped
@@ -27,12 +25,11 @@ from nav_msgs.msg import Odometry as OdometryMsg
 from nav_msgs.msg import Path
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.exceptions import ParameterException
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.signals import SignalHandlerOptions
 
 from mm_interfaces.srv import GetSensorData
 
+from . import ros_spin
 from .calibration import Calibration
 from .geometry import DEFAULT_MOUNTS, SensorMount
 from .odometry import METHODS, Odometry, Pose2D, Sample
@@ -226,20 +223,12 @@ class OdometryNode(Node):
 
 
 def main(argv: list[str] | None = None) -> int:
-    rclpy.init(
-        args=argv if argv is not None else sys.argv, signal_handler_options=SignalHandlerOptions.NO
-    )
-    stop = threading.Event()
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    stop = ros_spin.init(argv)
     node = None
     code = 0
     try:
         node = OdometryNode()
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        while not stop.is_set() and rclpy.ok():
-            executor.spin_once(timeout_sec=0.1)
+        ros_spin.spin_until(node, stop)
     except (ValueError, ParameterException, OSError) as exc:
         print(f"mm-odometry: {exc}", file=sys.stderr)
         code = 2
