@@ -159,6 +159,7 @@ class SharedState:
                     return Totals(*iv[1:N_INT], *fv)
             if time.monotonic() > deadline:
                 raise TimeoutError("the poller process holds the shared state (is it hung?)")
+            time.sleep(0)  # let a writer in this process (tests) finish; yields the GIL
 
     def samples(
         self, i: int, since_seq: int, max_samples: int

@@ -454,7 +454,13 @@ def test_reader_thread_sees_consistent_monotone_totals_while_polling():
             if stamps != sorted(set(stamps)) or len(stamps) != state.snapshot(i).seq:
                 problems.append(f"chained reads of sensor {i} lost or repeated polls")
 
-    th = threading.Thread(target=reader)
+    def guarded_reader() -> None:
+        try:
+            reader()
+        except Exception as exc:  # a crashed reader is a failure, not a warning
+            problems.append(f"reader crashed: {exc!r}")
+
+    th = threading.Thread(target=guarded_reader)
     th.start()
     try:
         rig.run(6000)
