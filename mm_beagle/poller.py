@@ -180,10 +180,6 @@ class Channel:
         self.sim_base = (0, 0, 0, 0)
         self.ints[ss.I_STATE] = ss.STATE_STARTING
 
-    @property
-    def up(self) -> bool:
-        return self.driver is not None
-
     def record(self, stamp_ns: int, m: Motion | None, extra_flags: int = 0) -> None:
         """Add one read to the totals and the ring (under the sequence lock).
 
@@ -434,12 +430,7 @@ class Poller:
     def run(self) -> None:
         cfg = self.cfg
         glob, hist = memoryview(self.state.glob), memoryview(self.state.hist)
-        g_polls, g_late, g_sum, g_beat = (
-            ss.G_POLLS,
-            ss.G_LATE,
-            ss.G_PERIOD_SUM_NS,
-            ss.G_HEARTBEAT_NS,
-        )
+        g_polls, g_late, g_sum = ss.G_POLLS, ss.G_LATE, ss.G_PERIOD_SUM_NS
         g_cmd = ss.G_COMMANDS_SENT
         wall_ns, sleep = time.time_ns, time.sleep
         period_ns = round(1e9 / cfg.poll_rate)
@@ -470,7 +461,6 @@ class Poller:
             for ch in channels:
                 self.poll(ch, stamp, mono)
             glob[g_polls] += 1
-            glob[g_beat] = t
             if t >= next_health:
                 next_health = t + health_ns
                 for ch in channels:

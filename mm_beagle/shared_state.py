@@ -51,7 +51,6 @@ G_POLLS = 0
 G_LATE = 1  # poll periods longer than LATE_FACTOR x the nominal period
 G_OVERRUNS = 2  # poll slots skipped because the poller fell behind
 G_RUNNING = 3
-G_HEARTBEAT_NS = 4
 G_PERIOD_SUM_NS = 5
 G_COMMANDS_SENT = 6  # the one field the node writes: bumped after each command it sends
 N_GLOBAL = 8
