@@ -225,6 +225,12 @@ def test_topic_carries_sensor_data(node, client):
     assert {m.id for m in got} == {S0, S1}
     for m in got:
         assert m.samples > 0 and m.interval > 0
+    # Nothing was built while nobody listened, and the topic's cursor did not move:
+    # the first message of each sensor covers every poll since the node started.
+    for dev in (S0, S1):
+        first = next(m for m in got if m.id == dev)
+        assert first.samples == first.seq
+        assert first.x_counts == first.x_total_counts
 
 
 def test_diagnostics_per_sensor(node, client):
