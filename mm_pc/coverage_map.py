@@ -213,9 +213,11 @@ def _check_codes(codes) -> np.ndarray:
     a = np.asarray(codes)
     if a.ndim != 2 or a.shape[0] == 0 or a.shape[1] == 0:
         raise ValueError(f"codes must be a non-empty 2-D array (ny, nx), got shape {a.shape}")
-    if a.dtype.kind not in "iub":
-        if a.dtype.kind != "f" or not np.all(np.isfinite(a)) or np.any(a != np.round(a)):
-            raise ValueError(f"codes must be whole numbers, got dtype {a.dtype}")
+    whole = a.dtype.kind in "iub" or (
+        a.dtype.kind == "f" and np.all(np.isfinite(a)) and np.all(a == np.round(a))
+    )
+    if not whole:
+        raise ValueError(f"codes must be whole numbers, got dtype {a.dtype}")
     bad = sorted(set(np.unique(a).tolist()) - _STORED_CODES)
     if bad:
         allowed = ", ".join(f"{c} {CODE_NAMES[c]}" for c in sorted(_STORED_CODES))
