@@ -1,0 +1,203 @@
+"""mm-monitor: the Qt monitor's command line.
+
+    mm-monitor                          window, asks /mm_beagle at 15 Hz
+    mm-monitor --sim                    also start mm-beagle on emulated sensors (private domain)
+    mm-monitor --headless --duration 10 --screenshot monitor.png
+                                        offscreen run, a screenshot of the main window, exit 0
+    mm-monitor --replay run.mcap        replay a recording into the monitor (no node needed)
+
+Where there is no display (no $DISPLAY / $WAYLAND_DISPLAY) and --headless was
+not given, the monitor says so and runs headless instead, leaving a
+screenshot and a one-paragraph summary of what it saw.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import signal
+import sys
+import time
+from contextlib import ExitStack
+from pathlib import Path
+
+__all__ = ["main", "summary"]
+
+DEFAULT_SCREENSHOT = "demo-output/mm-monitor.png"
+
+
+def _parser() -> argparse.ArgumentParser:
+    from ..odometry import METHODS
+
+    p = argparse.ArgumentParser(prog="mm-monitor", description=__doc__.split("\n\n")[0])
+    p.add_argument("--beagle", default="/mm_beagle", help="namespace/name of the mm_beagle node")
+    p.add_argument("--rate", type=float, default=15.0, help="sample rate, 1..500 Hz (default 15)")
+    p.add_argument("--method", default="exact", choices=sorted(METHODS), help="pose method")
+    p.add_argument("--calibration", type=Path, default=None, help="calibration YAML to load")
+    p.add_argument("--headless", action="store_true", help="no window on screen (offscreen)")
+    p.add_argument("--duration", type=float, default=0.0, help="seconds, then exit (0 = never)")
+    p.add_argument("--screenshot", type=Path, default=None, help="PNG of the window at the end")
+    p.add_argument(
+        "--sim", nargs="?", const="figure_eight", default=None, metavar="TRAJECTORY",
+        help="start mm-beagle on emulated sensors driving TRAJECTORY (default figure_eight)",
+    )  # fmt: skip
+    p.add_argument("--replay", type=Path, default=None, help="replay an MCAP recording")
+    p.add_argument("--tab", default="Map", help="tab to show first (Map, Graphs, Data, ...)")
+    return p
+
+
+def _has_display() -> bool:
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+def summary(window, seconds: float) -> str:
+    """One paragraph: what the monitor saw in ``seconds`` (for the headless run)."""
+    ctx = window.ctx
+    s = ctx.session
+    bridge = ctx.bridge
+    parts = []
+    if bridge is not None:
+        st = bridge.stats()
+        rtt = "n/a" if math.isnan(st.rtt_p50_s) else f"{st.rtt_p50_s * 1e3:.1f} ms"
+        parts.append(
+            f"In {seconds:.1f} s the monitor was {st.state} to {ctx.config.beagle}: "
+            f"{st.replies} replies to {st.requests} requests at {ctx.config.rate_hz:g} Hz "
+            f"(round trip p50 {rtt}, {st.dropped_requests} dropped, "
+            f"{st.skipped_ticks} ticks skipped while a reply was outstanding)."
+        )
+    else:
+        parts.append(f"In {seconds:.1f} s the monitor processed {s.stats.replies} replies.")
+    hist = s.history
+    if hist is not None and len(hist):
+        x, y = hist.column("x"), hist.column("y")
+        import numpy as np
+
+        travelled = float(np.sum(np.hypot(np.diff(x), np.diff(y)))) if len(x) > 1 else 0.0
+        p = s.pose
+        parts.append(
+            f"Sensors {', '.join(s.devices)}; {len(hist)} samples used; the robot "
+            f"({s.method}) travelled {travelled:.2f} m and is at x={p.x:.3f} m, y={p.y:.3f} m, "
+            f"yaw={math.degrees(p.yaw_wrapped):.1f} deg."
+        )
+    else:
+        parts.append("No sensor data arrived.")
+    if s.stats.restarts:
+        parts.append(f"The node restarted {s.stats.restarts} time(s); each was re-baselined.")
+    if window.frame_ms:
+        import numpy as np
+
+        f = np.asarray(window.frame_ms)
+        parts.append(
+            f"Frames: p50 {np.percentile(f, 50):.1f} ms, p95 {np.percentile(f, 95):.1f} ms."
+        )
+    return " ".join(parts)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    try:
+        from ..calibration import Calibration  # noqa: F401 - fail early on a broken install
+        from .ros_bridge import validate_rate
+
+        validate_rate(args.rate)
+    except ValueError as e:
+        print(f"mm-monitor: {e}", file=sys.stderr)
+        return 2
+    if args.duration < 0:
+        print("mm-monitor: --duration must be >= 0", file=sys.stderr)
+        return 2
+    headless = args.headless
+    if not headless and not _has_display() and os.environ.get("QT_QPA_PLATFORM") != "offscreen":
+        duration = args.duration or 20.0
+        print(
+            f"mm-monitor: no display ($DISPLAY and $WAYLAND_DISPLAY are unset); running headless "
+            f"for {duration:g} s instead, leaving a screenshot and a summary.",
+            flush=True,
+        )
+        headless, args.duration = True, duration
+        args.screenshot = args.screenshot or Path(DEFAULT_SCREENSHOT)
+    if headless:
+        os.environ["QT_QPA_PLATFORM"] = "offscreen"
+    return _run(args, headless)
+
+
+def _run(args, headless: bool) -> int:
+    from PySide6.QtCore import QTimer
+    from PySide6.QtWidgets import QApplication
+
+    from mm_beagle.harness import beagle_process, use_isolated_ros_env
+
+    from .context import MonitorConfig, MonitorContext
+    from .export import grab_png
+    from .main_window import MainWindow
+    from .session import MonitorSession
+
+    config = MonitorConfig(beagle=args.beagle, rate_hz=args.rate, method=args.method)
+    if args.calibration is not None:
+        config.calibration_file = args.calibration
+    with ExitStack() as stack:
+        if args.sim:
+            env = use_isolated_ros_env()
+            log = Path(os.environ.get("TMPDIR", "/tmp")) / "mm_monitor_sim_beagle.log"
+            print(
+                f"mm-monitor: starting mm-beagle on emulated sensors ({args.sim}, "
+                f"ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}); node log: {log}",
+                flush=True,
+            )
+            stack.enter_context(
+                beagle_process({"backend": "sim", "sim_trajectory": args.sim}, env, str(log))
+            )
+        app = QApplication.instance() or QApplication([sys.argv[0]])
+        app.setApplicationName("Mouse Monitor")
+        bridge = None
+        if args.replay is None:
+            from .ros_bridge import RosBridge
+
+            bridge = RosBridge(args.beagle, args.rate)
+        session = MonitorSession(method=args.method)
+        ctx = MonitorContext(session, bridge, config)
+        window = MainWindow(ctx)
+        for i in range(window.tabs.count()):
+            if window.tabs.tabText(i).lower() == args.tab.lower():
+                window.tabs.setCurrentIndex(i)
+        ctx.load_calibration()
+        if ctx.calibration_error:
+            print(f"mm-monitor: {ctx.calibration_error}", file=sys.stderr)
+        window.show()
+        if bridge is not None:
+            bridge.start()
+            stack.callback(bridge.stop)
+        if args.replay is not None:
+            from .replay import start_replay
+
+            start_replay(window, args.replay)
+        # Python signal handlers run only between bytecodes: wake the interpreter regularly.
+        signal.signal(signal.SIGINT, lambda *_: app.quit())
+        signal.signal(signal.SIGTERM, lambda *_: app.quit())
+        tick = QTimer()
+        tick.timeout.connect(lambda: None)
+        tick.start(200)
+        started = time.monotonic()
+        if args.duration:
+            QTimer.singleShot(int(args.duration * 1000), app.quit)
+        app.exec()
+        seconds = time.monotonic() - started
+        code = 0
+        if args.screenshot is not None:
+            window.tabs.setCurrentIndex(window.tabs.currentIndex())
+            window.frame()
+            try:
+                path = grab_png(window, args.screenshot)
+                print(f"mm-monitor: screenshot {path}", flush=True)
+            except OSError as e:
+                print(f"mm-monitor: {e}", file=sys.stderr)
+                code = 1
+        if headless or args.duration:
+            print(summary(window, seconds), flush=True)
+        window.close()
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

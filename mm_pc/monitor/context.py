@@ -1,0 +1,101 @@
+"""What every view of the monitor shares: the session, the bridge and a few signals.
+
+Views get one :class:`MonitorContext` and never talk to each other directly.
+Replies (live from the bridge, or from a replay) enter through
+:meth:`MonitorContext.on_reply`, which runs the session's processing, hands
+the raw reply to a recorder if one is attached, and announces it.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from PySide6.QtCore import QObject, Signal
+
+from ..calibration import Calibration
+from .readings import Reply
+from .session import MonitorSession
+
+__all__ = ["MonitorConfig", "MonitorContext", "default_calibration_path"]
+
+
+def default_calibration_path() -> Path:
+    """Where the wizard saves and the monitor loads the calibration by default."""
+    base = os.environ.get("XDG_CONFIG_HOME") or os.path.join(os.path.expanduser("~"), ".config")
+    return Path(base) / "mouse-monitor" / "calibration.yaml"
+
+
+@dataclass
+class MonitorConfig:
+    """Start-up options of the monitor (the command line of mm-monitor)."""
+
+    beagle: str = "/mm_beagle"
+    rate_hz: float = 15.0
+    calibration_file: Path = field(default_factory=default_calibration_path)
+    method: str = "exact"
+
+
+class MonitorContext(QObject):
+    """Shared state of one monitor window.
+
+    ``bridge`` is a :class:`~.ros_bridge.RosBridge` or None (offline: replay,
+    tests); views must check ``bridge is not None`` before asking the node.
+    """
+
+    reply_processed = Signal(object)  # Reply, after the session took it
+    devices_known = Signal(tuple)  # sensor ids, once the first reply named them
+    session_reset = Signal()  # paths, graphs and pose cleared
+    calibration_changed = Signal()  # a new calibration is in force
+    odometry_changed = Signal()  # pose method, geometry or sensor changed
+    status_message = Signal(str)  # a line for the status bar
+
+    def __init__(
+        self, session: MonitorSession, bridge=None, config: MonitorConfig | None = None
+    ) -> None:
+        super().__init__()
+        self.session = session
+        self.bridge = bridge
+        self.config = config or MonitorConfig()
+        #: object with ``write_reply(reply)``; set by the recorder while recording
+        self.recorder = None
+        self.calibration_error = ""
+
+    def on_reply(self, reply: Reply) -> None:
+        """Process one reply (GUI thread) and tell the views."""
+        known = bool(self.session.devices)
+        self.session.process(reply)
+        if self.recorder is not None:
+            self.recorder.write_reply(reply)
+        if not known and self.session.devices:
+            self.devices_known.emit(self.session.devices)
+        self.reply_processed.emit(reply)
+
+    def reset(self) -> None:
+        """Reset path and values (pose to the origin); counting carries on."""
+        self.session.reset()
+        self.session_reset.emit()
+
+    def load_calibration(self, path: Path | None = None) -> bool:
+        """Load the calibration file (default: the config's); False and a message if it fails.
+
+        A missing default file is normal (never calibrated) and not an error.
+        """
+        path = Path(path or self.config.calibration_file)
+        if not path.exists():
+            self.calibration_error = ""
+            return False
+        try:
+            cal = Calibration.load(path)
+        except (OSError, ValueError) as e:
+            self.calibration_error = f"calibration {path} not loaded: {e}"
+            self.status_message.emit(self.calibration_error)
+            return False
+        self.set_calibration(cal)
+        self.status_message.emit(f"calibration loaded from {path}")
+        return True
+
+    def set_calibration(self, cal: Calibration) -> None:
+        self.session.calibration = cal
+        self.calibration_changed.emit()

@@ -1,0 +1,11 @@
+"""Placeholder: being written (owner: see the task list)."""
+
+from __future__ import annotations
+
+from PySide6.QtWidgets import QDialog
+
+
+class GeometryDialog(QDialog):
+    def __init__(self, ctx, parent=None) -> None:
+        super().__init__(parent)
+        self.ctx = ctx

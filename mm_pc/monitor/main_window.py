@@ -1,0 +1,323 @@
+"""The monitor's main window: tabs of views, a control dock, the status bar.
+
+It only wires things together: views get the shared
+:class:`~.context.MonitorContext`; a frame timer asks the visible views to
+redraw (each skips the work when nothing changed); the status bar shows the
+link state, round-trip time and achieved sample rate from the bridge.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+
+from PySide6.QtCore import Qt, QTimer
+from PySide6.QtGui import QAction, QKeySequence
+from PySide6.QtWidgets import (
+    QComboBox,
+    QDockWidget,
+    QFormLayout,
+    QGroupBox,
+    QHBoxLayout,
+    QLabel,
+    QLineEdit,
+    QMainWindow,
+    QPushButton,
+    QScrollArea,
+    QTabWidget,
+    QVBoxLayout,
+    QWidget,
+)
+
+from ..odometry import METHODS
+from .context import MonitorContext
+from .ros_bridge import validate_rate
+
+__all__ = ["FRAME_HZ", "MainWindow"]
+
+FRAME_HZ = 30.0
+
+STATE_TEXT = {
+    "waiting": ("waiting for {beagle}", "#a66f00"),
+    "connected": ("connected to {beagle}", "#1b7a1b"),
+    "lost": ("lost {beagle} (retrying)", "#b00020"),
+    "offline": ("offline (replay)", "#555555"),
+}
+
+
+class RateEditor(QWidget):
+    """The sample rate field: 1..500 Hz; 0 or junk is refused with a message beside it."""
+
+    def __init__(self, ctx: MonitorContext, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.ctx = ctx
+        self.edit = QLineEdit(f"{ctx.config.rate_hz:g}")
+        self.edit.setToolTip("requests per second to the Beagle node, 1..500 Hz (Enter applies)")
+        self.edit.setMaximumWidth(70)
+        self.edit.returnPressed.connect(self.apply)
+        self.error = QLabel("")
+        self.error.setStyleSheet("color: #b00020")
+        self.error.setWordWrap(True)
+        row = QHBoxLayout()
+        row.setContentsMargins(0, 0, 0, 0)
+        row.addWidget(self.edit)
+        row.addWidget(QLabel("Hz"))
+        row.addStretch(1)
+        lay = QVBoxLayout(self)
+        lay.setContentsMargins(0, 0, 0, 0)
+        lay.addLayout(row)
+        lay.addWidget(self.error)
+        self.error.hide()
+
+    def apply(self) -> bool:
+        """Apply the typed rate; False (rate unchanged, error shown) when it is refused."""
+        try:
+            hz = validate_rate(self.edit.text().strip())
+        except ValueError as e:
+            self.error.setText(str(e))
+            self.error.show()
+            return False
+        self.error.hide()
+        self.ctx.config.rate_hz = hz
+        if self.ctx.bridge is not None:
+            self.ctx.bridge.set_rate(hz)
+        self.ctx.status_message.emit(f"sample rate {hz:g} Hz")
+        return True
+
+
+class MainWindow(QMainWindow):
+    """Mouse Monitor main window."""
+
+    def __init__(self, ctx: MonitorContext) -> None:
+        super().__init__()
+        self.ctx = ctx
+        self.setWindowTitle(f"Mouse Monitor — {ctx.config.beagle}")
+        self.resize(1280, 800)
+        self.frame_ms: deque[float] = deque(maxlen=100_000)
+        self.views: dict[str, QWidget] = {}
+        self.tabs = QTabWidget()
+        self.setCentralWidget(self.tabs)
+        self._build_views()
+        self._build_control_dock()
+        self._build_direction_dock()
+        self._build_menu()
+        self._build_status_bar()
+        ctx.status_message.connect(lambda m: self.statusBar().showMessage(m, 5000))
+        if ctx.bridge is not None:
+            ctx.bridge.data_received.connect(ctx.on_reply)
+            ctx.bridge.connection_changed.connect(self._on_state)
+            ctx.bridge.stats_updated.connect(self._on_stats)
+            ctx.bridge.data_failed.connect(self._on_data_failed)
+            self._on_state(ctx.bridge.state)
+        else:
+            self._on_state("offline")
+        self.frame_timer = QTimer(self)
+        self.frame_timer.setInterval(int(1000 / FRAME_HZ))
+        self.frame_timer.timeout.connect(self.frame)
+        self.frame_timer.start()
+
+    # -- construction -------------------------------------------------------------------
+
+    def _build_views(self) -> None:
+        from .data_list import DataListView
+        from .debug_view import DebugView
+        from .graphs_view import GraphsView
+        from .health_view import HealthView
+        from .map_view import MapView
+        from .registers_view import RegistersView
+
+        for title, cls in (
+            ("Map", MapView),
+            ("Graphs", GraphsView),
+            ("Data", DataListView),
+            ("Registers", RegistersView),
+            ("Debug", DebugView),
+            ("Health", HealthView),
+        ):
+            view = cls(self.ctx, self)
+            self.views[title] = view
+            self.tabs.addTab(view, title)
+
+    def _build_control_dock(self) -> None:
+        from .resolution_panel import ResolutionPanel
+
+        panel = QWidget()
+        lay = QVBoxLayout(panel)
+
+        link = QGroupBox("Sampling")
+        form = QFormLayout(link)
+        self.rate_editor = RateEditor(self.ctx)
+        form.addRow("Sample rate", self.rate_editor)
+        self.pause_button = QPushButton("Pause polling")
+        self.pause_button.setCheckable(True)
+        self.pause_button.toggled.connect(self.set_paused)
+        self.pause_button.setEnabled(self.ctx.bridge is not None)
+        form.addRow(self.pause_button)
+        reset = QPushButton("Reset path and values")
+        reset.clicked.connect(self.ctx.reset)
+        form.addRow(reset)
+        lay.addWidget(link)
+
+        pose = QGroupBox("Pose")
+        pform = QFormLayout(pose)
+        self.method_box = QComboBox()
+        self.method_box.addItems(sorted(METHODS))
+        self.method_box.setCurrentText(self.ctx.session.method)
+        self.method_box.setToolTip(
+            "exact: one sensor, no slip (default); two-sensor: least squares with residual; "
+            "seed-approach1/2: the original's formulas, to compare"
+        )
+        self.method_box.currentTextChanged.connect(self.set_method)
+        pform.addRow("Method", self.method_box)
+        self.method_error = QLabel("")
+        self.method_error.setStyleSheet("color: #b00020")
+        self.method_error.setWordWrap(True)
+        self.method_error.hide()
+        pform.addRow(self.method_error)
+        for text, slot in (
+            ("Calibration wizard…", self.open_calibration_wizard),
+            ("Median filters…", self.open_filter_dialog),
+            ("Robot geometry…", self.open_geometry_dialog),
+            ("Log…", self.open_log_dialog),
+        ):
+            b = QPushButton(text)
+            b.clicked.connect(slot)
+            pform.addRow(b)
+        lay.addWidget(pose)
+
+        self.resolution_panel = ResolutionPanel(self.ctx, self)
+        lay.addWidget(self.resolution_panel)
+        lay.addStretch(1)
+        scroll = QScrollArea()
+        scroll.setWidgetResizable(True)
+        scroll.setWidget(panel)
+        dock = QDockWidget("Control", self)
+        dock.setObjectName("control_dock")
+        dock.setWidget(scroll)
+        dock.setFeatures(QDockWidget.DockWidgetMovable | QDockWidget.DockWidgetFloatable)
+        self.addDockWidget(Qt.LeftDockWidgetArea, dock)
+
+    def _build_direction_dock(self) -> None:
+        from .direction_widget import DirectionPanel
+
+        self.direction_panel = DirectionPanel(self.ctx, self)
+        dock = QDockWidget("Direction", self)
+        dock.setObjectName("direction_dock")
+        dock.setWidget(self.direction_panel)
+        self.addDockWidget(Qt.RightDockWidgetArea, dock)
+
+    def _build_menu(self) -> None:
+        file_menu = self.menuBar().addMenu("&File")
+        self.record_action = QAction("&Record…", self)
+        self.record_action.setShortcut(QKeySequence("Ctrl+R"))
+        self.record_action.triggered.connect(self.toggle_recording)
+        file_menu.addAction(self.record_action)
+        replay = QAction("Re&play…", self)
+        replay.triggered.connect(self.open_replay)
+        file_menu.addAction(replay)
+        export = QAction("&Export view as PNG…", self)
+        export.setShortcut(QKeySequence("Ctrl+E"))
+        export.triggered.connect(self.export_png)
+        file_menu.addAction(export)
+        file_menu.addSeparator()
+        quit_action = QAction("&Quit", self)
+        quit_action.setShortcut(QKeySequence.Quit)
+        quit_action.triggered.connect(self.close)
+        file_menu.addAction(quit_action)
+
+    def _build_status_bar(self) -> None:
+        self.state_label = QLabel()
+        self.rtt_label = QLabel("RTT –")
+        self.rate_label = QLabel("– Hz")
+        self.rows_label = QLabel("")
+        for w in (self.state_label, self.rtt_label, self.rate_label, self.rows_label):
+            self.statusBar().addPermanentWidget(w)
+
+    # -- periodic ---------------------------------------------------------------------------
+
+    def frame(self) -> None:
+        """Redraw the visible views (each does nothing when its data did not change)."""
+        t0 = time.perf_counter()
+        current = self.tabs.currentWidget()
+        if current is not None and hasattr(current, "refresh"):
+            current.refresh()
+        self.direction_panel.refresh()
+        hist = self.ctx.session.history
+        if hist is not None:
+            self.rows_label.setText(f"{len(hist)} samples")
+        self.frame_ms.append((time.perf_counter() - t0) * 1e3)
+
+    def _on_state(self, state: str) -> None:
+        text, colour = STATE_TEXT.get(state, (state, "#000000"))
+        self.state_label.setText(text.format(beagle=self.ctx.config.beagle))
+        self.state_label.setStyleSheet(f"color: {colour}; font-weight: bold")
+
+    def _on_stats(self, stats) -> None:
+        if stats.rtt_p50_s == stats.rtt_p50_s:  # not NaN
+            self.rtt_label.setText(f"RTT {stats.rtt_p50_s * 1e3:.1f} ms")
+        self.rate_label.setText(f"{stats.rate_hz:.1f} Hz")
+
+    def _on_data_failed(self, message: str) -> None:
+        self.statusBar().showMessage(f"data request: {message}", 3000)
+
+    # -- actions ------------------------------------------------------------------------------
+
+    def set_paused(self, paused: bool) -> None:
+        if self.ctx.bridge is not None:
+            self.ctx.bridge.set_polling(not paused)
+        self.pause_button.setText("Resume polling" if paused else "Pause polling")
+
+    def set_method(self, method: str) -> None:
+        try:
+            self.ctx.session.configure_odometry(method=method)
+        except ValueError as e:
+            self.method_error.setText(str(e))
+            self.method_error.show()
+            self.method_box.blockSignals(True)
+            self.method_box.setCurrentText(self.ctx.session.method)
+            self.method_box.blockSignals(False)
+            return
+        self.method_error.hide()
+        self.ctx.odometry_changed.emit()
+
+    def open_calibration_wizard(self) -> None:
+        from .calibration_wizard import CalibrationWizard
+
+        CalibrationWizard(self.ctx, self).open()
+
+    def open_filter_dialog(self) -> None:
+        from .filter_dialog import FilterDialog
+
+        FilterDialog(self.ctx, self).open()
+
+    def open_geometry_dialog(self) -> None:
+        from .geometry_dialog import GeometryDialog
+
+        GeometryDialog(self.ctx, self).open()
+
+    def open_log_dialog(self) -> None:
+        from .log_dialog import LogDialog
+
+        LogDialog(self.ctx, self).show()
+
+    def toggle_recording(self) -> None:
+        from .recording import toggle_recording
+
+        toggle_recording(self)
+
+    def open_replay(self) -> None:
+        from .replay import open_replay
+
+        open_replay(self)
+
+    def export_png(self) -> None:
+        from .export import export_current_view
+
+        export_current_view(self)
+
+    def closeEvent(self, event) -> None:  # noqa: N802 - Qt API
+        self.frame_timer.stop()
+        if self.ctx.recorder is not None:
+            self.ctx.recorder.close()
+            self.ctx.recorder = None
+        super().closeEvent(event)

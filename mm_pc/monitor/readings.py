@@ -1,0 +1,78 @@
+"""What one reply of mm_beagle holds, as plain Python (no Qt, no ROS).
+
+The ROS bridge turns each ``mm_interfaces/SensorData`` into a
+:class:`Reading` (duck-typed: :meth:`Reading.from_msg` reads attributes
+only), so the processing in :mod:`.session` and the replay of a recording run
+the very same code without rclpy.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["Reading", "Reply"]
+
+
+@dataclass(frozen=True)
+class Reading:
+    """One sensor in one reply. Sensor frame (X right, Y forward), metres, seconds.
+
+    ``x_total``/``y_total``: measured displacement since the node started;
+    ``x_lift_total``/``y_lift_total``: the node's estimate of what lifts lost
+    (not included in the measured totals); ``seq``: polls done so far (it
+    goes back when the node restarts); ``stamp_ns``: time of the newest poll.
+    """
+
+    id: str
+    stamp_ns: int
+    seq: int
+    x_total: float
+    y_total: float
+    x_lift_total: float = 0.0
+    y_lift_total: float = 0.0
+    x_speed: float = 0.0
+    y_speed: float = 0.0
+    x_counts: int = 0
+    y_counts: int = 0
+    cpi: int = 0
+    samples: int = 0
+    lift_events: int = 0
+    lift_events_total: int = 0
+    interval: float = 0.0
+
+    @classmethod
+    def from_msg(cls, msg) -> Reading:
+        """From an ``mm_interfaces/SensorData`` (or anything with its fields)."""
+        return cls(
+            id=str(msg.id),
+            stamp_ns=int(msg.stamp.sec) * 1_000_000_000 + int(msg.stamp.nanosec),
+            seq=int(msg.seq),
+            x_total=float(msg.x_total_disp),
+            y_total=float(msg.y_total_disp),
+            x_lift_total=float(msg.x_lift_est_total_disp),
+            y_lift_total=float(msg.y_lift_est_total_disp),
+            x_speed=float(msg.x_speed),
+            y_speed=float(msg.y_speed),
+            x_counts=int(msg.x_counts),
+            y_counts=int(msg.y_counts),
+            cpi=int(msg.cpi),
+            samples=int(msg.samples),
+            lift_events=int(msg.lift_events),
+            lift_events_total=int(msg.lift_events_total),
+            interval=float(msg.interval),
+        )
+
+
+@dataclass(frozen=True)
+class Reply:
+    """One answer of ``get_sensor_data``: the readings, and when and how fast it came.
+
+    ``received_s``: monotonic time of arrival (s); ``rtt_s``: request to reply (s).
+    """
+
+    readings: tuple[Reading, ...]
+    received_s: float = 0.0
+    rtt_s: float = 0.0
+
+    def by_id(self) -> dict[str, Reading]:
+        return {r.id: r for r in self.readings}

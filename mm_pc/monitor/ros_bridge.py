@@ -1,0 +1,376 @@
+"""The monitor's only contact with ROS: rclpy in its own thread, results as Qt signals.
+
+The GUI thread never waits on the network. It calls the bridge's methods
+(``set_rate``, ``request_once``, ``set_resolution``, ...), which only queue
+the action and wake the executor through a guard condition; the action then
+runs on the executor thread (where every rclpy object is used), and the
+answer comes back as a Qt signal, which Qt delivers on the GUI thread.
+
+Requests of the sample timer: at most one ``get_sensor_data`` is in flight.
+A tick that finds a request still outstanding is skipped (``skipped_ticks``):
+the next reply's totals cover the gap, so a slow link (WLAN latency) costs
+neither double counts nor lost counts. A request without an answer after
+``timeout_s`` is abandoned and counted in ``dropped_requests``.
+
+Connection states: ``waiting`` (the node was never seen), ``connected``
+(replies arrive), ``lost`` (it was seen, and now the service is gone or
+requests time out). The bridge keeps asking, so a restarted node is found
+again by itself.
+"""
+
+from __future__ import annotations
+
+import queue
+import statistics
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from contextlib import suppress
+from dataclasses import dataclass
+from typing import ClassVar
+
+from PySide6.QtCore import QObject, Signal
+
+from .readings import Reading, Reply
+
+__all__ = ["MAX_RATE_HZ", "MIN_RATE_HZ", "BridgeStats", "RosBridge", "validate_rate"]
+
+MIN_RATE_HZ = 1.0
+MAX_RATE_HZ = 500.0
+WAITING, CONNECTED, LOST = "waiting", "connected", "lost"
+
+
+def validate_rate(value) -> float:
+    """A sample rate in Hz, 1..500; ValueError with the allowed range otherwise."""
+    try:
+        hz = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(
+            f"sample rate must be a number of Hz in {MIN_RATE_HZ:g}..{MAX_RATE_HZ:g}, got {value!r}"
+        ) from None
+    if not (MIN_RATE_HZ <= hz <= MAX_RATE_HZ):  # also rejects NaN
+        raise ValueError(
+            f"sample rate must be in {MIN_RATE_HZ:g}..{MAX_RATE_HZ:g} Hz, got {value!r}"
+        )
+    return hz
+
+
+@dataclass(frozen=True)
+class BridgeStats:
+    """Link figures for the status bar: round-trip time (s) and achieved reply rate (Hz)."""
+
+    state: str
+    rtt_p50_s: float
+    rtt_max_s: float
+    rate_hz: float
+    requests: int
+    replies: int
+    skipped_ticks: int
+    dropped_requests: int
+    failed_replies: int
+
+
+class RosBridge(QObject):
+    """rclpy node + executor thread serving the monitor.
+
+    ``beagle``: namespace/name of the mm_beagle node (its services are
+    ``<beagle>/get_sensor_data`` etc.). ``rate_hz``: sample rate of the data
+    requests. ``timeout_s``: a request older than this is abandoned.
+    """
+
+    data_received = Signal(object)  # Reply
+    data_failed = Signal(str)  # what went wrong (success=false, or no reply)
+    settings_received = Signal(str, object)  # id, mm_interfaces/SensorSettings
+    settings_failed = Signal(str, str)  # id, message
+    resolution_done = Signal(str, bool, str, int)  # id, ok, message, CPI read back (0 = unknown)
+    samples_received = Signal(str, object)  # id, GetSamples.Response
+    samples_failed = Signal(str, str)  # id, message
+    diagnostics_received = Signal(object)  # {device: {"level", "message", key: value...}}
+    connection_changed = Signal(str)  # waiting | connected | lost
+    stats_updated = Signal(object)  # BridgeStats, twice a second
+
+    def __init__(
+        self,
+        beagle: str = "/mm_beagle",
+        rate_hz: float = 15.0,
+        node_name: str = "mm_monitor",
+        timeout_s: float = 2.0,
+        parent: QObject | None = None,
+    ) -> None:
+        super().__init__(parent)
+        self.beagle = "/" + beagle.strip("/") if beagle.strip("/") else "/mm_beagle"
+        self._rate = validate_rate(rate_hz)
+        self.node_name = node_name
+        self.timeout_s = float(timeout_s)
+        self._actions: queue.SimpleQueue[Callable[[], None]] = queue.SimpleQueue()
+        self._thread: threading.Thread | None = None
+        self._polling = True
+        self._state = WAITING
+        self._seen = False
+        self._in_flight: tuple[object, float] | None = None
+        self._rtts: deque[float] = deque(maxlen=200)
+        self._reply_times: deque[float] = deque(maxlen=2000)
+        self.requests = self.replies = self.skipped_ticks = 0
+        self.dropped_requests = self.failed_replies = 0
+        self._consecutive_failures = 0
+
+    # -- life cycle (GUI thread) ---------------------------------------------------------
+
+    def start(self) -> None:
+        """Create the node in a private rclpy context and spin it in a thread."""
+        import rclpy
+        from diagnostic_msgs.msg import DiagnosticArray
+        from rclpy.context import Context
+        from rclpy.executors import SingleThreadedExecutor
+
+        from mm_interfaces.srv import GetSamples, GetSensorData, GetSensorSettings, SetResolution
+
+        self._ctx = Context()
+        rclpy.init(context=self._ctx)
+        self.node = rclpy.create_node(self.node_name, context=self._ctx)
+        self._types = {
+            "get_sensor_data": GetSensorData,
+            "get_sensor_settings": GetSensorSettings,
+            "set_resolution": SetResolution,
+            "get_samples": GetSamples,
+        }
+        self._clients = {
+            n: self.node.create_client(t, f"{self.beagle}/{n}") for n, t in self._types.items()
+        }
+        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
+        self._wake = self.node.create_guard_condition(self._run_actions)
+        self._timer = self.node.create_timer(1.0 / self._rate, self._tick)
+        self.node.create_timer(0.1, self._watchdog)
+        self.node.create_timer(0.5, self._publish_stats)
+        self._executor = SingleThreadedExecutor(context=self._ctx)
+        self._executor.add_node(self.node)
+        self._thread = threading.Thread(target=self._spin, name="mm_monitor_ros", daemon=True)
+        self._thread.start()
+
+    def _spin(self) -> None:
+        from rclpy.executors import ExternalShutdownException
+
+        with suppress(ExternalShutdownException, RuntimeError):
+            self._executor.spin()
+
+    def stop(self) -> None:
+        """Stop the executor thread and shut the private context down (idempotent)."""
+        if self._thread is None:
+            return
+        self._executor.shutdown(timeout_sec=1.0)
+        self._thread.join(3.0)
+        self._thread = None
+        with suppress(Exception):
+            self.node.destroy_node()
+        with suppress(Exception):
+            self._ctx.try_shutdown()
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None
+
+    # -- requests from the GUI (any thread) ---------------------------------------------
+
+    def _post(self, action: Callable[[], None]) -> None:
+        self._actions.put(action)
+        if self._thread is not None:
+            self._wake.trigger()
+
+    def _run_actions(self) -> None:
+        while True:
+            try:
+                action = self._actions.get_nowait()
+            except queue.Empty:
+                return
+            action()
+
+    @property
+    def rate_hz(self) -> float:
+        return self._rate
+
+    def set_rate(self, hz) -> float:
+        """Change the sample rate (1..500 Hz); ValueError (nothing changed) otherwise."""
+        rate = validate_rate(hz)
+        self._rate = rate
+
+        def apply() -> None:
+            self._timer.cancel()
+            self.node.destroy_timer(self._timer)
+            self._timer = self.node.create_timer(1.0 / rate, self._tick)
+
+        self._post(apply)
+        return rate
+
+    @property
+    def polling(self) -> bool:
+        return self._polling
+
+    def set_polling(self, on: bool) -> None:
+        """Pause (False) or resume (True) the periodic data requests."""
+        self._polling = bool(on)
+
+    def request_once(self) -> None:
+        """One data request now (the debug view's 'request sample')."""
+        self._post(lambda: self._request_data(manual=True))
+
+    def request_settings(self, device: str) -> None:
+        self._post(lambda: self._call("get_sensor_settings", device, id=device))
+
+    def set_resolution(self, device: str, cpi: int) -> None:
+        self._post(lambda: self._call("set_resolution", device, id=device, cpi=int(cpi)))
+
+    def request_samples(self, device: str, since_seq: int = 0, max_samples: int = 0) -> None:
+        self._post(
+            lambda: self._call(
+                "get_samples", device, id=device, since_seq=int(since_seq),
+                max_samples=int(max_samples),
+            )
+        )
+
+    # -- executor thread ------------------------------------------------------------------
+
+    def _tick(self) -> None:
+        if self._polling:
+            self._request_data(manual=False)
+
+    def _request_data(self, manual: bool) -> None:
+        client = self._clients["get_sensor_data"]
+        if self._in_flight is not None:
+            if not manual:
+                self.skipped_ticks += 1
+            return
+        if not client.service_is_ready():
+            return
+        self.requests += 1
+        sent = time.monotonic()
+        future = client.call_async(self._types["get_sensor_data"].Request(id=""))
+        self._in_flight = (future, sent)
+        future.add_done_callback(lambda f: self._on_data(f, sent))
+
+    def _on_data(self, future, sent: float) -> None:
+        if self._in_flight is None or self._in_flight[0] is not future:
+            return  # abandoned by the watchdog
+        self._in_flight = None
+        now = time.monotonic()
+        res = future.result()
+        if res is None or not res.success:
+            self.failed_replies += 1
+            self.data_failed.emit(res.message if res is not None else "no reply")
+            if res is not None:
+                self._set_state(CONNECTED)  # the node answers; its sensors are down
+            return
+        self.replies += 1
+        self._consecutive_failures = 0
+        self._rtts.append(now - sent)
+        self._reply_times.append(now)
+        self._set_state(CONNECTED)
+        readings = tuple(Reading.from_msg(m) for m in res.data)
+        self.data_received.emit(Reply(readings, received_s=now, rtt_s=now - sent))
+
+    _SIGNALS: ClassVar[dict[str, tuple[str, str]]] = {
+        "get_sensor_settings": ("settings_received", "settings_failed"),
+        "get_samples": ("samples_received", "samples_failed"),
+    }
+
+    def _call(self, service: str, device: str, **fields) -> None:
+        client = self._clients[service]
+        if not client.service_is_ready():
+            self._fail(service, device, f"{self.beagle}/{service} is not available")
+            return
+        try:
+            request = self._types[service].Request(**fields)
+        except (TypeError, ValueError, AssertionError) as e:
+            self._fail(service, device, f"bad request: {e}")
+            return
+        future = client.call_async(request)
+        timer = threading.Timer(self.timeout_s * 2.5, lambda: self._expire(service, device, future))
+        timer.daemon = True
+        timer.start()
+        future.add_done_callback(lambda f: (timer.cancel(), self._on_reply(service, device, f)))
+
+    def _expire(self, service: str, device: str, future) -> None:
+        if not future.done():
+            self._post(lambda: self._clients[service].remove_pending_request(future))
+            self._fail(service, device, f"no answer within {self.timeout_s * 2.5:g} s")
+
+    def _on_reply(self, service: str, device: str, future) -> None:
+        res = future.result()
+        if res is None:
+            return
+        if service == "set_resolution":
+            self.resolution_done.emit(device, bool(res.success), res.message, int(res.cpi))
+        elif not res.success:
+            self._fail(service, device, res.message)
+        elif service == "get_sensor_settings":
+            self.settings_received.emit(device, res.settings)
+        else:
+            self.samples_received.emit(device, res)
+
+    def _fail(self, service: str, device: str, message: str) -> None:
+        if service == "set_resolution":
+            self.resolution_done.emit(device, False, message, 0)
+        else:
+            getattr(self, self._SIGNALS[service][1]).emit(device, message)
+
+    def _watchdog(self) -> None:
+        client = self._clients["get_sensor_data"]
+        if self._in_flight is not None:
+            future, sent = self._in_flight
+            if time.monotonic() - sent > self.timeout_s:
+                self._in_flight = None
+                client.remove_pending_request(future)
+                self.dropped_requests += 1
+                self._consecutive_failures += 1
+                self.data_failed.emit(f"no reply within {self.timeout_s:g} s")
+                if self._consecutive_failures >= 2:
+                    self._set_state(LOST)
+        if not client.service_is_ready() and self._state == CONNECTED:
+            self._set_state(LOST)
+
+    def _set_state(self, state: str) -> None:
+        if state == CONNECTED:
+            self._seen = True
+        if state != self._state:
+            self._state = state
+            self.connection_changed.emit(state)
+
+    @property
+    def state(self) -> str:
+        return self._state
+
+    def stats(self) -> BridgeStats:
+        """The link figures now (any thread)."""
+        rtts = list(self._rtts)
+        now = time.monotonic()
+        times = [t for t in list(self._reply_times) if now - t <= 2.0]
+        rate = (len(times) - 1) / (times[-1] - times[0]) if len(times) > 2 else 0.0
+        return BridgeStats(
+            self._state,
+            statistics.median(rtts) if rtts else float("nan"),
+            max(rtts) if rtts else float("nan"),
+            rate,
+            self.requests,
+            self.replies,
+            self.skipped_ticks,
+            self.dropped_requests,
+            self.failed_replies,
+        )
+
+    def _publish_stats(self) -> None:
+        self.stats_updated.emit(self.stats())
+
+    def _on_diagnostics(self, msg) -> None:
+        prefix = self.beagle.rsplit("/", 1)[-1] + ":"
+        out = {}
+        for status in msg.status:
+            if not status.name.startswith(prefix):
+                continue
+            values = {kv.key: kv.value for kv in status.values}
+            values["level"] = int.from_bytes(status.level, "little") if isinstance(
+                status.level, bytes
+            ) else int(status.level)
+            values["message"] = status.message
+            out[status.hardware_id] = values
+        if out:
+            self.diagnostics_received.emit(out)
