@@ -120,6 +120,10 @@ GATE_2D = 9.21
 DEFAULT_P0 = np.diag([1e-4, 1e-4, 1e-4])
 
 _AXES = {"x": 0, "y": 1}
+_EYE3 = np.eye(3)
+_AXIS_ROWS = {"x": np.array([[1.0, 0.0, 0.0]]), "y": np.array([[0.0, 1.0, 0.0]])}
+_HEADING_ROW = np.array([[0.0, 0.0, 1.0]])
+_POSITION_ROWS = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 
 
 def wrap_angle(a: float) -> float:
@@ -229,6 +233,11 @@ def _spd(name: str, value, n: int, allow_semi: bool = False) -> np.ndarray:
             f"smallest eigenvalue {eig[0]:.3g}, matrix {a.tolist()}"
         )
     return a
+
+
+def _all_finite(*arrays: np.ndarray) -> bool:
+    """True if every element is finite (a sum is NaN or inf if any element is)."""
+    return all(math.isfinite(float(a.sum())) for a in arrays)
 
 
 def _gate(gate: float | None) -> float | None:
@@ -363,7 +372,7 @@ class PoseEKF:
         p = f @ self._P @ f.T + g @ m_cov @ g.T
         p = 0.5 * (p + p.T)
         s = np.array([x + dx, y + dy, yaw_end])
-        if not (np.all(np.isfinite(s)) and np.all(np.isfinite(p))):
+        if not _all_finite(s, p):
             raise ValueError(f"increment ({a}, {b}, {c}) gives a non-finite state")
         self._s, self._P = s, p
 
@@ -373,17 +382,17 @@ class PoseEKF:
         """Gated Joseph-form update with innovation nu (m,), H (m, 3), R (m, m)."""
         p = self._P
         s_mat = h @ p @ h.T + r
-        s_inv = np.linalg.inv(s_mat)
+        s_inv = 1.0 / s_mat if s_mat.shape == (1, 1) else np.linalg.inv(s_mat)
         d2 = float(nu @ s_inv @ nu)
         self.last_distance2 = d2
         if gate is not None and not d2 <= gate:
             return False
         k = p @ h.T @ s_inv
-        i_kh = np.eye(3) - k @ h
+        i_kh = _EYE3 - k @ h
         p_new = i_kh @ p @ i_kh.T + k @ r @ k.T
         p_new = 0.5 * (p_new + p_new.T)
         s_new = self._s + k @ nu
-        if not (np.all(np.isfinite(s_new)) and np.all(np.isfinite(p_new))):
+        if not _all_finite(s_new, p_new):
             raise ValueError("update gives a non-finite state; measurement or covariance too large")
         self._s, self._P = s_new, p_new
         return True
@@ -402,8 +411,7 @@ class PoseEKF:
         z = np.array([_finite("fix x", pair[0]), _finite("fix y", pair[1])])
         r = _spd("cov2x2", cov2x2, 2)
         g = _gate(gate)
-        h = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
-        return self._update(z - self._s[:2], h, r, g)
+        return self._update(z - self._s[:2], _POSITION_ROWS, r, g)
 
     def update_heading(self, yaw: float, var: float, gate: float | None = GATE_1D) -> bool:
         """Absolute heading ``yaw`` (rad, REP 103, any wrap) with variance ``var`` (rad^2)."""
@@ -413,7 +421,7 @@ class PoseEKF:
             raise ValueError(f"heading variance must be > 0 rad^2, got {v}")
         g = _gate(gate)
         nu = np.array([wrap_angle(z - float(self._s[2]))])
-        return self._update(nu, np.array([[0.0, 0.0, 1.0]]), np.array([[v]]), g)
+        return self._update(nu, _HEADING_ROW, np.array([[v]]), g)
 
     def update_axis(self, axis: str, value: float, var: float, gate: float | None = None) -> bool:
         """One absolute coordinate: ``axis`` 'x' or 'y' is ``value`` m, variance ``var`` m^2.
@@ -430,9 +438,7 @@ class PoseEKF:
             raise ValueError(f"axis variance must be > 0 m^2, got {v}")
         g = _gate(gate)
         i = _AXES[axis]
-        h = np.zeros((1, 3))
-        h[0, i] = 1.0
-        return self._update(np.array([z - float(self._s[i])]), h, np.array([[v]]), g)
+        return self._update(np.array([z - float(self._s[i])]), _AXIS_ROWS[axis], np.array([[v]]), g)
 
     def update_ranges(self, beacons, ranges, sigma, gate: float | None = GATE_1D) -> bool:
         """Ranges (m) to beacons of known position, used directly (tightly coupled).
