@@ -6,6 +6,11 @@ mm-bench pose --json
     final/heading/RMS error, calibration error, update/integrate samples/s.
     See mm_pc.bench_pose.
 
+mm-bench maps --json
+    Coverage grid update/init times, trilateration fixes/s and error vs
+    noise, raw vs fused drift after a simulated 200 m mowing run.
+    See mm_pc.bench_maps.
+
 mm-bench poll --seconds S --json
     mm-beagle on emulated sensors (separate process) while two client
     processes call get_sensor_data at 100 Hz each. Reports the poll rate and
@@ -247,8 +252,14 @@ def main(argv: list[str] | None = None) -> int:
     poll.add_argument("--json", action="store_true", help="print JSON only (the default)")
     pose = sub.add_parser("pose", help="accuracy and speed of every odometry method (simulated)")
     pose.add_argument("--json", action="store_true", help="print JSON only (the default)")
+    maps = sub.add_parser("maps", help="grid map, trilateration and fusion (simulated)")
+    maps.add_argument("--json", action="store_true", help="print JSON only (the default)")
     args = parser.parse_args(argv)
-    if args.what == "pose":
+    if args.what == "maps":
+        from mm_pc.bench_maps import bench_maps
+
+        result = bench_maps()
+    elif args.what == "pose":
         from mm_pc.bench_pose import bench_pose
 
         result = bench_pose()
