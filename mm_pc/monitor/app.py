@@ -60,8 +60,9 @@ def summary(window, seconds: float) -> str:
     if bridge is not None:
         st = bridge.stats()
         rtt = "n/a" if math.isnan(st.rtt_p50_s) else f"{st.rtt_p50_s * 1e3:.1f} ms"
+        link = {"connected": "was connected to", "waiting": "waited for", "lost": "had lost"}
         parts.append(
-            f"In {seconds:.1f} s the monitor was {st.state} to {ctx.config.beagle}: "
+            f"In {seconds:.1f} s the monitor {link.get(st.state, st.state)} {ctx.config.beagle}: "
             f"{st.replies} replies to {st.requests} requests at {ctx.config.rate_hz:g} Hz "
             f"(round trip p50 {rtt}, {st.dropped_requests} dropped, "
             f"{st.skipped_ticks} ticks skipped while a reply was outstanding)."
@@ -119,7 +120,19 @@ def main(argv: list[str] | None = None) -> int:
         args.screenshot = args.screenshot or Path(DEFAULT_SCREENSHOT)
     if headless:
         os.environ["QT_QPA_PLATFORM"] = "offscreen"
+        _quiet_qt_messages()
     return _run(args, headless)
+
+
+def _quiet_qt_messages() -> None:
+    """Drop the offscreen plugin's harmless 'propagateSizeHints' warning; keep the rest."""
+    from PySide6.QtCore import qInstallMessageHandler
+
+    def handler(_mode, _context, message: str) -> None:
+        if "propagateSizeHints" not in message:
+            print(message, file=sys.stderr)
+
+    qInstallMessageHandler(handler)
 
 
 def _run(args, headless: bool) -> int:
