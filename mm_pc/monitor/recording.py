@@ -1,5 +1,512 @@
-"""Placeholder: being written."""
+"""Record what the monitor received to an MCAP file that ROS 2 tools open.
+
+File layout (MCAP profile ``ros2``, schemas ``ros2msg``, messages ``cdr``):
+
+``/mm_beagle/sensor_data_replies`` -- ``mm_interfaces/msg/SensorData``
+    One message per sensor per reply, built from each :class:`Reading`
+    (stamp from ``stamp_ns``). Fields the monitor does not keep are written
+    as follows: ``x_disp``/``y_disp`` = speed x interval (what the node
+    computed them from); ``x_total_counts``, ``y_total_counts`` and the
+    per-interval lift estimates ``*_lift_est_counts``/``*_lift_est_disp``
+    are 0 (a :class:`Reading` does not carry them).
+``/mm_monitor/reply_meta`` -- ``std_msgs/msg/Float64MultiArray``
+    One message per reply, ``data = [received_s, rtt_s]``: the exact
+    monotonic arrival time and round-trip time (s) of the reply.
+``/mm_monitor/samples/<device>`` -- ``mm_interfaces/srv/GetSamples_Response``
+    The single 1 kHz polls, when the debug view fetched them
+    (:meth:`McapRecorder.write_samples`); channel metadata ``device``.
+
+Every message of one reply has the reply's number (from 0) as its MCAP
+``sequence`` and the same ``log_time``: the arrival time on the system clock
+(the monotonic ``received_s`` shifted by system-minus-monotonic at the first
+reply), so tools show wall-clock times. ``publish_time`` is the node's poll
+stamp for sensor data. A metadata record ``mm_monitor`` holds the start time,
+the beagle node's name, the devices, the sample rate and the reply count.
+
+:func:`read_replies` gives the replies back exactly (every :class:`Reading`
+field, ``received_s`` and ``rtt_s``), so a replay runs the very same
+processing. ``ros2 bag play`` / Foxglove / rosbags read the file without
+this code.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import re
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+from types import SimpleNamespace
+
+from PySide6.QtCore import QTimer
+from PySide6.QtWidgets import QFileDialog, QLabel
+
+from .readings import Reading, Reply
+
+__all__ = [
+    "META_TOPIC",
+    "SAMPLES_TOPIC",
+    "SENSOR_TOPIC",
+    "McapRecorder",
+    "read_replies",
+    "read_samples",
+    "ros2msg_definition",
+    "start_recording",
+    "stop_recording",
+    "toggle_recording",
+]
+
+SENSOR_TOPIC = "/mm_beagle/sensor_data_replies"
+META_TOPIC = "/mm_monitor/reply_meta"
+SAMPLES_TOPIC = "/mm_monitor/samples"
+SENSOR_TYPE = "mm_interfaces/msg/SensorData"
+META_TYPE = "std_msgs/msg/Float64MultiArray"
+SAMPLES_TYPE = "mm_interfaces/srv/GetSamples_Response"
+META_LABEL = "received_s,rtt_s"
+#: rosbag2 requires this channel metadata key; "" = default QoS
+QOS = {"offered_qos_profiles": ""}
+
+_PRIMITIVES = {
+    "bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16",
+    "int32", "uint32", "int64", "uint64", "string", "wstring",
+}  # fmt: skip
+_SEPARATOR = "=" * 80
+
+
+# -- message definitions -------------------------------------------------------------------
+
+
+def _interface_text(type_name: str) -> str:
+    """The .msg text of ``pkg/msg/Type``, or the response part of ``pkg/srv/Type_Response``."""
+    from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
+
+    pkg, kind, name = type_name.split("/")
+    try:
+        share = Path(get_package_share_directory(pkg))
+    except PackageNotFoundError:
+        raise ValueError(f"the ROS package {pkg!r} of {type_name} is not installed") from None
+    if kind == "srv":
+        base, _, part = name.rpartition("_")
+        text = (share / "srv" / f"{base}.srv").read_text()
+        request, _, response = text.partition("\n---\n")
+        return response if part == "Response" else request
+    return (share / "msg" / f"{name}.msg").read_text()
+
+
+def _field_types(text: str, pkg: str) -> list[str]:
+    """Non-primitive field types (``pkg/Type``) used in a .msg text, in order."""
+    out = []
+    for raw in text.splitlines():
+        line = raw.split("#", 1)[0].strip()
+        if not line:
+            continue
+        ftype = line.split()[0]
+        if "=" in line.split(None, 1)[-1].split()[0]:
+            continue  # a constant
+        base = re.sub(r"\[.*\]$", "", ftype)
+        base = re.sub(r"<=\d+$", "", base)
+        if base in _PRIMITIVES:
+            continue
+        if base == "Header":
+            base = "std_msgs/Header"
+        out.append(base if "/" in base else f"{pkg}/{base}")
+    return out
+
+
+@functools.cache
+def ros2msg_definition(type_name: str) -> str:
+    """The full ``ros2msg`` schema text of ``pkg/msg/Type`` as rosbag2 writes it into MCAP.
+
+    The type's own .msg text, then each dependency once (depth first) after
+    a line of 80 ``=`` and ``MSG: pkg/Type``. Read from the installed
+    interface files (ament index).
+    """
+    pkg = type_name.split("/")[0]
+    text = _interface_text(type_name)
+    parts, seen = [text.rstrip("\n")], set()
+
+    def add_deps(body: str, owner_pkg: str) -> None:
+        for dep in _field_types(body, owner_pkg):
+            if dep in seen:
+                continue
+            seen.add(dep)
+            dpkg, dname = dep.split("/")
+            dep_text = _interface_text(f"{dpkg}/msg/{dname}")
+            parts.append(f"{_SEPARATOR}\nMSG: {dep}\n{dep_text.rstrip(chr(10))}")
+            add_deps(dep_text, dpkg)
+
+    add_deps(text, pkg)
+    return "\n".join(parts) + "\n"
+
+
+# -- Reading <-> SensorData -------------------------------------------------------------------
+
+
+@functools.cache
+def _ros() -> SimpleNamespace:
+    """The rclpy pieces, imported once (an import statement per message is costly under Qt)."""
+    from builtin_interfaces.msg import Time
+    from rclpy.serialization import deserialize_message, serialize_message
+    from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
+
+    from mm_interfaces.msg import SensorData
+    from mm_interfaces.srv import GetSamples
+
+    return SimpleNamespace(
+        Time=Time,
+        SensorData=SensorData,
+        GetSamplesResponse=GetSamples.Response,
+        Float64MultiArray=Float64MultiArray,
+        MultiArrayDimension=MultiArrayDimension,
+        MultiArrayLayout=MultiArrayLayout,
+        serialize=serialize_message,
+        deserialize=deserialize_message,
+    )
+
+
+def _to_msg(r: Reading):
+    ros = _ros()
+    Time, SensorData = ros.Time, ros.SensorData  # noqa: N806 - message classes
+    try:
+        return SensorData(
+            stamp=Time(sec=r.stamp_ns // 1_000_000_000, nanosec=r.stamp_ns % 1_000_000_000),
+            id=r.id,
+            x_disp=r.x_speed * r.interval,
+            y_disp=r.y_speed * r.interval,
+            x_speed=r.x_speed,
+            y_speed=r.y_speed,
+            x_counts=r.x_counts,
+            y_counts=r.y_counts,
+            cpi=r.cpi,
+            samples=r.samples,
+            lift_events=r.lift_events,
+            interval=r.interval,
+            seq=r.seq,
+            x_total_disp=r.x_total,
+            y_total_disp=r.y_total,
+            lift_events_total=r.lift_events_total,
+            x_lift_est_total_disp=r.x_lift_total,
+            y_lift_est_total_disp=r.y_lift_total,
+        )
+    except (AssertionError, TypeError) as e:
+        raise ValueError(
+            f"reading of {r.id!r} does not fit mm_interfaces/SensorData: {e}"
+        ) from None
+
+
+# -- the recorder --------------------------------------------------------------------------------
+
+
+class McapRecorder:
+    """Writes replies (and fetched single polls) to ``path`` as MCAP, ROS 2 profile.
+
+    Raises OSError when the file cannot be created. A write error later
+    (disk full) does not raise into the monitor: the recorder stops writing,
+    keeps the message in ``error`` and calls ``on_error(message)`` once.
+    """
+
+    def __init__(self, path: str | Path, beagle: str = "/mm_beagle", rate_hz: float = 0.0) -> None:
+        from mcap.writer import CompressionType, Writer
+
+        self.path = Path(path)
+        self.beagle = beagle
+        self.rate_hz = float(rate_hz)
+        self._schemas: dict[str, int] = {}
+        self._file = open(self.path, "wb")  # noqa: SIM115 - closed in close()
+        try:
+            self._writer = Writer(self._file, compression=CompressionType.ZSTD)
+            self._writer.start(profile="ros2", library="mm_monitor")
+            self._sensor_channel = self._channel(SENSOR_TOPIC, SENSOR_TYPE)
+            self._meta_channel = self._channel(META_TOPIC, META_TYPE)
+        except Exception:
+            self._file.close()
+            raise
+        self._sample_channels: dict[str, int] = {}
+        self.started = datetime.now(timezone.utc)
+        self.replies = 0
+        self.samples_messages = 0
+        self.devices: list[str] = []
+        self.error = ""
+        self.on_error = None
+        self.closed = False
+        self._offset_ns: int | None = None
+        ros = _ros()
+        self._meta_layout = ros.MultiArrayLayout(
+            dim=[ros.MultiArrayDimension(label=META_LABEL, size=2, stride=2)]
+        )
+
+    def _channel(self, topic: str, type_name: str, metadata: dict | None = None) -> int:
+        schemas = self._schemas
+        if type_name not in schemas:
+            schemas[type_name] = self._writer.register_schema(
+                name=type_name, encoding="ros2msg", data=ros2msg_definition(type_name).encode()
+            )
+        return self._writer.register_channel(
+            topic=topic,
+            message_encoding="cdr",
+            schema_id=schemas[type_name],
+            metadata={**QOS, **(metadata or {})},
+        )
+
+    def _log_time(self, received_s: float) -> int:
+        ns = round(received_s * 1e9)
+        if self._offset_ns is None:
+            self._offset_ns = time.time_ns() - ns
+        return max(0, ns + self._offset_ns)
+
+    def write_reply(self, reply: Reply) -> None:
+        """Append one reply: its readings and its arrival/round-trip times.
+
+        ValueError (nothing written) when a reading does not fit SensorData
+        or the recorder is closed.
+        """
+        if self.closed:
+            raise ValueError(f"the recording {self.path} is closed")
+        if self.error:
+            return
+        ros = _ros()
+        msgs = [(r, ros.serialize(_to_msg(r))) for r in reply.readings]
+        meta = ros.Float64MultiArray(
+            layout=self._meta_layout, data=[float(reply.received_s), float(reply.rtt_s)]
+        )
+        log_time = self._log_time(reply.received_s)
+        seq = self.replies & 0xFFFFFFFF
+        try:
+            self._writer.add_message(
+                self._meta_channel, log_time, ros.serialize(meta), log_time, seq
+            )
+            for r, data in msgs:
+                self._writer.add_message(self._sensor_channel, log_time, data, r.stamp_ns, seq)
+        except OSError as e:
+            self._fail(e)
+            return
+        self.replies += 1
+        for r in reply.readings:
+            if r.id not in self.devices:
+                self.devices.append(r.id)
+
+    def write_samples(self, device: str, response) -> None:
+        """Append a ``GetSamples.Response`` of ``device`` (the debug view's single polls)."""
+        if self.closed:
+            raise ValueError(f"the recording {self.path} is closed")
+        if self.error:
+            return
+        serialize_message = _ros().serialize
+        try:
+            if device not in self._sample_channels:
+                suffix = re.sub(r"[^A-Za-z0-9_/]", "_", device).strip("/") or "sensor"
+                self._sample_channels[device] = self._channel(
+                    f"{SAMPLES_TOPIC}/{suffix}", SAMPLES_TYPE, {"device": device}
+                )
+            now = time.time_ns()
+            stamps = list(response.stamp_ns)
+            publish = int(stamps[-1]) if stamps else now
+            self._writer.add_message(
+                self._sample_channels[device], now, serialize_message(response), publish,
+                self.samples_messages & 0xFFFFFFFF,
+            )  # fmt: skip
+        except OSError as e:
+            self._fail(e)
+            return
+        self.samples_messages += 1
+
+    def _fail(self, e: OSError) -> None:
+        self.error = f"recording to {self.path} stopped: {e}"
+        if self.on_error is not None:
+            self.on_error(self.error)
+
+    def close(self) -> None:
+        """Write the metadata and the index, close the file (idempotent)."""
+        if self.closed:
+            return
+        self.closed = True
+        try:
+            self._writer.add_metadata(
+                "mm_monitor",
+                {
+                    "start_time": self.started.isoformat(),
+                    "start_time_ns": str(int(self.started.timestamp() * 1e9)),
+                    "end_time": datetime.now(timezone.utc).isoformat(),
+                    "beagle": self.beagle,
+                    "devices": ",".join(self.devices),
+                    "rate_hz": f"{self.rate_hz:g}",
+                    "replies": str(self.replies),
+                    "reply_meta": f"{META_TOPIC}: data = [received_s, rtt_s] (s, monotonic)",
+                    "not_recorded": "x_total_counts, y_total_counts, *_lift_est_counts, "
+                    "*_lift_est_disp are 0; x_disp/y_disp = speed * interval",
+                },
+            )
+            self._writer.finish()
+        except OSError as e:
+            if not self.error:
+                self._fail(e)
+        finally:
+            self._file.close()
+
+
+# -- reading back ------------------------------------------------------------------------------
+
+
+def _open_messages(path: str | Path):
+    """(schema, channel, message) of every message, or ValueError saying what is wrong."""
+    from mcap.reader import make_reader
+
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"no recording at {path} (file not found)")
+    try:
+        with open(path, "rb") as f:
+            if f.read(8) != b"\x89MCAP0\r\n":
+                raise ValueError(f"{path} is not an MCAP file (it does not start with MCAP magic)")
+            f.seek(0)
+            return list(make_reader(f).iter_messages(log_time_order=False))
+    except ValueError:
+        raise
+    except Exception as e:  # the mcap reader raises many kinds on a damaged file
+        raise ValueError(
+            f"{path} is a damaged or incomplete MCAP file ({type(e).__name__}: {e}); "
+            "a recording cut short can be repaired with `mcap recover`"
+        ) from None
+
+
+def read_replies(path: str | Path) -> list[Reply]:
+    """The replies recorded in ``path`` (by :class:`McapRecorder`, or any MCAP file with
+    ``mm_interfaces/msg/SensorData`` messages), in recorded order.
+
+    With the ``/mm_monitor/reply_meta`` channel, messages are grouped by their
+    sequence number and ``received_s``/``rtt_s`` are exact; without it, the
+    SensorData messages with the same ``log_time`` form one reply
+    (``received_s`` = log_time in s, ``rtt_s`` = 0). Raises ValueError for a
+    missing, non-MCAP or damaged file, or one without sensor data.
+    """
+    ros = _ros()
+    deserialize_message, SensorData = ros.deserialize, ros.SensorData  # noqa: N806
+    Float64MultiArray = ros.Float64MultiArray  # noqa: N806
+    messages = _open_messages(path)
+    sensor = [(c, m) for s, c, m in messages if s is not None and s.name == SENSOR_TYPE]
+    meta = [m for s, c, m in messages if c.topic == META_TOPIC and s and s.name == META_TYPE]
+    if not sensor and not meta:
+        topics = sorted({c.topic for _, c, _ in messages})
+        raise ValueError(
+            f"{path} holds no {SENSOR_TYPE} messages (topics: {', '.join(topics) or 'none'})"
+        )
+    try:
+        readings = [
+            (m.sequence, m.log_time, Reading.from_msg(deserialize_message(m.data, SensorData)))
+            for c, m in sensor
+            if c.message_encoding == "cdr"
+        ]
+        metas = {}
+        for m in meta:
+            values = list(deserialize_message(m.data, Float64MultiArray).data)
+            metas[m.sequence] = (m.log_time, float(values[0]), float(values[1]))
+    except Exception as e:  # deserialisation of foreign bytes can fail in many ways
+        raise ValueError(
+            f"{path}: a message could not be decoded ({type(e).__name__}: {e})"
+        ) from None
+    if metas:
+        groups: dict[int, list[Reading]] = {k: [] for k in metas}
+        for seq, _, r in readings:
+            groups.setdefault(seq, []).append(r)
+        out = []
+        for seq in sorted(groups, key=lambda k: (metas.get(k, (0,))[0], k)):
+            _, received, rtt = metas.get(seq, (0, math.nan, 0.0))
+            out.append(Reply(tuple(groups[seq]), received_s=received, rtt_s=rtt))
+        return out
+    by_time: dict[int, list[Reading]] = {}
+    for _, log_time, r in readings:
+        by_time.setdefault(log_time, []).append(r)
+    return [Reply(tuple(v), received_s=t / 1e9) for t, v in sorted(by_time.items())]
+
+
+def read_samples(path: str | Path) -> list[tuple[str, object]]:
+    """(device, GetSamples.Response) of every recorded single-poll fetch, in order."""
+    ros = _ros()
+    out = []
+    for s, c, m in _open_messages(path):
+        if s is not None and s.name == SAMPLES_TYPE:
+            device = c.metadata.get("device", c.topic)
+            out.append((m.log_time, device, ros.deserialize(m.data, ros.GetSamplesResponse)))
+    return [(d, r) for _, d, r in sorted(out, key=lambda x: x[0])]
+
+
+# -- the window's File > Record action -------------------------------------------------------------
+
+
+def _set_indicator(window, text: str | None) -> None:
+    label = getattr(window, "_recording_label", None)
+    if text is None:
+        if label is not None:
+            window.statusBar().removeWidget(label)
+            label.deleteLater()
+            window._recording_label = None
+        return
+    if label is None:
+        label = QLabel()
+        label.setStyleSheet("color: #b00020; font-weight: bold")
+        window.statusBar().addPermanentWidget(label)
+        window._recording_label = label
+    label.setText(text)
+
+
+def start_recording(window, path: str | Path) -> bool:
+    """Record every reply from now on to ``path``; False (nothing attached) on an error,
+    which is shown in the status bar."""
+    ctx = window.ctx
+    if ctx.recorder is not None:
+        window.statusBar().showMessage(f"already recording to {ctx.recorder.path}", 8000)
+        return False
+    try:
+        recorder = McapRecorder(path, beagle=ctx.config.beagle, rate_hz=ctx.config.rate_hz)
+    except (OSError, ValueError) as e:
+        window.statusBar().showMessage(f"cannot record to {path}: {e}", 10000)
+        return False
+
+    def failed(message: str) -> None:
+        # called from inside ctx.on_reply: detach after it returns
+        QTimer.singleShot(0, lambda: _stop_after_error(window, recorder, message))
+
+    recorder.on_error = failed
+    ctx.recorder = recorder
+    window.record_action.setText("Stop &recording")
+    _set_indicator(window, f"● REC {recorder.path.name}")
+    window.statusBar().showMessage(f"recording to {recorder.path}")
+    return True
+
+
+def _stop_after_error(window, recorder: McapRecorder, message: str) -> None:
+    if window.ctx.recorder is recorder:
+        stop_recording(window)
+    window.statusBar().showMessage(message, 15000)
+
+
+def stop_recording(window) -> Path | None:
+    """Stop and close the recording; the file's path (None when nothing was recorded)."""
+    recorder = window.ctx.recorder
+    if recorder is None:
+        return None
+    window.ctx.recorder = None
+    recorder.close()
+    window.record_action.setText("&Record…")
+    _set_indicator(window, None)
+    if recorder.error:
+        window.statusBar().showMessage(recorder.error, 15000)
+    else:
+        window.statusBar().showMessage(
+            f"recorded {recorder.replies} replies to {recorder.path}", 8000
+        )
+    return recorder.path
 
 
 def toggle_recording(window) -> None:
-    window.statusBar().showMessage("recording: not yet available")
+    """File > Record: ask for a file and start, or stop the running recording."""
+    if window.ctx.recorder is not None:
+        stop_recording(window)
+        return
+    default = datetime.now().strftime("mouse-monitor-%Y%m%d-%H%M%S.mcap")
+    name, _ = QFileDialog.getSaveFileName(
+        window, "Record replies to", default, "MCAP recordings (*.mcap);;All files (*)"
+    )
+    if name:
+        start_recording(window, name)
