@@ -1,6 +1,6 @@
 """mm-monitor: the Qt monitor of Mouse Monitor for ROS 2.
 
-Layers (see docs/monitor-architecture.md):
+Layers (see docs/monitor.md):
 
 * :mod:`.readings`, :mod:`.history`, :mod:`.session` -- pure Python/numpy: what a
   reply of mm_beagle holds, the columnar history, and the processing pipeline

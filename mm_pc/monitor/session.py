@@ -104,7 +104,7 @@ class MonitorSession:
         sensor: int = 0,
         calibration: Calibration | None = None,
         use_lift_estimates: bool = True,
-        max_rows: int = 2_000_000,
+        max_rows: int = 1_000_000,
         log_length: int = 5000,
     ) -> None:
         if method not in METHODS:
