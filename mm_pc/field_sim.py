@@ -59,8 +59,12 @@ measurement belongs to one request end)
 Replay (:func:`run_fusion`)
 ---------------------------
 Per request: predict with the request's increment, then apply that request
-end's measurements: GPS (only :func:`~mm_pc.field_fixes.gps_fix_usable` fixes,
-R = accuracy^2 / 2 per axis), beacon ranges (tightly coupled,
+end's measurements: GPS (only :func:`~mm_pc.field_fixes.gps_fix_usable` fixes;
+gated with the fix's own R = accuracy^2 / 2 per axis, so ghosts are caught,
+but applied with R inflated by (1 + phi) / (1 - phi), phi = exp(-0.5 s / 30 s)
+(:func:`gps_inflation`, about 120): the filter treats fixes as independent,
+and 2 Hz fixes of an error that wanders over 30 s are not, so without it the
+filter believes it averaged the GPS error away), beacon ranges (tightly coupled,
 :meth:`~mm_pc.fusion.PoseEKF.update_ranges`) or trilaterated fixes
 (:func:`mm_pc.trilateration.least_squares_fix` with its covariance), compass
 (R = (2 deg)^2 + (1 deg)^2: the filter has no bias state, so the bias is
@@ -103,8 +107,11 @@ __all__ = [
     "GpsReading",
     "RangeReading",
     "WireContact",
+    "corner_beacons",
     "errors",
+    "gps_inflation",
     "lawn_path",
+    "plot_grid",
     "run_fusion",
     "simulate_field_run",
 ]
@@ -226,6 +233,7 @@ class FieldSim:
     range_sigma: float = RANGE_SIGMA
     compass_var: float = COMPASS_SIGMA**2 + COMPASS_BIAS**2
     wire_var: float = WIRE_SIGMA**2
+    gps_inflation: float = 1.0
     run_length_m: float = 0.0
     notes: dict = field(default_factory=dict)
 
@@ -344,6 +352,21 @@ def _gps_readings(truth, t, grid, gen) -> list[GpsReading]:
     return out
 
 
+def gps_inflation(interval_s: float, tau_s: float) -> float:
+    """Factor on a GPS fix's variance so that a stream of them counts as what it is worth.
+
+    For a first-order Gauss-Markov error with correlation exp(-interval/tau)
+    = phi between fixes, the mean of n fixes has the variance of
+    n (1 - phi) / (1 + phi) independent ones; weighting every fix by that
+    fraction, i.e. inflating its variance by (1 + phi) / (1 - phi), keeps the
+    filter from believing it averaged the error away.
+    """
+    if not (interval_s > 0 and tau_s > 0):
+        raise ValueError(f"interval and tau must be > 0 s, got {interval_s}, {tau_s}")
+    phi = math.exp(-interval_s / tau_s)
+    return (1 + phi) / (1 - phi)
+
+
 def _random_vector(gen, lo: float, hi: float) -> np.ndarray:
     a = gen.uniform(0, 2 * math.pi)
     return gen.uniform(lo, hi) * np.array([math.cos(a), math.sin(a)])
@@ -425,6 +448,7 @@ def simulate_field_run(seed: int | np.random.Generator = 1) -> FieldSim:
         grid=grid,
         wires=rectangle_perimeter(PLOT_W, PLOT_H),
         run_length_m=float(np.sum(v) * simulator.DT),
+        gps_inflation=gps_inflation(GPS_EVERY / ODOM_HZ, GPS_TAU),
     )
 
 
@@ -447,41 +471,35 @@ def _events_by_request(sim_run: FieldSim, use: Sequence[str]) -> dict[int, list]
     return events
 
 
-def _apply(ekf: PoseEKF, sim_run: FieldSim, name: str, m, stats: dict, gate: dict) -> None:
-    applied = False
-    g = {} if gate[name] < REACQUIRE_AFTER else {"gate": None}
+def _apply(ekf: PoseEKF, sim_run: FieldSim, name: str, m, ungated: bool) -> str:
+    """One reading into the filter: 'applied', 'rejected' (by the gate) or 'skipped'."""
+    g = {"gate": None} if ungated else {}
     if name == "compass":
-        applied = ekf.update_heading(float(compass_to_rep103(m.heading)), sim_run.compass_var, **g)
+        ok = ekf.update_heading(float(compass_to_rep103(m.heading)), sim_run.compass_var, **g)
     elif name == "beacons":
-        applied = ekf.update_ranges(sim_run.beacons, m.ranges, sim_run.range_sigma, **g)
+        ok = ekf.update_ranges(sim_run.beacons, m.ranges, sim_run.range_sigma, **g)
     elif name == "trilateration":
         try:
             fix = least_squares_fix(
                 sim_run.beacons, m.ranges, sim_run.range_sigma, initial=tuple(ekf.state[:2])
             )
         except TrilaterationError:
-            stats["skipped"] = stats.get("skipped", 0) + 1
-            return
-        applied = ekf.update_position((fix.x, fix.y), fix.covariance, **g)
+            return "skipped"
+        ok = ekf.update_position((fix.x, fix.y), fix.covariance, **g)
     elif name == "gps":
         if not gps_fix_usable(m.quality):
-            stats["skipped"] = stats.get("skipped", 0) + 1
-            return
-        xy = sim_run.grid.to_local(m.lat, m.lon)
+            return "skipped"
         var = gps_accuracy_m(m.quality) ** 2 / 2
-        applied = ekf.update_position(xy, np.diag([var, var]), **g)
-    elif name == "perimeter":
+        r = np.diag([var, var])
+        xy = sim_run.grid.to_local(m.lat, m.lon)
+        ok = ekf.update_position(xy, r * sim_run.gps_inflation, **g, gate_cov=r)
+    else:  # perimeter: which wire is a guess from the estimate, as on the robot
         s = ekf.state
         wire = nearest_segment((s[0], s[1]), sim_run.wires, max_distance=2.0)
         if wire is None:
-            stats["skipped"] = stats.get("skipped", 0) + 1
-            return
-        applied = ekf.update_axis(wire.axis, wire.value, sim_run.wire_var)
-    key = "applied" if applied else "rejected"
-    stats[key] = stats.get(key, 0) + 1
-    if g:
-        stats["reacquired"] = stats.get("reacquired", 0) + 1
-    gate[name] = 0 if applied else gate[name] + 1
+            return "skipped"
+        ok = ekf.update_axis(wire.axis, wire.value, sim_run.wire_var)
+    return "applied" if ok else "rejected"
 
 
 #: After this many rejections in a row of one source the filter is taken to be lost
@@ -508,12 +526,13 @@ def run_fusion(
     odometry's increments) or 'wheels' (wheel travel through
     :func:`mm_pc.field_fixes.body_increment`). Row k is the estimate after
     request k's predict and its measurements. ``stats``, if given, receives
-    counts: predicts, applied, rejected (failed the gate), skipped (not
-    usable: bad GPS quality, no trilateration fix, no wire near).
+    counts: ``predicts``; ``applied``, ``rejected`` (failed the gate),
+    ``skipped`` (not usable: bad GPS quality, no trilateration fix, no wire
+    near) and ``reacquired`` (applied ungated after :data:`REACQUIRE_AFTER`
+    rejections in a row), in total and per input under ``by_input``.
     """
-    unknown = [u for u in use if u not in FUSION_INPUTS]
-    if isinstance(use, str) or unknown:
-        raise ValueError(f"use must be a collection of {FUSION_INPUTS}, got {use!r}")
+    if isinstance(use, str) or any(u not in FUSION_INPUTS for u in use):
+        raise ValueError(f"use must be a collection of names from {FUSION_INPUTS}, got {use!r}")
     if motion not in MOTION_SOURCES:
         raise ValueError(f"motion must be one of {MOTION_SOURCES}, got {motion!r}")
     if motion == "mouse":
@@ -522,18 +541,30 @@ def run_fusion(
     else:
         ekf = PoseEKF(Pose2D(*sim.truth[0]), **WHEEL_NOISE)
         inc = np.array([body_increment(dl, dr, sim.track_width) for dl, dr in sim.wheels])
-    st = {} if stats is None else stats
+    kinds = ("applied", "rejected", "skipped", "reacquired")
+    by_input = {name: dict.fromkeys(kinds, 0) for name in use}
+    in_a_row = dict.fromkeys(use, 0)
     events = _events_by_request(sim, use)
-    rejected_in_a_row = dict.fromkeys(FUSION_INPUTS, 0)
     out = np.empty((inc.shape[0] + 1, 3))
     out[0] = ekf.state
     for k in range(1, inc.shape[0] + 1):
         a, b, c = inc[k - 1]
         ekf.predict(float(a), float(b), float(c))
         for name, m in events.get(k, ()):
-            _apply(ekf, sim, name, m, st, rejected_in_a_row)
+            ungated = in_a_row[name] >= REACQUIRE_AFTER
+            outcome = _apply(ekf, sim, name, m, ungated)
+            count = by_input[name]
+            count[outcome] += 1
+            count["reacquired"] += ungated and outcome == "applied"
+            if outcome != "skipped":
+                in_a_row[name] = in_a_row[name] + 1 if outcome == "rejected" else 0
         out[k] = ekf.state
-    st["predicts"] = inc.shape[0]
+    if stats is not None:
+        stats.clear()
+        stats["predicts"] = int(inc.shape[0])
+        for kind in kinds:
+            stats[kind] = sum(c[kind] for c in by_input.values())
+        stats["by_input"] = by_input
     return out
 
 

@@ -378,12 +378,24 @@ class PoseEKF:
 
     # -- updates -----------------------------------------------------------------------------
 
-    def _update(self, nu: np.ndarray, h: np.ndarray, r: np.ndarray, gate: float | None) -> bool:
-        """Gated Joseph-form update with innovation nu (m,), H (m, 3), R (m, m)."""
+    def _update(
+        self,
+        nu: np.ndarray,
+        h: np.ndarray,
+        r: np.ndarray,
+        gate: float | None,
+        r_gate: np.ndarray | None = None,
+    ) -> bool:
+        """Gated Joseph-form update with innovation nu (m,), H (m, 3), R (m, m).
+
+        ``r_gate``: the R the gate tests against, if not ``r``.
+        """
         p = self._P
-        s_mat = h @ p @ h.T + r
+        hph = h @ p @ h.T
+        s_mat = hph + r
         s_inv = 1.0 / s_mat if s_mat.shape == (1, 1) else np.linalg.inv(s_mat)
-        d2 = float(nu @ s_inv @ nu)
+        gate_inv = s_inv if r_gate is None else np.linalg.inv(hph + r_gate)
+        d2 = float(nu @ gate_inv @ nu)
         self.last_distance2 = d2
         if gate is not None and not d2 <= gate:
             return False
@@ -397,9 +409,13 @@ class PoseEKF:
         self._s, self._P = s_new, p_new
         return True
 
-    def update_position(self, xy, cov2x2, gate: float | None = GATE_2D) -> bool:
+    def update_position(self, xy, cov2x2, gate: float | None = GATE_2D, gate_cov=None) -> bool:
         """Position fix (x, y) m in the local frame with its 2x2 covariance (m^2).
 
+        ``gate_cov``: optional 2x2 covariance (m^2) to gate with instead of
+        ``cov2x2``. For fixes with time-correlated errors (GPS), whose
+        ``cov2x2`` is inflated so that a stream of them is not taken for
+        independent information, gate with the single fix's own accuracy.
         Returns True if applied, False if the fix failed the gate (state unchanged).
         """
         try:
@@ -410,8 +426,9 @@ class PoseEKF:
             raise ValueError(f"xy must be two numbers (x, y) in metres, got {xy!r}")
         z = np.array([_finite("fix x", pair[0]), _finite("fix y", pair[1])])
         r = _spd("cov2x2", cov2x2, 2)
+        r_gate = None if gate_cov is None else _spd("gate_cov", gate_cov, 2)
         g = _gate(gate)
-        return self._update(z - self._s[:2], _POSITION_ROWS, r, g)
+        return self._update(z - self._s[:2], _POSITION_ROWS, r, g, r_gate)
 
     def update_heading(self, yaw: float, var: float, gate: float | None = GATE_1D) -> bool:
         """Absolute heading ``yaw`` (rad, REP 103, any wrap) with variance ``var`` (rad^2)."""
