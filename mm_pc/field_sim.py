@@ -35,7 +35,7 @@ measurement belongs to one request end)
   ``TRACK_WIDTH``, encoder ticks of ``tick_length(0.18 m, 360)`` (the seed's
   12 ticks per turn give 47 mm steps, too coarse for a 20 Hz motion model),
   and slip: each wheel turns 2 % +- 2 % (per request) more than the ground
-  passes, plus slip bursts (one wheel 30 % for 1-3 s, about once a minute).
+  passes, plus slip bursts (one wheel 10 % more for 0.5-2 s, about once a minute).
 * GPS, 2 Hz: local metres through :class:`mm_pc.field_fixes.LocalGrid` to
   latitude/longitude (what a NavSatFix carries) and HDOP, satellites, fix
   type. The error is a first-order Gauss-Markov process per axis (time
