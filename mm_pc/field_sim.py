@@ -76,7 +76,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -212,7 +212,9 @@ class FieldSim:
     (continuous); ``mouse`` (N, 3) the raw odometry's body increments
     (fwd m, left m, dtheta rad) per request; ``wheels`` (N, 2) measured wheel
     travel (left, right) m per request; ``raw_wheels`` (N+1, 3) the wheel
-    odometry's own path; measurement lists in time order.
+    odometry's own path; measurement lists in time order. The remaining
+    fields are what the replay needs: beacons, GPS grid, wires, and the noise
+    figures it weights the readings with (m, m^2, rad^2).
     """
 
     t: np.ndarray
@@ -235,7 +237,6 @@ class FieldSim:
     wire_var: float = WIRE_SIGMA**2
     gps_inflation: float = 1.0
     run_length_m: float = 0.0
-    notes: dict = field(default_factory=dict)
 
 
 # --- the path ----------------------------------------------------------------------------

@@ -56,6 +56,17 @@ so slip is unmodelled error of about that order. Standing still adds no noise
 (mouse odometry does not drift at rest). A caller with better knowledge
 passes ``q`` (its own 3x3 M) to :meth:`PoseEKF.predict`.
 
+Driving predict from a pose stream
+----------------------------------
+A nav_msgs/Odometry stream (mm-odometry's mouse odometry, or wheel odometry)
+carries poses, not increments. :func:`pose_increment` (one pair) and
+:func:`increments_from_poses` (an array) invert the arc model: with
+c = wrap(yaw1 - yaw0) and m = yaw0 + c/2, (a, b) = R(-m) (x1 - x0, y1 - y0) / k(c),
+so predicting with the result from pose 0 lands on pose 1 to rounding, in
+whatever frame the odometry uses (only differences enter). The yaw step is
+wrapped, so yaws decoded from quaternions (:func:`yaw_from_quaternion`) work
+as long as the robot turns less than pi between two messages.
+
 Measurement models (update)
 ---------------------------
 All are z = h(s) + v, v ~ N(0, R), applied with innovation nu = z - h(s),
@@ -66,6 +77,10 @@ P+ = (I - K H) P (I - K H)^T + K R K^T, which keeps P symmetric positive
 
 * Position fix (GPS, trilateration): z = (x, y), H = [[1, 0, 0], [0, 1, 0]],
   R = the fix's 2x2 covariance (GPS: from HDOP; trilateration: its own).
+  A filter assumes each R is independent of the last; GPS errors wander over
+  tens of seconds, so a caller weighting a 2 Hz stream should inflate R and
+  gate with the single fix's own covariance (``gate_cov``), see
+  :mod:`mm_pc.field_sim`.
 * Heading (compass, converted to REP 103 by the caller): z = yaw,
   H = [0, 0, 1]; the innovation is wrapped to [-pi, pi) so 179 deg vs
   -179 deg is a 2 deg correction, not 358 deg.
@@ -132,7 +147,7 @@ def wrap_angle(a: float) -> float:
 
 
 def yaw_from_quaternion(z: float, w: float) -> float:
-    """Yaw (rad, (-pi, pi]) of a rotation about +z given as quaternion (0, 0, z, w).
+    """Yaw (rad, [-pi, pi)) of a rotation about +z given as quaternion (0, 0, z, w).
 
     The planar inverse of :func:`mm_pc.odometry_node.yaw_to_quaternion`, for
     feeding nav_msgs/Odometry poses to :func:`pose_increment`.

@@ -531,6 +531,11 @@ def test_run_fusion_rejects_unknown_inputs(run):
         fs.run_fusion(run, motion="legs")
 
 
+def test_lawn_path_rejects_a_bad_speed():
+    with pytest.raises(ValueError, match="speed must be a finite number of m/s > 0"):
+        fs.lawn_path(speed=0.0)
+
+
 def test_gps_inflation_is_the_gauss_markov_factor():
     assert fs.gps_inflation(0.5, 30.0) == pytest.approx(
         (1 + math.exp(-1 / 60)) / (1 - math.exp(-1 / 60))
