@@ -1,15 +1,195 @@
-"""Placeholder: being written (owner: see the task list)."""
+"""The 13 PLN2033 registers of every sensor, read from the node on demand.
+
+"Refresh" asks the node (``get_sensor_settings``) once per sensor; the
+answers arrive as bridge signals and fill one column per sensor (hex), and
+below the table the decoded status of each sensor: lift and motion as the
+node decoded them, the status register's bits 15..0, the names of the bits
+that are set (by the default register map, an assumption documented in
+docs/pln2033.md), the resolution and the time of the read. Errors of a read
+are shown in red under the button.
+"""
 
 from __future__ import annotations
 
-from PySide6.QtWidgets import QLabel, QVBoxLayout, QWidget
+import time
+
+from PySide6.QtGui import QFont
+from PySide6.QtWidgets import (
+    QGroupBox,
+    QHBoxLayout,
+    QHeaderView,
+    QLabel,
+    QPushButton,
+    QTableWidget,
+    QTableWidgetItem,
+    QVBoxLayout,
+    QWidget,
+)
+
+from pln2033.regmap import REGISTER_NAMES, RegisterMap
+
+__all__ = ["FIELDS", "RegistersView", "decode_status", "status_bits"]
+
+#: SensorSettings field names, in the seed's order
+FIELDS: tuple[str, ...] = tuple(f"{name}_register" for name in REGISTER_NAMES)
+NO_LOSS_TIP = (
+    "Reading the registers does not lose counts: the node folds the displacement it reads "
+    "with the status register into its sums before replying."
+)
+
+
+def status_bits(value: int) -> str:
+    """Bits 15..0 of a 16-bit register, in groups of four (e.g. '0000 0000 1001 0000')."""
+    bits = f"{value & 0xFFFF:016b}"
+    return " ".join(bits[i : i + 4] for i in range(0, 16, 4))
+
+
+def decode_status(value: int, regmap: RegisterMap | None = None) -> list[str]:
+    """Names of the status bits set in ``value`` (by ``regmap``, default: the assumed map)."""
+    m = regmap or RegisterMap.default()
+    named = (
+        ("motion", m.status_motion),
+        ("lift", m.status_lift),
+        ("overflow X", m.status_overflow_x),
+        ("overflow Y", m.status_overflow_y),
+        ("reserved (no sensor answering?)", m.status_reserved),
+    )
+    return [name for name, mask in named if value & mask]
 
 
 class RegistersView(QWidget):
+    """Register table (rows: registers, columns: sensors) with the decoded status below."""
+
     def __init__(self, ctx, parent=None) -> None:
         super().__init__(parent)
         self.ctx = ctx
-        QVBoxLayout(self).addWidget(QLabel("RegistersView"))
+        self._regmap = RegisterMap.default()
+        self.devices: list[str] = []
+        #: device -> (SensorSettings, local time of the answer)
+        self.settings: dict[str, tuple[object, float]] = {}
+        self.errors: dict[str, str] = {}
+
+        self.refresh_button = QPushButton("Refresh")
+        self.refresh_button.setToolTip(NO_LOSS_TIP)
+        self.refresh_button.clicked.connect(lambda: self.request_registers())
+        self.note = QLabel("")
+        self.error = QLabel("")
+        self.error.setStyleSheet("color: #b00020")
+        self.error.setWordWrap(True)
+        bar = QHBoxLayout()
+        bar.addWidget(self.refresh_button)
+        bar.addWidget(self.note, 1)
+
+        self.table = QTableWidget(len(FIELDS), 0)
+        self.table.setVerticalHeaderLabels(list(FIELDS))
+        self.table.setEditTriggers(QTableWidget.NoEditTriggers)
+        self.table.horizontalHeader().setSectionResizeMode(QHeaderView.Stretch)
+        self.table.setToolTip(NO_LOSS_TIP)
+        mono = QFont("monospace")
+        mono.setStyleHint(QFont.Monospace)
+        self._mono = mono
+
+        self.status_box = QGroupBox("Status (decoded)")
+        self.status_layout = QHBoxLayout(self.status_box)
+        self.status_labels: dict[str, QLabel] = {}
+
+        lay = QVBoxLayout(self)
+        lay.addLayout(bar)
+        lay.addWidget(self.error)
+        lay.addWidget(self.table, 1)
+        lay.addWidget(self.status_box)
+
+        if ctx.bridge is not None:
+            ctx.bridge.settings_received.connect(self.on_settings)
+            ctx.bridge.settings_failed.connect(self.on_failed)
+        ctx.devices_known.connect(self._set_devices)
+        self._set_devices(ctx.session.devices)
+        self._update_note()
+
+    # -- columns -----------------------------------------------------------------------
+
+    def _set_devices(self, devices) -> None:
+        for dev in devices:
+            self._column(dev)
+        self._update_note()
+
+    def _column(self, device: str) -> int:
+        if device not in self.devices:
+            self.devices.append(device)
+            col = len(self.devices) - 1
+            self.table.setColumnCount(len(self.devices))
+            self.table.setHorizontalHeaderItem(col, QTableWidgetItem(device))
+            label = QLabel("not read yet")
+            label.setFont(self._mono)
+            box = QGroupBox(device)
+            QVBoxLayout(box).addWidget(label)
+            self.status_layout.addWidget(box)
+            self.status_labels[device] = label
+        return self.devices.index(device)
+
+    def _update_note(self) -> None:
+        if self.ctx.bridge is None:
+            self.refresh_button.setEnabled(False)
+            self.note.setText("offline: no node to read the registers from")
+        elif not self.ctx.session.devices:
+            self.note.setText("no sensor known yet (waiting for the first reply)")
+        else:
+            self.note.setText("values read on demand; reading loses no counts")
+
+    # -- requests and answers -----------------------------------------------------------
+
+    def request_registers(self, devices=None) -> int:
+        """Ask the node for the registers of ``devices`` (default: every known sensor).
+
+        Returns the number of requests sent (0 offline). Never waits: the
+        answers arrive through the bridge's signals.
+        """
+        bridge = self.ctx.bridge
+        devices = list(self.ctx.session.devices if devices is None else devices)
+        if bridge is None or not devices:
+            self._update_note()
+            return 0
+        self.errors.clear()
+        self.error.setText("")
+        for dev in devices:
+            bridge.request_settings(dev)
+        self.note.setText(f"asked the node for {len(devices)} sensor(s)…")
+        return len(devices)
+
+    def on_settings(self, device: str, msg) -> None:
+        """Fill one sensor's column and status from a SensorSettings message."""
+        col = self._column(device)
+        for row, name in enumerate(FIELDS):
+            item = QTableWidgetItem(f"0x{int(getattr(msg, name)):04X}")
+            item.setFont(self._mono)
+            self.table.setItem(row, col, item)
+        now = time.time()
+        self.settings[device] = (msg, now)
+        self.errors.pop(device, None)
+        self._show_errors()
+        self.status_labels[device].setText(self.status_text(msg, now))
+        self.note.setText(f"read {time.strftime('%H:%M:%S', time.localtime(now))}")
+
+    def status_text(self, msg, stamp: float) -> str:
+        status = int(msg.status_register)
+        names = ", ".join(decode_status(status, self._regmap)) or "none"
+        yes = {True: "yes", False: "no"}
+        return "\n".join(
+            (
+                f"lifted: {yes[bool(msg.lifted)]}    motion: {yes[bool(msg.motion)]}",
+                f"status 0x{status:04X}  bits 15..0: {status_bits(status)}",
+                f"bits set: {names}",
+                f"cpi {int(msg.cpi)}  (x_cpi {int(msg.x_cpi)}, y_cpi {int(msg.y_cpi)})",
+                f"read at {time.strftime('%H:%M:%S', time.localtime(stamp))}",
+            )
+        )
+
+    def on_failed(self, device: str, message: str) -> None:
+        self.errors[device] = message
+        self._show_errors()
+
+    def _show_errors(self) -> None:
+        self.error.setText("\n".join(f"{d}: {m}" for d, m in self.errors.items()))
 
     def refresh(self) -> None:
-        pass
+        """Nothing to redraw per frame: the registers are read on demand."""
