@@ -1,0 +1,552 @@
+"""Map view and direction widgets: what they draw equals the session's history and pose.
+
+Run the hour-of-data timing with ``-s`` to see it printed:
+``python -m pytest -q -s tests/test_monitor_map.py -k hour``.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pyqtgraph as pg
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from PySide6.QtCore import QPointF, Qt
+from PySide6.QtGui import QColor, QImage
+
+from mm_pc.monitor.context import MonitorContext
+from mm_pc.monitor.direction_widget import (
+    GAINS_PX_PER_MM,
+    DirectionPanel,
+    auto_gain,
+)
+from mm_pc.monitor.map_view import (
+    MAX_WIDTH_M,
+    MIN_WIDTH_M,
+    ROBOT_COLOUR,
+    MapView,
+    PathDecimator,
+    sensor_colour,
+)
+from mm_pc.monitor.session import MonitorSession
+from mm_pc.monitor.sim_feed import DEFAULT_DEVICES, sim_replies
+from mm_pc.odometry import Pose2D
+
+# PySide6-Essentials 6.12.0 drops one reference to True/False per Signal.emit (see
+# /work/notes/requests-views.md); without this the process aborts with "bool_dealloc"
+# after a few hundred replies. Remove once the dependency pin excludes 6.12.0.
+if sys.version_info < (3, 12):
+    for _b in (True, False):
+        ctypes.c_ssize_t.from_address(id(_b)).value += 1 << 40
+
+IMAGES = Path(__file__).resolve().parent.parent / "docs" / "images"
+
+
+# -- helpers ---------------------------------------------------------------------------------
+
+
+def feed(ctx: MonitorContext, name: str = "figure_eight", rate: float = 50, seconds=None) -> None:
+    for r in sim_replies(name, rate, seconds):
+        ctx.on_reply(r)
+
+
+@pytest.fixture
+def ctx() -> MonitorContext:
+    return MonitorContext(MonitorSession())
+
+
+@pytest.fixture
+def view(qtbot, ctx) -> MapView:
+    v = MapView(ctx)
+    qtbot.addWidget(v)
+    v.resize(900, 650)
+    v.show()
+    qtbot.waitExposed(v)
+    return v
+
+
+def history_points(hist, cx: str, cy: str) -> set[tuple[float, float]]:
+    return set(zip(hist.column(cx).tolist(), hist.column(cy).tolist(), strict=True))
+
+
+def assert_path_from_history(view: MapView, key, hist, cx: str, cy: str) -> np.ndarray:
+    x, y = view.path_data(key)
+    hx, hy = hist.column(cx), hist.column(cy)
+    assert len(x) >= 2
+    assert (x[0], y[0]) == (hx[0], hy[0])
+    assert (x[-1], y[-1]) == (hx[-1], hy[-1])
+    pts = history_points(hist, cx, cy)
+    assert all(p in pts for p in zip(x.tolist(), y.tolist(), strict=True))
+    return x
+
+
+def hour_rows(session: MonitorSession, rows: int = 360_000, rate: float = 100.0) -> np.ndarray:
+    """Rows of an hour at ``rate`` Hz: a mower's stripes 20 m long, 0.2 m apart, at 0.2 m/s,
+    with the sensors where their mounts are (columns as the session's history)."""
+    hist = session.history
+    t = np.arange(rows) / rate
+    s = 0.2 * t
+    stripe, along = np.divmod(s, 20.2)
+    on_line = along < 20.0
+    back = stripe % 2 == 1
+    x = np.where(on_line, np.where(back, 20.0 - along, along), np.where(back, 0.0, 20.0))
+    y = 0.2 * stripe + np.where(on_line, 0.0, along - 20.0)
+    yaw = np.where(on_line, np.where(back, math.pi, 0.0), math.pi / 2)
+    out = np.zeros((rows, len(hist.columns)))
+    col = hist.index
+    out[:, col["t"]], out[:, col["dt"]] = t, 1 / rate
+    out[:, col["x"]], out[:, col["y"]], out[:, col["yaw"]] = x, y, yaw
+    c, sn = np.cos(yaw), np.sin(yaw)
+    for k, m in enumerate(session.mounts):
+        out[:, col[f"s{k}_wx"]] = x + c * m.x - sn * m.y
+        out[:, col[f"s{k}_wy"]] = y + sn * m.x + c * m.y
+        out[:, col[f"s{k}_dy"]] = 0.002
+    return out
+
+
+def distinct_colours(img: QImage, step: int = 3) -> set[int]:
+    return {
+        img.pixel(x, y) for x in range(0, img.width(), step) for y in range(0, img.height(), step)
+    }
+
+
+def has_colour(img: QImage, colour: str, tol: int = 40) -> bool:
+    want = QColor(colour)
+    for x in range(0, img.width(), 2):
+        for y in range(0, img.height(), 2):
+            c = QColor(img.pixel(x, y))
+            if (abs(c.red() - want.red()) + abs(c.green() - want.green())
+                    + abs(c.blue() - want.blue())) < tol:
+                return True
+    return False
+
+
+class FakeDrag:
+    """Enough of pyqtgraph's MouseDragEvent for ViewBox.mouseDragEvent (a pan by dx px)."""
+
+    def __init__(self, dx: float, button=Qt.MouseButton.LeftButton) -> None:
+        self._button, self._dx = button, dx
+
+    def accept(self):
+        pass
+
+    def button(self):
+        return self._button
+
+    def pos(self):
+        return pg.Point(100 + self._dx, 100)
+
+    def lastPos(self):  # noqa: N802 - pyqtgraph API
+        return pg.Point(100, 100)
+
+
+class FakeWheel:
+    def __init__(self, delta: int, pos: QPointF) -> None:
+        self._delta, self._pos = delta, pos
+
+    def delta(self):
+        return self._delta
+
+    def pos(self):
+        return self._pos
+
+    def accept(self):
+        pass
+
+
+# -- the decimation (pure) ----------------------------------------------------------------------
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    steps=st.lists(st.tuples(st.floats(-0.01, 0.01), st.floats(-0.01, 0.01)), min_size=1,
+                   max_size=300),
+    cuts=st.lists(st.integers(0, 300), max_size=5),
+)
+def test_decimation_keeps_path_points_within_a_cell_and_is_incremental(steps, cuts):
+    pts = np.cumsum(np.array(steps), axis=0) + 3.0
+    x, y = pts[:, 0], pts[:, 1]
+    whole = PathDecimator()
+    whole.update(x, y)
+    parts = PathDecimator()
+    for c in [*sorted(cuts), len(x)]:
+        parts.update(x[: min(c, len(x))], y[: min(c, len(x))])
+    assert parts.rows_seen == whole.rows_seen == len(x)
+    assert parts.bounds == (x.min(), x.max(), y.min(), y.max())
+    index = {p: i for i, p in reversed(list(enumerate(zip(x.tolist(), y.tolist(), strict=True))))}
+    for level, eps in enumerate(PathDecimator.LEVEL_EPS_M):
+        kx, ky, connect = whole.points(level)
+        px, py, _ = parts.points(level)
+        assert connect is None
+        np.testing.assert_array_equal(kx, px)
+        np.testing.assert_array_equal(ky, py)
+        assert (kx[0], ky[0]) == (x[0], y[0])
+        assert (kx[-1], ky[-1]) == (x[-1], y[-1])
+        kept = [index[p] for p in zip(kx.tolist(), ky.tolist(), strict=True)]
+        assert kept == sorted(kept)
+        # every dropped point is in the cell of the last point kept before it
+        last = np.maximum.accumulate(np.isin(np.arange(len(x)), kept) * np.arange(len(x)))
+        d = np.hypot(x - x[last], y - y[last])
+        assert np.all(d <= math.sqrt(2) * eps + 1e-12)
+
+
+def test_decimation_of_a_still_robot_keeps_first_and_last_only():
+    dec = PathDecimator()
+    dec.update(np.full(1000, 0.25), np.full(1000, -1.0))
+    x, y, _ = dec.points(0)
+    assert list(zip(x, y, strict=True)) == [(0.25, -1.0)]
+    dec.update(np.r_[np.full(1000, 0.25), [np.nan, 0.3]], np.r_[np.full(1000, -1.0), [0.0, -1.0]])
+    x, y, _ = dec.points(0)
+    assert list(zip(x, y, strict=True)) == [(0.25, -1.0), (0.3, -1.0)]  # NaN row skipped
+
+
+def test_clipped_points_hold_everything_inside_the_rectangle():
+    t = np.linspace(0, 40 * math.pi, 50_000)
+    x, y = np.cos(t) * (1 + t / 40), np.sin(t) * (1 + t / 40)
+    dec = PathDecimator()
+    dec.update(x, y)
+    rect = (0.5, 1.5, -0.3, 0.4)
+    cx, cy, connect = dec.points(0, rect, budget=1000)
+    assert len(cx) < dec.level_size(0)
+    allx, ally, _ = dec.points(0)
+    inside = (allx >= 0.5) & (allx <= 1.5) & (ally >= -0.3) & (ally <= 0.4)
+    shown = set(zip(cx.tolist(), cy.tolist(), strict=True))
+    assert all(p in shown for p in zip(allx[inside].tolist(), ally[inside].tolist(), strict=True))
+    assert shown <= set(zip(allx.tolist(), ally.tolist(), strict=True))
+    assert connect is not None and not connect[-1] and (~connect).sum() > 1  # runs are broken
+
+
+# -- the map ---------------------------------------------------------------------------------------
+
+
+def test_paths_equal_history_and_markers_sit_at_the_pose(view, ctx):
+    feed(ctx, seconds=30)
+    view.refresh()
+    view.fit_paths()
+    view.refresh()
+    hist = ctx.session.history
+    x = assert_path_from_history(view, "robot", hist, "x", "y")
+    assert len(x) == len(hist)  # 4 mm per row: nothing falls under a 0.5 mm cell
+    for k in range(2):
+        assert_path_from_history(view, k, hist, f"s{k}_wx", f"s{k}_wy")
+    pose = ctx.session.pose
+    assert (view.robot_marker.pos().x(), view.robot_marker.pos().y()) == pytest.approx(
+        (pose.x, pose.y))
+    hx, hy = view.robot_heading.getData()
+    assert (hx[0], hy[0]) == pytest.approx((pose.x, pose.y))
+    assert (hx[1], hy[1]) == pytest.approx(
+        (pose.x + 0.1 * math.cos(pose.yaw), pose.y + 0.1 * math.sin(pose.yaw)))
+    for k, items in enumerate(view.sensor_items):
+        sx, sy = items["dot"].getData()
+        assert (sx[0], sy[0]) == pytest.approx((hist.last(f"s{k}_wx"), hist.last(f"s{k}_wy")))
+    assert f"{pose.x:+.3f} m" in view.pose_label.text()
+
+
+def test_zoomed_out_path_is_decimated_but_still_from_the_history(view, ctx):
+    feed(ctx, seconds=30)
+    view.set_visible_width(MAX_WIDTH_M, (0.0, 0.0))
+    view.refresh()
+    hist = ctx.session.history
+    x = assert_path_from_history(view, "robot", hist, "x", "y")
+    assert len(x) < len(hist) / 4
+    assert view.render_stats()["levels"]["robot"] > 0
+
+
+def test_refresh_does_nothing_when_the_history_did_not_change(view, ctx):
+    feed(ctx, seconds=2)
+    view.refresh()
+    n = view.render_stats()["refreshes"]
+    view.refresh()
+    view.refresh()
+    assert view.render_stats()["refreshes"] == n
+    ctx.on_reply(next(iter(sim_replies("figure_eight", 50, 3))))  # a baseline: no row
+    feed_more = list(sim_replies("figure_eight", 50, 2.1))[-1]
+    ctx.on_reply(feed_more)
+    view.refresh()
+    assert view.render_stats()["refreshes"] == n + 1
+
+
+def test_zoom_slider_sets_the_visible_width_and_follows_the_wheel(view, ctx):
+    view.zoom_slider.setValue(0)
+    assert view.visible_width() == pytest.approx(MIN_WIDTH_M, rel=1e-6)
+    view.zoom_slider.setValue(view.zoom_slider.maximum())
+    assert view.visible_width() == pytest.approx(MAX_WIDTH_M, rel=1e-6)
+    view.zoom_slider.setValue(view.zoom_slider.maximum() // 2)
+    mid = math.sqrt(MIN_WIDTH_M * MAX_WIDTH_M)
+    assert view.visible_width() == pytest.approx(mid, rel=1e-6)
+    assert view.width_label.text() == f"{mid:.3g} m"
+    centre = view.vb.mapViewToScene(QPointF(*view.view_centre()))
+    view.vb.wheelEvent(FakeWheel(120, view.vb.mapFromScene(centre)))  # zoom in
+    assert view.visible_width() < mid
+    assert view.zoom_slider.value() < view.zoom_slider.maximum() // 2
+    view.set_visible_width(1e6)
+    assert view.visible_width() == pytest.approx(MAX_WIDTH_M, rel=1e-6)
+
+
+def test_follow_recentres_on_the_robot_and_a_pan_ends_it(view, ctx):
+    view.set_visible_width(0.5, (5.0, 5.0))
+    view.follow_check.setChecked(True)
+    feed(ctx, seconds=10)
+    view.refresh()
+    pose = ctx.session.pose
+    assert view.view_centre() == pytest.approx((pose.x, pose.y), abs=1e-9)
+    assert view.visible_width() == pytest.approx(0.5, rel=1e-6)
+    view.vb.mouseDragEvent(FakeDrag(40))
+    assert not view.follow_check.isChecked()
+    centre = view.view_centre()
+    feed_tail = list(sim_replies("figure_eight", 50, 11))[-20:]
+    for r in feed_tail:
+        ctx.on_reply(r)
+    view.refresh()
+    assert view.view_centre() == pytest.approx(centre)  # left where the user put it
+    view.follow_check.setChecked(True)
+    view.refresh()  # no new data, but following was switched on
+    pose = ctx.session.pose
+    assert view.view_centre() == pytest.approx((pose.x, pose.y), abs=1e-9)
+
+
+def test_hidden_paths_are_not_updated_and_catch_up_when_shown(view, ctx):
+    replies = list(sim_replies("figure_eight", 50, 20))
+    for r in replies[:300]:
+        ctx.on_reply(r)
+    view.refresh()
+    view.path_checks[0].setChecked(False)
+    assert not view.paths[0].curve.isVisible()
+    before = view.path_data(0)[0].copy()
+    for r in replies[300:]:
+        ctx.on_reply(r)
+    view.refresh()
+    np.testing.assert_array_equal(view.path_data(0)[0], before)
+    assert len(view.path_data("robot")[0]) > len(before)
+    view.path_checks[0].setChecked(True)
+    view.refresh()
+    assert_path_from_history(view, 0, ctx.session.history, "s0_wx", "s0_wy")
+    view.set_path_visible("robot", False)
+    assert not view.path_checks["robot"].isChecked()
+
+
+def test_reset_button_clears_the_paths_and_puts_the_robot_home(view, ctx, qtbot):
+    replies = list(sim_replies("figure_eight", 50, 12))
+    for r in replies[:500]:
+        ctx.on_reply(r)
+    view.refresh()
+    assert len(view.path_data("robot")[0]) > 100
+    qtbot.mouseClick(view.reset_button, Qt.MouseButton.LeftButton)
+    view.refresh()
+    assert ctx.session.pose == Pose2D()
+    for key in view.paths:
+        assert len(view.path_data(key)[0]) == 0
+    assert view.robot_marker.pos().x() == 0 and view.robot_marker.pos().y() == 0
+    # counting carries on from the baselines: the new path starts near the origin
+    for r in replies[500:550]:
+        ctx.on_reply(r)
+    view.refresh()
+    x, y = view.path_data("robot")
+    assert len(x) == len(ctx.session.history) == 50
+    assert math.hypot(x[0], y[0]) < 0.01
+
+
+def test_history_dropping_old_rows_rebuilds_the_paths(qtbot):
+    ctx = MonitorContext(MonitorSession(max_rows=400))
+    v = MapView(ctx)
+    qtbot.addWidget(v)
+    replies = list(sim_replies("figure_eight", 50, 12))
+    for r in replies[:300]:
+        ctx.on_reply(r)
+    v.refresh()
+    for r in replies[300:]:
+        ctx.on_reply(r)
+    v.refresh()
+    hist = ctx.session.history
+    assert hist.dropped_rows > 0
+    assert_path_from_history(v, "robot", hist, "x", "y")
+
+
+def test_sensors_appear_when_the_devices_are_known(view, ctx):
+    assert view.sensor_items == []
+    assert list(view.path_checks) == ["robot"]
+    view.refresh()  # no history yet: draws the robot at the origin
+    feed(ctx, seconds=3)
+    assert len(view.sensor_items) == 2
+    assert list(view.path_checks) == ["robot", 0, 1]
+    assert view.path_checks[1].text() == "sensor 2"
+    assert DEFAULT_DEVICES[1] in view.path_checks[1].toolTip()
+    view.refresh()
+    assert_path_from_history(view, 1, ctx.session.history, "s1_wx", "s1_wy")
+
+
+def test_view_built_after_the_devices_has_its_sensors(qtbot, ctx):
+    feed(ctx, seconds=2)
+    v = MapView(ctx)
+    qtbot.addWidget(v)
+    assert len(v.sensor_items) == 2
+    v.refresh()
+    assert_path_from_history(v, 0, ctx.session.history, "s0_wx", "s0_wy")
+
+
+def test_sensor_axes_point_right_and_forward(view, ctx):
+    feed(ctx, seconds=4)
+    view.set_visible_width(MIN_WIDTH_M, (0.0, 0.0))
+    view.refresh()
+    pose, m = ctx.session.pose, ctx.session.mounts[0]
+    ax, ay = view.sensor_items[0]["axes"].getData()
+    # segment 0: X arrow shaft, segment 3: Y arrow shaft (3 segments per arrow)
+    xdir = np.array([ax[1] - ax[0], ay[1] - ay[0]]) / 0.025
+    ydir = np.array([ax[7] - ax[6], ay[7] - ay[6]]) / 0.025
+    right = (math.sin(pose.yaw + m.yaw), -math.cos(pose.yaw + m.yaw))
+    forward = (math.cos(pose.yaw + m.yaw), math.sin(pose.yaw + m.yaw))
+    assert xdir == pytest.approx(right)
+    assert ydir == pytest.approx(forward)
+    assert view.sensor_items[0]["axes"].isVisible()
+
+
+def test_map_screenshot(view, ctx):
+    feed(ctx, "figure_eight", 50, 30)
+    view.refresh()
+    view.fit_paths()
+    view.refresh()
+    IMAGES.mkdir(parents=True, exist_ok=True)
+    img = view.grab().toImage()
+    assert img.save(str(IMAGES / "map.png"))
+    assert len(distinct_colours(img)) > 20
+    for colour in (ROBOT_COLOUR, sensor_colour(0), sensor_colour(1)):
+        assert has_colour(img, colour), colour
+
+
+# -- direction widgets -----------------------------------------------------------------------------
+
+
+@pytest.fixture
+def panel(qtbot, ctx) -> DirectionPanel:
+    p = DirectionPanel(ctx)
+    qtbot.addWidget(p)
+    p.resize(240, 440)
+    p.show()
+    qtbot.waitExposed(p)
+    return p
+
+
+def test_direction_vector_is_the_newest_displacement_times_the_gain(panel, ctx):
+    assert panel.widgets == [] and not panel.waiting.isHidden()
+    feed(ctx, seconds=5)
+    assert len(panel.widgets) == 2 and panel.waiting.isHidden()
+    panel.refresh()
+    hist = ctx.session.history
+    for k, w in enumerate(panel.widgets):
+        dx, dy = hist.last(f"s{k}_dx"), hist.last(f"s{k}_dy")
+        assert (dx, dy) != (0.0, 0.0)
+        assert w.vector_px() == pytest.approx((dx * w.gain, dy * w.gain))
+        tail = hist.tail(100)
+        peak = np.hypot(tail[:, hist.index[f"s{k}_dx"]], tail[:, hist.index[f"s{k}_dy"]]).max()
+        assert w.gain == auto_gain(peak, w.radius_px())
+        assert peak * w.gain <= 0.9 * w.radius_px()
+        speed = math.hypot(hist.last(f"s{k}_vx"), hist.last(f"s{k}_vy"))
+        assert w.speed == pytest.approx(speed)
+    index = panel.gain_box.findData(10 * 1e3)
+    panel.gain_box.setCurrentIndex(index)
+    for k, w in enumerate(panel.widgets):
+        assert w.gain == 1e4
+        assert w.vector_px() == pytest.approx(
+            (hist.last(f"s{k}_dx") * 1e4, hist.last(f"s{k}_dy") * 1e4))
+
+
+def test_direction_refresh_skips_unchanged_history(panel, ctx, monkeypatch):
+    feed(ctx, seconds=2)
+    panel.refresh()
+    calls = []
+    for w in panel.widgets:
+        monkeypatch.setattr(w, "set_sample", lambda *a: calls.append(a))
+    panel.refresh()
+    assert calls == []
+    ctx.reset()
+    panel.refresh()
+    assert calls == [(0.0, 0.0, 0.0, 0.0)] * 2
+
+
+def test_auto_gain_steps():
+    assert auto_gain(0.0, 100) == GAINS_PX_PER_MM[-1] * 1e3
+    assert auto_gain(0.002, 100) == 20e3  # 2 mm * 20 px/mm = 40 px <= 90 px; 50 px/mm is 100
+    assert auto_gain(10.0, 100) == GAINS_PX_PER_MM[0] * 1e3
+
+
+def test_direction_screenshot(panel, ctx):
+    feed(ctx, "figure_eight", 50, 30)
+    panel.refresh()
+    IMAGES.mkdir(parents=True, exist_ok=True)
+    img = panel.grab().toImage()
+    assert img.save(str(IMAGES / "direction.png"))
+    assert len(distinct_colours(img, 2)) > 10
+    assert has_colour(img, sensor_colour(0)) and has_colour(img, sensor_colour(1))
+
+
+# -- an hour of 100 Hz data ---------------------------------------------------------------------
+
+
+def fill_hour(ctx: MonitorContext, rows: int = 360_000) -> None:
+    """Put an hour of synthetic 100 Hz rows into the session (History.extend), pose at the end.
+    The session must know its devices (``MonitorSession(devices=...)``)."""
+    session = ctx.session
+    data = hour_rows(session, rows)
+    session.history.extend(data)
+    col = session.history.index
+    session.odometry.reset(Pose2D(*data[-1, [col["x"], col["y"], col["yaw"]]]))
+
+
+def time_refreshes(view: MapView, ctx: MonitorContext, n: int = 60) -> np.ndarray:
+    """Milliseconds of ``view.refresh()`` after one new row each, following the stripes."""
+    hist = ctx.session.history
+    row = hist.tail(1)[0]
+    ms = []
+    for _ in range(n):
+        row = row.copy()
+        row[hist.index["x"]] += 0.002
+        for k in range(2):
+            row[hist.index[f"s{k}_wx"]] += 0.002
+        hist.append(row)
+        t0 = time.perf_counter()
+        view.refresh()
+        ms.append((time.perf_counter() - t0) * 1e3)
+    return np.array(ms)
+
+
+def test_an_hour_of_100hz_data_refreshes_cheaply(qtbot, capsys):
+    ctx = MonitorContext(MonitorSession(devices=DEFAULT_DEVICES))
+    view = MapView(ctx)
+    qtbot.addWidget(view)
+    view.resize(1200, 800)
+    view.show()
+    qtbot.waitExposed(view)
+    t0 = time.perf_counter()
+    fill_hour(ctx)
+    view.refresh()
+    first_ms = (time.perf_counter() - t0) * 1e3
+    hist = ctx.session.history
+    assert len(hist) == 360_000
+    report = [f"first refresh (fill + decimate 360000 rows x 3 paths): {first_ms:.0f} ms"]
+    for label, width, follow in (("follow, 1 m wide", 1.0, True),
+                                 ("whole mowed area, 30 m wide", 30.0, False),
+                                 ("zoomed out, 200 m wide", 200.0, False)):
+        view.follow_check.setChecked(follow)
+        view.set_visible_width(width, (10.0, 10.0))
+        view.refresh()
+        ms = time_refreshes(view, ctx)
+        t1 = time.perf_counter()
+        for _ in range(5):
+            view.grab()
+        paint_ms = (time.perf_counter() - t1) / 5 * 1e3
+        stats = view.render_stats()
+        report.append(
+            f"{label}: refresh p50 {np.percentile(ms, 50):.2f} ms, p95 "
+            f"{np.percentile(ms, 95):.2f} ms, max {ms.max():.2f} ms; full repaint (grab) "
+            f"{paint_ms:.1f} ms; points drawn {stats['points']}, levels {stats['levels']}"
+        )
+        if not follow:  # the whole path is in view: it starts and ends where the history does
+            assert_path_from_history(view, "robot", hist, "x", "y")
+    with capsys.disabled():
+        print("\n" + "\n".join(report))
