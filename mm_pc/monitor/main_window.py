@@ -124,6 +124,7 @@ class MainWindow(QMainWindow):
         from .graphs_view import GraphsView
         from .health_view import HealthView
         from .map_view import MapView
+        from .maps_view import MapsView
         from .registers_view import RegistersView
 
         for title, cls in (
@@ -133,6 +134,7 @@ class MainWindow(QMainWindow):
             ("Registers", RegistersView),
             ("Debug", DebugView),
             ("Health", HealthView),
+            ("Maps", MapsView),
         ):
             view = cls(self.ctx, self)
             self.views[title] = view
