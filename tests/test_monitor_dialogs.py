@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 pytest.importorskip("pytestqt")
-from PySide6.QtCore import Qt
+from PySide6.QtCore import SIGNAL, Qt
 from PySide6.QtGui import QImage
 from PySide6.QtWidgets import QWizard
 
@@ -214,6 +214,7 @@ def test_wizard_cancel_keeps_the_old_calibration_and_the_robot_moves_again(qtbot
     assert not ctx.config.calibration_file.exists()
     feed(ctx, replies[100:])
     assert ctx.session.pose.x > 0.5
+    assert ctx.receivers(SIGNAL("reply_processed(PyObject)")) == 0  # closed: not listening
 
 
 def test_wizard_refuses_a_bad_true_distance(qtbot, ctx):

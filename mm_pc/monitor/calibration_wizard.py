@@ -18,6 +18,7 @@ degrees, kept in metres and radians.
 from __future__ import annotations
 
 import math
+from contextlib import suppress
 from pathlib import Path
 
 from PySide6.QtCore import Qt
@@ -397,6 +398,8 @@ class CalibrationWizard(QWizard):
 
     def done(self, result: int) -> None:
         """Finish applies the result; Cancel/close ends the run with the old calibration."""
+        if result == QWizard.Accepted and not self.validateCurrentPage():
+            return
         if not self._done:
             self._done = True
             if result == QWizard.Accepted and self.calibration is not None:
@@ -405,4 +408,8 @@ class CalibrationWizard(QWizard):
             elif self.ctx.session.calibrating:
                 self.ctx.session.finish_calibration(None)
                 self.ctx.status_message.emit("calibration cancelled; the old one stays")
+            # a closed wizard stays a child of the window: stop listening to every reply
+            for signal in (self.ctx.reply_processed, self.ctx.devices_known):
+                with suppress(RuntimeError, TypeError):
+                    signal.disconnect(self.drive_page.update_sums)
         super().done(result)

@@ -14,6 +14,7 @@ the calibration and the pose math; see :mod:`mm_pc.filters`.
 
 from __future__ import annotations
 
+from contextlib import suppress
 from dataclasses import dataclass
 
 from PySide6.QtWidgets import (
@@ -188,6 +189,16 @@ class FilterDialog(QDialog):
         self.ctx.session.clear_filters()
         self.load_from_session()
         self._say("filters cleared (all off)")
+
+    def done(self, result: int) -> None:
+        """Closed: stop following the session (the dialog may outlive its window)."""
+        for signal, slot in (
+            (self.ctx.devices_known, self._build_rows),
+            (self.ctx.session_reset, self.load_from_session),
+        ):
+            with suppress(RuntimeError, TypeError):
+                signal.disconnect(slot)
+        super().done(result)
 
     # -- helpers ----------------------------------------------------------------------------
 

@@ -23,6 +23,7 @@ is kept with the geometry in ``ctx.robot_geometry`` and in the YAML file::
 from __future__ import annotations
 
 import math
+from contextlib import suppress
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -285,6 +286,16 @@ class GeometryDialog(QDialog):
         self.error.hide()
         self.status.setText(f"loaded from {path}; press Apply to use it")
         return True
+
+    def done(self, result: int) -> None:
+        """Closed: stop following the session (the dialog may outlive its window)."""
+        for signal, slot in (
+            (self.ctx.devices_known, self.load_from_session),
+            (self.ctx.odometry_changed, self._show_method),
+        ):
+            with suppress(RuntimeError, TypeError):
+                signal.disconnect(slot)
+        super().done(result)
 
     def _save_clicked(self) -> None:
         path, _ = QFileDialog.getSaveFileName(self, "Save geometry", "", "YAML (*.yaml *.yml)")
