@@ -11,6 +11,11 @@ mm-bench maps --json
     noise, raw vs fused drift after a simulated 200 m mowing run.
     See mm_pc.bench_maps.
 
+mm-bench gui [--hours H] [--rate HZ] [--frames N] --json
+    The real monitor window offscreen with H hours of simulated history at
+    HZ, polling a real mm-beagle sim node at HZ: frame time p50/p95 (all
+    tabs and per tab), memory, dropped requests. See mm_pc.monitor.bench_gui.
+
 mm-bench poll --seconds S --json
     mm-beagle on emulated sensors (separate process) while two client
     processes call get_sensor_data at 100 Hz each. Reports the poll rate and
@@ -254,8 +259,20 @@ def main(argv: list[str] | None = None) -> int:
     pose.add_argument("--json", action="store_true", help="print JSON only (the default)")
     maps = sub.add_parser("maps", help="grid map, trilateration and fusion (simulated)")
     maps.add_argument("--json", action="store_true", help="print JSON only (the default)")
+    gui = sub.add_parser("gui", help="monitor frame times and memory with an hour of history")
+    gui.add_argument("--hours", type=float, default=1.0, help="simulated history (h)")
+    gui.add_argument("--rate", type=float, default=100.0, help="sample rate (Hz)")
+    gui.add_argument("--frames", type=int, default=300, help="frames measured per tab")
+    gui.add_argument("--json", action="store_true", help="print JSON only (the default)")
     args = parser.parse_args(argv)
-    if args.what == "maps":
+    if args.what == "gui":
+        from mm_pc.monitor.bench_gui import bench_gui
+
+        try:
+            result = bench_gui(hours=args.hours, rate_hz=args.rate, frames=args.frames)
+        except ValueError as e:
+            parser.error(str(e))
+    elif args.what == "maps":
         from mm_pc.bench_maps import bench_maps
 
         result = bench_maps()

@@ -165,11 +165,33 @@ def _ros() -> SimpleNamespace:
     )
 
 
-def _to_msg(r: Reading):
+#: integer fields of Reading -> (min, max) of their SensorData type
+_INT_RANGES = {
+    "x_counts": (-(2**31), 2**31 - 1),
+    "y_counts": (-(2**31), 2**31 - 1),
+    "cpi": (0, 2**16 - 1),
+    "samples": (0, 2**32 - 1),
+    "lift_events": (0, 2**32 - 1),
+    "seq": (0, 2**64 - 1),
+    "lift_events_total": (0, 2**64 - 1),
+    "stamp_ns": (0, (2**31 - 1) * 1_000_000_000),
+}
+
+
+def _serialize_reading(r: Reading) -> bytes:
+    """CDR bytes of the SensorData of one reading; ValueError when a value does not fit."""
+    # checked here: rclpy's serializer mishandles out-of-range integers (SystemError)
+    for name, (lo, hi) in _INT_RANGES.items():
+        v = getattr(r, name)
+        if not (isinstance(v, int) and lo <= v <= hi):
+            raise ValueError(
+                f"reading of {r.id!r} does not fit mm_interfaces/SensorData: "
+                f"{name}={v!r} is not an integer in {lo}..{hi}"
+            )
     ros = _ros()
     Time, SensorData = ros.Time, ros.SensorData  # noqa: N806 - message classes
     try:
-        return SensorData(
+        return ros.serialize(SensorData(
             stamp=Time(sec=r.stamp_ns // 1_000_000_000, nanosec=r.stamp_ns % 1_000_000_000),
             id=r.id,
             x_disp=r.x_speed * r.interval,
@@ -188,8 +210,8 @@ def _to_msg(r: Reading):
             lift_events_total=r.lift_events_total,
             x_lift_est_total_disp=r.x_lift_total,
             y_lift_est_total_disp=r.y_lift_total,
-        )
-    except (AssertionError, TypeError) as e:
+        ))  # fmt: skip
+    except (AssertionError, TypeError, ValueError, OverflowError, SystemError) as e:
         raise ValueError(
             f"reading of {r.id!r} does not fit mm_interfaces/SensorData: {e}"
         ) from None
@@ -266,7 +288,7 @@ class McapRecorder:
         if self.error:
             return
         ros = _ros()
-        msgs = [(r, ros.serialize(_to_msg(r))) for r in reply.readings]
+        msgs = [(r, _serialize_reading(r)) for r in reply.readings]
         meta = ros.Float64MultiArray(
             layout=self._meta_layout, data=[float(reply.received_s), float(reply.rtt_s)]
         )
@@ -349,7 +371,8 @@ class McapRecorder:
 
 
 def _open_messages(path: str | Path):
-    """(schema, channel, message) of every message, or ValueError saying what is wrong."""
+    """((schema, channel, message) of every message, {topic: schema name}); ValueError
+    saying what is wrong with a file that cannot be read."""
     from mcap.reader import make_reader
 
     path = Path(path)
@@ -360,7 +383,9 @@ def _open_messages(path: str | Path):
             if f.read(8) != b"\x89MCAP0\r\n":
                 raise ValueError(f"{path} is not an MCAP file (it does not start with MCAP magic)")
             f.seek(0)
-            return list(make_reader(f).iter_messages(log_time_order=False))
+            reader = make_reader(f, validate_crcs=True)
+            messages = list(reader.iter_messages(log_time_order=False))
+            summary = reader.get_summary()
     except ValueError:
         raise
     except Exception as e:  # the mcap reader raises many kinds on a damaged file
@@ -368,6 +393,12 @@ def _open_messages(path: str | Path):
             f"{path} is a damaged or incomplete MCAP file ({type(e).__name__}: {e}); "
             "a recording cut short can be repaired with `mcap recover`"
         ) from None
+    types = {c.topic: (s.name if s else "") for s, c, _ in messages}
+    if summary is not None:  # channels without messages (an empty recording)
+        for c in summary.channels.values():
+            schema = summary.schemas.get(c.schema_id)
+            types.setdefault(c.topic, schema.name if schema else "")
+    return messages, types
 
 
 def read_replies(path: str | Path) -> list[Reply]:
@@ -383,11 +414,11 @@ def read_replies(path: str | Path) -> list[Reply]:
     ros = _ros()
     deserialize_message, SensorData = ros.deserialize, ros.SensorData  # noqa: N806
     Float64MultiArray = ros.Float64MultiArray  # noqa: N806
-    messages = _open_messages(path)
+    messages, types = _open_messages(path)
     sensor = [(c, m) for s, c, m in messages if s is not None and s.name == SENSOR_TYPE]
     meta = [m for s, c, m in messages if c.topic == META_TOPIC and s and s.name == META_TYPE]
-    if not sensor and not meta:
-        topics = sorted({c.topic for _, c, _ in messages})
+    if SENSOR_TYPE not in types.values():
+        topics = sorted(types)
         raise ValueError(
             f"{path} holds no {SENSOR_TYPE} messages (topics: {', '.join(topics) or 'none'})"
         )
@@ -410,7 +441,7 @@ def read_replies(path: str | Path) -> list[Reply]:
         for seq, _, r in readings:
             groups.setdefault(seq, []).append(r)
         out = []
-        for seq in sorted(groups, key=lambda k: (metas.get(k, (0,))[0], k)):
+        for seq in sorted(groups):  # the reply number: recorded order
             _, received, rtt = metas.get(seq, (0, math.nan, 0.0))
             out.append(Reply(tuple(groups[seq]), received_s=received, rtt_s=rtt))
         return out
@@ -424,7 +455,7 @@ def read_samples(path: str | Path) -> list[tuple[str, object]]:
     """(device, GetSamples.Response) of every recorded single-poll fetch, in order."""
     ros = _ros()
     out = []
-    for s, c, m in _open_messages(path):
+    for s, c, m in _open_messages(path)[0]:
         if s is not None and s.name == SAMPLES_TYPE:
             device = c.metadata.get("device", c.topic)
             out.append((m.log_time, device, ros.deserialize(m.data, ros.GetSamplesResponse)))

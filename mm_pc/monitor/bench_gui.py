@@ -1,0 +1,289 @@
+"""mm-bench gui: frame times and memory of the real monitor window with an hour of history.
+
+What :func:`bench_gui` does, in order:
+
+1. Builds the real :class:`~.main_window.MainWindow` offscreen
+   (``QT_QPA_PLATFORM=offscreen``) with a fresh :class:`~.session.MonitorSession`;
+   its own 30 Hz frame timer is stopped so that only measured frames run.
+2. Fast-forwards ``hours`` of ``rate_hz`` replies into the session: the
+   replies of :func:`~.sim_feed.sim_replies` (figure eight; stamps ending
+   now, so live data continues in time) go through
+   :meth:`MonitorSession.process` one by one -- the very processing of live
+   replies (deltas, filters, calibration, pose, history row, log), just
+   without a Qt signal per reply. The first reply goes through
+   ``ctx.on_reply`` (views learn the sensors) and the last one is announced
+   with ``reply_processed``. An hour at 100 Hz (360 000 rows) takes ~35 s.
+3. With ``node=True``: starts a real mm-beagle on emulated sensors
+   (:func:`mm_beagle.harness.beagle_process`, private ROS domain) and a
+   :class:`~.ros_bridge.RosBridge` polling it at ``rate_hz``, so live
+   replies keep arriving (the first one is a new baseline: the node's
+   counters are not the fast-forwarded ones).
+4. On every tab in turn, ``frames`` frames at ~30 Hz: events are processed
+   between frames (live replies are taken there, as in the real window);
+   a frame is ``window.frame()`` (the views' ``refresh``) plus the
+   ``processEvents`` right after it, which paints. Frame time = both,
+   measured with ``perf_counter``; ``refresh_ms_*`` = ``window.frame()`` alone.
+5. Memory: resident set size (psutil) before the fast-forward, after it and
+   after the frames.
+
+``frame_ms_p50``/``frame_ms_p95`` are over all tabs' frames; ``tab_p95_ms``
+per tab. A view whose ``refresh`` raises is reported in ``errors`` and its
+tab skipped, so the bench runs whatever the views contain.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import math
+import os
+import sys
+import tempfile
+import time
+from contextlib import ExitStack
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["bench_gui", "pyside_refcount_guard"]
+
+FRAME_HZ = 30.0
+GOAL_P95_MS = 16.0
+
+_guard_base: dict[int, int] = {}
+
+
+def pyside_refcount_guard(margin: int = 300_000) -> int:
+    """Work around PySide6 6.12.0 on CPython < 3.12; does nothing elsewhere.
+
+    That release drops one reference to ``True`` per ``Signal.emit`` and one
+    to ``None`` per call of a void Qt method, so a busy window aborts with
+    "Fatal Python error: bool_dealloc/none_dealloc" within minutes. This
+    tops ``None``/``True``/``False`` up to ``margin`` references above their
+    count at the first call, held by lists that are deliberately never freed
+    (freeing them would give the lost references back at exit and abort
+    there). Call it often (every frame); returns the references added.
+    Remove once the dependency excludes 6.12.0 (see /work/notes/requests-views.md).
+    """
+    import PySide6
+
+    if PySide6.__version__ != "6.12.0" or sys.version_info >= (3, 12):
+        return 0
+    added = 0
+    for obj in (None, True, False):
+        base = _guard_base.setdefault(id(obj), sys.getrefcount(obj))
+        missing = base + margin - sys.getrefcount(obj)
+        if missing > 0:
+            refs = [obj] * missing
+            ctypes.pythonapi.Py_IncRef(ctypes.py_object(refs))  # never freed, on purpose
+            added += missing
+    return added
+
+
+def _rss_mb() -> float:
+    import psutil
+
+    return psutil.Process().memory_info().rss / 1e6
+
+
+def _pct(values, q: float) -> float:
+    return round(float(np.percentile(values, q)), 3) if len(values) else math.nan
+
+
+class _Pump:
+    """Processes Qt events (and keeps the refcount guard topped up) until a deadline."""
+
+    def __init__(self, app) -> None:
+        self.app = app
+        self.guard_refs = 0
+
+    def until(self, deadline: float, predicate=None) -> bool:
+        while True:
+            self.guard_refs += pyside_refcount_guard()
+            self.app.processEvents()
+            if predicate is not None and predicate():
+                return True
+            if time.perf_counter() >= deadline:
+                return predicate is None
+            time.sleep(0.001)
+
+
+def _fast_forward(ctx, hours: float, rate_hz: float, trajectory: str) -> int:
+    """Feed ``hours`` of simulated replies through the session; returns replies fed."""
+    from .sim_feed import sim_replies
+
+    seconds = hours * 3600.0
+    start_ns = time.time_ns() - int(seconds * 1e9) - 1_000_000_000
+    replies = sim_replies(trajectory, rate_hz, seconds, start_ns=start_ns)
+    first = next(replies)
+    ctx.on_reply(first)  # the views learn the sensors as they would live
+    process = ctx.session.process
+    last, n = first, 1
+    for r in replies:
+        process(r)
+        last, n = r, n + 1
+    ctx.reply_processed.emit(last)
+    return n
+
+
+def _measure_tab(window, pump: _Pump, frames: int) -> tuple[list[float], list[float], str]:
+    """(frame ms, refresh ms, error) of ``frames`` frames of the current tab at ~30 Hz."""
+    app = pump.app
+    total, refresh = [], []
+    period = 1.0 / FRAME_HZ
+    next_frame = time.perf_counter()
+    for _ in range(frames):
+        next_frame += period
+        pump.until(next_frame)
+        t0 = time.perf_counter()
+        try:
+            window.frame()
+            t1 = time.perf_counter()
+            app.processEvents()
+        except Exception as e:  # a view under construction may raise anything
+            return total, refresh, f"{type(e).__name__}: {e}"
+        t2 = time.perf_counter()
+        total.append((t2 - t0) * 1e3)
+        refresh.append((t1 - t0) * 1e3)
+    return total, refresh, ""
+
+
+def bench_gui(
+    hours: float = 1.0,
+    rate_hz: float = 100.0,
+    frames: int = 300,
+    node: bool = True,
+    trajectory: str = "figure_eight",
+) -> dict:
+    """Run the GUI benchmark (see the module doc); a JSON-ready dict.
+
+    ``hours``: simulated history fed before measuring (> 0); ``rate_hz``:
+    replies per second of the history and of the live bridge (1..500);
+    ``frames``: frames measured per tab (>= 1); ``node``: poll a real
+    mm-beagle sim node while measuring.
+    """
+    from .ros_bridge import validate_rate
+
+    if not (isinstance(hours, (int, float)) and 0 < hours <= 24):
+        raise ValueError(f"hours must be in (0, 24], got {hours!r}")
+    rate_hz = validate_rate(rate_hz)
+    if not (isinstance(frames, int) and frames >= 1):
+        raise ValueError(f"frames must be an integer >= 1, got {frames!r}")
+    os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+    from PySide6.QtWidgets import QApplication
+
+    app = QApplication.instance() or QApplication(["mm-bench"])
+    pump = _Pump(app)
+    pump.guard_refs += pyside_refcount_guard()
+    with ExitStack() as stack:
+        tmp = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="mm_bench_gui_")))
+        if node:
+            from mm_beagle.harness import beagle_process, use_isolated_ros_env
+
+            env = use_isolated_ros_env()
+            params = {"backend": "sim", "sim_trajectory": trajectory}
+            stack.enter_context(beagle_process(params, env, str(tmp / "beagle.log")))
+        window, bridge = _build_window(tmp, rate_hz, node)
+        stack.callback(window.close)
+        if bridge is not None:
+            stack.callback(bridge.stop)
+        result = _run(window, bridge, pump, hours, rate_hz, frames, trajectory)
+    result["refcount_guard_refs"] = pump.guard_refs
+    result["refcount_guard_mb"] = round(pump.guard_refs * 8 / 1e6, 1)  # one pointer each
+    return result
+
+
+def _build_window(tmp: Path, rate_hz: float, node: bool):
+    from .context import MonitorConfig, MonitorContext
+    from .main_window import MainWindow
+    from .session import MonitorSession
+
+    bridge = None
+    if node:
+        from .ros_bridge import RosBridge
+
+        bridge = RosBridge("/mm_beagle", rate_hz, node_name="mm_bench_gui")
+        bridge.set_polling(False)  # until the history is in
+    config = MonitorConfig(rate_hz=rate_hz, calibration_file=tmp / "calibration.yaml")
+    window = MainWindow(MonitorContext(MonitorSession(), bridge, config))
+    window.frame_timer.stop()
+    window.show()
+    return window, bridge
+
+
+def _run(window, bridge, pump: _Pump, hours, rate_hz, frames, trajectory) -> dict:
+    ctx = window.ctx
+    pump.until(time.perf_counter() + 0.2)
+    rss_start = _rss_mb()
+    t0 = time.perf_counter()
+    fed = _fast_forward(ctx, hours, rate_hz, trajectory)
+    fill_s = time.perf_counter() - t0
+    pump.until(time.perf_counter() + 0.2)
+    rss_filled = _rss_mb()
+    rows_filled = len(ctx.session.history)
+    live_replies0 = 0
+    if bridge is not None:
+        bridge.start()
+        bridge.set_polling(True)
+        if not pump.until(time.perf_counter() + 30.0, lambda: bridge.replies >= 5):
+            raise RuntimeError("the mm-beagle sim node did not answer within 30 s")
+        live_replies0 = bridge.replies
+    t_frames = time.perf_counter()
+    per_tab, all_frames, all_refresh, errors, first = {}, [], [], {}, {}
+    for i in range(window.tabs.count()):
+        name = window.tabs.tabText(i)
+        window.tabs.setCurrentIndex(i)
+        total, refresh, error = _measure_tab(window, pump, frames)
+        if error:
+            errors[name] = error
+        if total:
+            first[name] = round(total[0], 3)
+            per_tab[name] = _pct(total, 95)
+            all_frames += total
+            all_refresh += refresh
+    frames_s = time.perf_counter() - t_frames
+    rss_end = _rss_mb()
+    hist = ctx.session.history
+    out = {
+        "benchmark": "gui",
+        "hours": hours,
+        "rate_hz": rate_hz,
+        "frames_per_tab": frames,
+        "frame_ms_p50": _pct(all_frames, 50),
+        "frame_ms_p95": _pct(all_frames, 95),
+        "frame_ms_max": round(max(all_frames), 3) if all_frames else math.nan,
+        "refresh_ms_p50": _pct(all_refresh, 50),
+        "refresh_ms_p95": _pct(all_refresh, 95),
+        "tab_p95_ms": per_tab,
+        "tab_first_frame_ms": first,
+        "goal_p95_ms": GOAL_P95_MS,
+        "memory_mb": round(rss_end, 1),
+        "memory_before_mb": round(rss_start, 1),
+        "memory_after_history_mb": round(rss_filled, 1),
+        "memory_growth_mb_during_frames": round(rss_end - rss_filled, 1),
+        "history_mb": round(hist.nbytes / 1e6, 1),
+        "history_rows_fed": fed,
+        "rows_after_history": rows_filled,
+        "rows": len(hist),
+        "fill_s": round(fill_s, 1),
+        "frames_s": round(frames_s, 1),
+        "errors": errors,
+        "machine": {
+            "cpus": os.cpu_count(),
+            "python": sys.version.split()[0],
+            "load_avg_1min": round(os.getloadavg()[0], 2),
+        },
+    }
+    if bridge is not None:
+        st = bridge.stats()
+        replies = bridge.replies - live_replies0
+        out.update(
+            replies=replies,
+            live_rate_hz=round(replies / frames_s, 1) if frames_s > 0 else 0.0,
+            dropped_requests=st.dropped_requests,
+            skipped_ticks=st.skipped_ticks,
+            rtt_ms_p50=round(st.rtt_p50_s * 1e3, 3),
+            rtt_ms_max=round(st.rtt_max_s * 1e3, 3),
+        )
+    else:
+        out.update(replies=0, dropped_requests=0, rtt_ms_p50=math.nan)
+    return out
