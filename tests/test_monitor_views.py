@@ -26,7 +26,7 @@ from mm_pc.monitor.data_list import (
     HistoryTableModel,
     export_csv,
 )
-from mm_pc.monitor.graphs_view import GraphsView
+from mm_pc.monitor.graphs_view import GraphsView, PeakCache, bucket_size
 from mm_pc.monitor.log_dialog import HEADER, LogDialog, format_entry
 from mm_pc.monitor.readings import Reading, Reply
 from mm_pc.monitor.registers_view import FIELDS, RegistersView, decode_status, status_bits
@@ -191,27 +191,81 @@ def test_graph_refresh_skips_when_nothing_changed_and_pause_freezes(qtbot):
     assert view.plots[(0, "disp")].vb.state["mouseEnabled"] == [False, False]
 
 
-def test_graph_cost_does_not_grow_with_history(qtbot):
-    ctx = make_ctx(1.0)
+def hour_of_history(ctx, seed=1):
+    """Append an hour of 100 Hz rows (random sensor values) to the context's history."""
     hist = ctx.session.history
-    rows = np.zeros((360_000, len(hist.columns)))
-    rows[:, hist.index["t"]] = np.arange(360_000) / 100.0
-    hist.extend(rows)  # an hour at 100 Hz
+    rng = np.random.default_rng(seed)
+    rows = rng.normal(0.0, 1e-3, (360_000, len(hist.columns)))
+    t_last = hist.last("t")
+    rows[:, hist.index["t"]] = t_last + (1 + np.arange(360_000)) / 100.0
+    hist.extend(rows)
+    return hist
+
+
+def append_rows(hist, count, seed=2):
+    rng = np.random.default_rng(seed)
+    for _ in range(count):
+        row = rng.normal(0.0, 1e-3, len(hist.columns))
+        row[hist.index["t"]] = hist.last("t") + 0.01
+        hist.append(row)
+
+
+def reference_peaks(t, y, i0, size):
+    """What a min/max-bucket curve must hold: buckets aligned to row numbers, edges as they are."""
+    b0, b1 = -(-i0 // size), len(t) // size
+    blocks = y[b0 * size : b1 * size].reshape(-1, size)
+    mid = np.column_stack((blocks.min(axis=1), blocks.max(axis=1))).ravel()
+    ys = np.concatenate((y[i0 : b0 * size], mid, y[b1 * size :]))
+    ts = np.concatenate((t[i0 : b0 * size], np.repeat(t[b0 * size : b1 * size : size], 2),
+                         t[b1 * size :]))
+    return ts, ys
+
+
+def test_graph_cost_does_not_grow_with_history_or_window(qtbot):
+    ctx = make_ctx(1.0)
+    hist = hour_of_history(ctx)
     view = GraphsView(ctx)
     qtbot.addWidget(view)
     view.resize(1000, 600)
     view.show()
-    times = []
-    for _ in range(20):
-        hist.append(hist.tail(1)[0] + np.eye(len(hist.columns))[hist.index["t"]] * 0.01)
-        t0 = time.perf_counter()
-        view.refresh()
-        times.append(time.perf_counter() - t0)
-    x, _y = view.curves[(0, "disp", "x")].getOriginalDataset()
     t = hist.column("t")
-    assert len(x) == int((t >= t[-1] - 10).sum()) <= 1001  # only the window's rows
-    assert x[-1] == t[-1]
-    assert np.percentile(times, 95) < 0.05
+    for seconds in (10, 3600):
+        view.window_box.setValue(seconds)
+        times = []
+        for _ in range(20):
+            append_rows(hist, 1)
+            t0 = time.perf_counter()
+            view.refresh()
+            times.append(time.perf_counter() - t0)
+        t = hist.column("t")
+        x, y = view.curves[(1, "speed", "y")].getOriginalDataset()
+        i0 = int(np.searchsorted(t, t[-1] - seconds))
+        if seconds == 10:  # every row of the window, nothing else
+            assert len(x) == len(t) - i0 <= 1001
+            np.testing.assert_array_equal(y, hist.column("s1_vy")[i0:] * 1e3)
+        else:  # 360 000 rows drawn as min/max of 256-row buckets, built up frame by frame
+            assert bucket_size(len(t) - i0) == 256 and len(x) <= 2 * 1407 + 2 * 256
+            rx, ry = reference_peaks(t, hist.column("s1_vy") * 1e3, i0, 256)
+            np.testing.assert_array_equal(x, rx)
+            np.testing.assert_array_equal(y, ry)
+            assert y.max() == hist.column("s1_vy")[i0:].max() * 1e3  # peaks survive
+        assert np.percentile(times, 95) < 0.03, (seconds, np.percentile(times, 95))
+
+
+def test_peak_cache_incremental_equals_fresh():
+    rng = np.random.default_rng(3)
+    t = np.arange(50_000) / 100.0
+    y = rng.normal(size=50_000)
+    cache = PeakCache()
+    for n in (20_000, 20_001, 20_064, 31_000, 50_000):
+        i0 = n - 9000
+        got = cache.window(t[:n], y[:n], i0, 8)
+        want = reference_peaks(t[:n], y[:n], i0, 8)
+        np.testing.assert_array_equal(got[0], want[0])
+        np.testing.assert_array_equal(got[1], want[1])
+    assert bucket_size(4000) == 1 and bucket_size(4001) == 4 and bucket_size(360_000) == 256
+    _x, v = cache.window(t, y, 100, 1)  # size 1: the rows themselves
+    np.testing.assert_array_equal(v, y[100:])
 
 
 def test_graphs_screenshot(qtbot):

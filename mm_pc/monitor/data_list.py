@@ -53,6 +53,12 @@ CSV_HEADER = (
 )
 
 
+_DISPLAY = Qt.ItemDataRole.DisplayRole
+_ALIGNMENT_ROLE = Qt.ItemDataRole.TextAlignmentRole
+_RIGHT = Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignVCenter
+_HORIZONTAL = Qt.Orientation.Horizontal
+
+
 def _column_name(sensor_index: int, field: str) -> str:
     return field if field == "t" else sensor_columns(sensor_index)[field]
 
@@ -95,6 +101,8 @@ class HistoryTableModel(QAbstractTableModel):
         self._dropped = 0
         self._history = None
         self._version = -1
+        self._cols: list = []  # column views of the history, taken at the last sync
+        self._cache: dict[int, tuple[str, ...]] = {}
 
     def rowCount(self, parent=QModelIndex()) -> int:  # noqa: B008, N802 - Qt API
         return 0 if parent.isValid() else self._rows
@@ -102,10 +110,10 @@ class HistoryTableModel(QAbstractTableModel):
     def columnCount(self, parent=QModelIndex()) -> int:  # noqa: B008, N802 - Qt API
         return 0 if parent.isValid() else len(COLUMNS)
 
-    def headerData(self, section, orientation, role=Qt.DisplayRole):  # noqa: N802 - Qt API
-        if role != Qt.DisplayRole:
+    def headerData(self, section, orientation, role=_DISPLAY):  # noqa: N802 - Qt API
+        if role != _DISPLAY:
             return None
-        if orientation == Qt.Horizontal:
+        if orientation == _HORIZONTAL:
             return COLUMNS[section][0] if 0 <= section < len(COLUMNS) else None
         return str(self._len - section)  # the reply's number, 1 = first
 
@@ -115,15 +123,28 @@ class HistoryTableModel(QAbstractTableModel):
         return float(hist.column(self._names[column])[self._len - 1 - row]) * COLUMNS[column][2]
 
     def text(self, row: int, column: int) -> str:
-        return COLUMNS[column][3].format(self.value(row, column))
+        return self._row_texts(row)[column]
 
-    def data(self, index, role=Qt.DisplayRole):
-        if not index.isValid() or index.row() >= self._rows:
-            return None
-        if role == Qt.DisplayRole:
-            return self.text(index.row(), index.column())
-        if role == Qt.TextAlignmentRole:
-            return int(Qt.AlignRight | Qt.AlignVCenter)
+    def _row_texts(self, row: int) -> tuple[str, ...]:
+        # a repaint asks for every visible cell several times; rows never change once written
+        i = self._len - 1 - row
+        texts = self._cache.get(i)
+        if texts is None:
+            if len(self._cache) > 4096:
+                self._cache.clear()
+            texts = tuple(
+                fmt.format(float(hist_col[i]) * scale)
+                for hist_col, (_h, _f, scale, fmt) in zip(self._cols, COLUMNS, strict=True)
+            )
+            self._cache[i] = texts
+        return texts
+
+    def data(self, index, role=_DISPLAY):
+        if role == _DISPLAY:
+            row = index.row()
+            return self._row_texts(row)[index.column()] if 0 <= row < self._rows else None
+        if role == _ALIGNMENT_ROLE:
+            return _RIGHT
         return None
 
     def sync(self) -> None:
@@ -154,6 +175,7 @@ class HistoryTableModel(QAbstractTableModel):
                 self.endRemoveRows()
         new = shown - self._rows
         self._version = hist.version
+        self._cols = [hist.column(n) for n in self._names]  # the buffer may have moved
         if new > 0:
             self.beginInsertRows(QModelIndex(), 0, new - 1)
             self._len, self._rows = n, shown
@@ -171,6 +193,8 @@ class HistoryTableModel(QAbstractTableModel):
         self._rows = min(self._len, self.max_rows)
         self._dropped = hist.dropped_rows if hist is not None else 0
         self._version = hist.version if hist is not None else -1
+        self._cols = [hist.column(n) for n in self._names] if hist is not None else []
+        self._cache.clear()
         self.endResetModel()
 
     def rows_text(self, rows: list[int]) -> str:

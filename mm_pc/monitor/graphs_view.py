@@ -4,8 +4,11 @@ Per sensor two plots against t (s since the first reply): the displacement
 per reply (processed: filtered and calibrated; mm, sensor frame X/Y) and the
 speed (mm/s). Only the rows inside the window are handed to the curves (found
 with a binary search on t), so a redraw costs the same with a minute or an
-hour of history. Paused, nothing is redrawn and the plots can be zoomed and
-panned; resuming jumps back to the live window.
+hour of history; a window of more than 4000 rows is drawn as the minimum
+and maximum of 1000-2000 buckets (spikes stay visible), kept from frame to
+frame so only newly completed buckets are computed.
+Paused, nothing is redrawn and the plots can be zoomed and panned; resuming
+jumps back to the live window.
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ from PySide6.QtWidgets import (
 
 from .session import sensor_columns
 
-__all__ = ["DEFAULT_WINDOW_S", "GraphsView", "window_slice"]
+__all__ = ["DEFAULT_WINDOW_S", "GraphsView", "PeakCache", "bucket_size", "window_slice"]
 
 DEFAULT_WINDOW_S = 10
 MAX_WINDOW_S = 3600
@@ -33,6 +36,63 @@ PLOTS = (
     ("speed", "speed", ("vx", "vy"), "mm/s"),
 )
 AXIS_COLOURS = {"x": "#d62728", "y": "#1f77b4"}
+#: windows longer than 2 * MAX_BUCKETS rows are drawn min/max-decimated (a few px per bucket)
+MAX_BUCKETS = 2000
+
+
+def bucket_size(rows: int, buckets: int = MAX_BUCKETS) -> int:
+    """Rows per min/max bucket for a window of ``rows`` (1 = draw every row).
+
+    A power of two, so it changes only when the window's length doubles or
+    halves (finished buckets can then be kept from frame to frame)."""
+    if rows <= 2 * buckets:
+        return 1
+    return 1 << (-(-rows // buckets) - 1).bit_length()
+
+
+class PeakCache:
+    """Minimum and maximum of one column over buckets of ``size`` history rows.
+
+    Buckets are aligned to absolute row numbers ``[b * size, (b + 1) * size)``;
+    the history only grows, so a finished bucket never changes and each
+    refresh computes just the buckets completed since the previous one.
+    Call :meth:`clear` when rows were dropped or the history was cleared.
+    """
+
+    def __init__(self) -> None:
+        self.clear()
+
+    def clear(self) -> None:
+        self.size = 0
+        self.start = 0  # bucket number of mins[0]
+        self.mins = np.empty(0)
+        self.maxs = np.empty(0)
+
+    def window(
+        self, t: np.ndarray, col: np.ndarray, i0: int, size: int
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(t, value) points for rows ``i0..len(t)``: whole buckets as their minimum then
+        maximum (both at the bucket's first t), the partial ones at either end as they are."""
+        n = len(t)
+        b0, b1 = -(-i0 // size), n // size
+        if size == 1 or b1 <= b0:
+            return t[i0:n], col[i0:n]
+        if size != self.size or not self.start <= b0 <= self.start + len(self.mins):
+            self.size, self.start = size, b0
+            self.mins = self.maxs = np.empty(0)
+        end = self.start + len(self.mins)
+        if b1 > end:
+            block = col[end * size : b1 * size].reshape(-1, size)
+            self.mins = np.concatenate((self.mins[b0 - self.start :], block.min(axis=1)))
+            self.maxs = np.concatenate((self.maxs[b0 - self.start :], block.max(axis=1)))
+            self.start = b0
+        lo, hi = b0 - self.start, b1 - self.start
+        peaks = np.empty(2 * (hi - lo))
+        peaks[0::2] = self.mins[lo:hi]
+        peaks[1::2] = self.maxs[lo:hi]
+        head, tail = slice(i0, b0 * size), slice(b1 * size, n)
+        out_t = np.concatenate((t[head], np.repeat(t[b0 * size : b1 * size : size], 2), t[tail]))
+        return out_t, np.concatenate((col[head], peaks, col[tail]))
 
 
 def window_slice(t: np.ndarray, seconds: float) -> slice:
@@ -53,6 +113,9 @@ class GraphsView(QWidget):
         #: (sensor index, plot key, "x" | "y") -> PlotDataItem
         self.curves: dict[tuple[int, str, str], pg.PlotDataItem] = {}
         self.plots: dict[tuple[int, str], pg.PlotItem] = {}
+        self._peaks: dict[str, PeakCache] = {}  # history column -> its bucket min/max
+        self._rows_of: tuple = (None, 0)  # (history, dropped_rows) the caches belong to
+        self._len = 0
 
         self.window_box = QSpinBox()
         self.window_box.setRange(1, MAX_WINDOW_S)
@@ -153,6 +216,8 @@ class GraphsView(QWidget):
         self._version = -1
 
     def _on_reset(self) -> None:
+        for cache in self._peaks.values():
+            cache.clear()
         for curve in self.curves.values():
             curve.setData([], [])
         self._invalidate()
@@ -171,14 +236,22 @@ class GraphsView(QWidget):
         if len(t) == 0:
             self.note.setText("no samples")
             return
+        if (hist, hist.dropped_rows) != self._rows_of or len(t) < self._len:
+            for cache in self._peaks.values():
+                cache.clear()  # rows were dropped or cleared: bucket numbers moved
+        self._rows_of, self._len = (hist, hist.dropped_rows), len(t)
         rows = window_slice(t, self.window_s)
-        tw = t[rows]
+        size = bucket_size(rows.stop - rows.start)
         for k in range(len(self._built_for)):
             names = sensor_columns(k)
             for key, _title, fields, _unit in PLOTS:
                 for axis, field in zip(("x", "y"), fields, strict=True):
-                    self.curves[(k, key, axis)].setData(tw, hist.column(names[field])[rows] * 1e3)
+                    cache = self._peaks.setdefault(names[field], PeakCache())
+                    x, y = cache.window(t, hist.column(names[field]), rows.start, size)
+                    self.curves[(k, key, axis)].setData(x, y * 1e3)
         end = float(t[-1])
         for plot in self.plots.values():
             plot.setXRange(end - self.window_s, end, padding=0.0)
-        self.note.setText(f"{len(tw)} of {len(t)} samples shown, t = {end:.1f} s")
+        shown = rows.stop - rows.start
+        every = f", min/max of {size}-sample buckets" if size > 1 else ""
+        self.note.setText(f"{shown} of {len(t)} samples in the window{every}, t = {end:.1f} s")
