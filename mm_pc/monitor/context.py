@@ -15,6 +15,7 @@ from pathlib import Path
 from PySide6.QtCore import QObject, Signal
 
 from ..calibration import Calibration
+from ..geometry import DEFAULT_GEOMETRY, RobotGeometry
 from .readings import Reply
 from .session import MonitorSession
 
@@ -61,6 +62,8 @@ class MonitorContext(QObject):
         #: object with ``write_reply(reply)``; set by the recorder while recording
         self.recorder = None
         self.calibration_error = ""
+        #: the robot's mounts and axis length as edited in the geometry dialog
+        self.robot_geometry: RobotGeometry = DEFAULT_GEOMETRY
 
     def on_reply(self, reply: Reply) -> None:
         """Process one reply (GUI thread) and tell the views."""

@@ -108,6 +108,7 @@ class MainWindow(QMainWindow):
             ctx.bridge.connection_changed.connect(self._on_state)
             ctx.bridge.stats_updated.connect(self._on_stats)
             ctx.bridge.data_failed.connect(self._on_data_failed)
+            ctx.bridge.polling_changed.connect(self._on_polling_changed)
             self._on_state(ctx.bridge.state)
         else:
             self._on_state("offline")
@@ -264,6 +265,13 @@ class MainWindow(QMainWindow):
 
     # -- actions ------------------------------------------------------------------------------
 
+    def _on_polling_changed(self, polling: bool) -> None:
+        """Keep the pause button in step when another view (Debug) pauses polling."""
+        self.pause_button.blockSignals(True)
+        self.pause_button.setChecked(not polling)
+        self.pause_button.blockSignals(False)
+        self.pause_button.setText("Pause polling" if polling else "Resume polling")
+
     def set_paused(self, paused: bool) -> None:
         if self.ctx.bridge is not None:
             self.ctx.bridge.set_polling(not paused)
@@ -282,25 +290,33 @@ class MainWindow(QMainWindow):
         self.method_error.hide()
         self.ctx.odometry_changed.emit()
 
+    @staticmethod
+    def _open_dialog(dialog) -> None:
+        """Open window-modal; the dialog is deleted when closed (no stale connections)."""
+        dialog.setAttribute(Qt.WA_DeleteOnClose)
+        dialog.open()
+
     def open_calibration_wizard(self) -> None:
         from .calibration_wizard import CalibrationWizard
 
-        CalibrationWizard(self.ctx, self).open()
+        self._open_dialog(CalibrationWizard(self.ctx, self))
 
     def open_filter_dialog(self) -> None:
         from .filter_dialog import FilterDialog
 
-        FilterDialog(self.ctx, self).open()
+        self._open_dialog(FilterDialog(self.ctx, self))
 
     def open_geometry_dialog(self) -> None:
         from .geometry_dialog import GeometryDialog
 
-        GeometryDialog(self.ctx, self).open()
+        self._open_dialog(GeometryDialog(self.ctx, self))
 
     def open_log_dialog(self) -> None:
         from .log_dialog import LogDialog
 
-        LogDialog(self.ctx, self).show()
+        dialog = LogDialog(self.ctx, self)
+        dialog.setAttribute(Qt.WA_DeleteOnClose)
+        dialog.show()
 
     def toggle_recording(self) -> None:
         from .recording import toggle_recording

@@ -88,6 +88,7 @@ class RosBridge(QObject):
     samples_failed = Signal(str, str)  # id, message
     diagnostics_received = Signal(object)  # {device: {"level", "message", key: value...}}
     connection_changed = Signal(str)  # waiting | connected | lost
+    polling_changed = Signal(bool)  # periodic requests on (True) or paused
     stats_updated = Signal(object)  # BridgeStats, twice a second
 
     def __init__(
@@ -208,7 +209,9 @@ class RosBridge(QObject):
 
     def set_polling(self, on: bool) -> None:
         """Pause (False) or resume (True) the periodic data requests."""
-        self._polling = bool(on)
+        if bool(on) != self._polling:
+            self._polling = bool(on)
+            self.polling_changed.emit(self._polling)
 
     def request_once(self) -> None:
         """One data request now (the debug view's 'request sample')."""
