@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 from PySide6.QtCore import QItemSelectionModel, QObject, Qt, Signal
 from PySide6.QtGui import QGuiApplication, QImage
+from PySide6.QtWidgets import QApplication
 
 from mm_pc.monitor.context import MonitorContext
 from mm_pc.monitor.data_list import (
@@ -102,6 +103,7 @@ def distinct_colours(img: QImage, step: int = 7) -> int:
 
 def save_image(widget, name: str) -> QImage:
     os.makedirs(IMAGES, exist_ok=True)
+    QApplication.processEvents()  # pending layout requests (labels whose text just changed)
     img = widget.grab().toImage()
     assert img.save(os.path.join(IMAGES, name))
     return img

@@ -10,7 +10,7 @@ shown yet. Newest at the bottom.
 
 from __future__ import annotations
 
-from PySide6.QtCore import QTimer
+from PySide6.QtCore import Qt, QTimer
 from PySide6.QtGui import QFont, QGuiApplication, QTextCursor
 from PySide6.QtWidgets import (
     QCheckBox,
@@ -57,6 +57,7 @@ class LogDialog(QDialog):
         self.ctx = ctx
         self.setWindowTitle("Log — raw and processed values")
         self.setModal(False)
+        self.setAttribute(Qt.WA_DeleteOnClose)  # the window opens a new one per click
         self.resize(1000, 500)
         self._last: LogEntry | None = None  # the newest entry shown
 
