@@ -268,6 +268,20 @@ def test_record_from_the_window_and_stop(qtbot, tmp_path):
     assert stop_recording(window) is None  # nothing running: no-op
 
 
+def test_single_polls_fetched_while_recording_go_into_the_file(qtbot, tmp_path):
+    bridge = RosBridge("/mm_beagle", 100.0, node_name="mm_monitor_unused")  # never started
+    window = make_window(qtbot, tmp_path, bridge)
+    path = tmp_path / "polls.mcap"
+    res = GetSamples.Response(success=True, first_seq=1, next_seq=2, stamp_ns=[9], dx=[4], dy=[5])
+    bridge.samples_received.emit("/dev/spidev1.0", res)  # before: not recorded
+    assert start_recording(window, path)
+    bridge.samples_received.emit("/dev/spidev1.0", res)
+    stop_recording(window)
+    bridge.samples_received.emit("/dev/spidev1.0", res)  # after: no error, not recorded
+    ((device, back),) = read_samples(path)
+    assert device == "/dev/spidev1.0" and list(back.dx) == [4] and back.next_seq == 2
+
+
 def test_unwritable_path_shows_why_and_attaches_nothing(qtbot, tmp_path):
     window = make_window(qtbot, tmp_path)
     bad = tmp_path / "no_such_dir" / "x.mcap"

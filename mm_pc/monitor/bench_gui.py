@@ -23,8 +23,8 @@ What :func:`bench_gui` does, in order:
    a frame is ``window.frame()`` (the views' ``refresh``) plus the
    ``processEvents`` right after it, which paints. Frame time = both,
    measured with ``perf_counter``; ``refresh_ms_*`` = ``window.frame()`` alone.
-5. Memory: resident set size (psutil) before the fast-forward, after it and
-   after the frames.
+5. Memory: resident set size (psutil) before the fast-forward, after it,
+   after each tab's frames (``memory_after_tab_mb``) and at the end.
 
 ``frame_ms_p50``/``frame_ms_p95`` are over all tabs' frames; ``tab_p95_ms``
 per tab. A view whose ``refresh`` raises is reported in ``errors`` and its
@@ -228,11 +228,12 @@ def _run(window, bridge, pump: _Pump, hours, rate_hz, frames, trajectory) -> dic
             raise RuntimeError("the mm-beagle sim node did not answer within 30 s")
         live_replies0 = bridge.replies
     t_frames = time.perf_counter()
-    per_tab, all_frames, all_refresh, errors, first = {}, [], [], {}, {}
+    per_tab, all_frames, all_refresh, errors, first, tab_mb = {}, [], [], {}, {}, {}
     for i in range(window.tabs.count()):
         name = window.tabs.tabText(i)
         window.tabs.setCurrentIndex(i)
         total, refresh, error = _measure_tab(window, pump, frames)
+        tab_mb[name] = round(_rss_mb(), 1)
         if error:
             errors[name] = error
         if total:
@@ -260,6 +261,7 @@ def _run(window, bridge, pump: _Pump, hours, rate_hz, frames, trajectory) -> dic
         "memory_before_mb": round(rss_start, 1),
         "memory_after_history_mb": round(rss_filled, 1),
         "memory_growth_mb_during_frames": round(rss_end - rss_filled, 1),
+        "memory_after_tab_mb": tab_mb,
         "history_mb": round(hist.nbytes / 1e6, 1),
         "history_rows_fed": fed,
         "rows_after_history": rows_filled,

@@ -13,8 +13,9 @@ File layout (MCAP profile ``ros2``, schemas ``ros2msg``, messages ``cdr``):
     One message per reply, ``data = [received_s, rtt_s]``: the exact
     monotonic arrival time and round-trip time (s) of the reply.
 ``/mm_monitor/samples/<device>`` -- ``mm_interfaces/srv/GetSamples_Response``
-    The single 1 kHz polls, when the debug view fetched them
-    (:meth:`McapRecorder.write_samples`); channel metadata ``device``.
+    The single 1 kHz polls, whenever they were fetched while recording (the
+    recorder listens to the bridge's ``samples_received``;
+    :meth:`McapRecorder.write_samples`); channel metadata ``device``.
 
 Every message of one reply has the reply's number (from 0) as its MCAP
 ``sequence`` and the same ``log_time``: the arrival time on the system clock
@@ -31,10 +32,12 @@ this code.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
 import re
 import time
+import warnings
 from datetime import datetime, timezone
 from pathlib import Path
 from types import SimpleNamespace
@@ -500,6 +503,8 @@ def start_recording(window, path: str | Path) -> bool:
 
     recorder.on_error = failed
     ctx.recorder = recorder
+    if ctx.bridge is not None:  # single polls fetched by anyone (the debug view) go in too
+        ctx.bridge.samples_received.connect(recorder.write_samples)
     window.record_action.setText("Stop &recording")
     _set_indicator(window, f"● REC {recorder.path.name}")
     window.statusBar().showMessage(f"recording to {recorder.path}")
@@ -518,6 +523,10 @@ def stop_recording(window) -> Path | None:
     if recorder is None:
         return None
     window.ctx.recorder = None
+    if window.ctx.bridge is not None:
+        with contextlib.suppress(RuntimeError, TypeError), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            window.ctx.bridge.samples_received.disconnect(recorder.write_samples)
     recorder.close()
     window.record_action.setText("&Record…")
     _set_indicator(window, None)
