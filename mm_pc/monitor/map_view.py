@@ -10,9 +10,11 @@ An hour at 100 Hz is 360 000 rows per path, so the paths are not handed to
 pyqtgraph as they are. :class:`PathDecimator` keeps, incrementally (only the
 rows added since the last refresh are looked at), a few decimated copies of a
 path: level ``k`` keeps a row only where the path enters a new square cell of
-``LEVEL_EPS_M[k]`` (0.5 mm, 2 mm, 8 mm, ...). The view shows the coarsest
+``LEVEL_EPS_M[k]`` (0.5 mm, 1 mm, 2 mm, ...). The view shows the coarsest
 level whose cell is below half a screen pixel, so what is dropped cannot be
-seen, and only the part near the visible area when that is still many points.
+seen. Each level is cut into chunks of 1024 points; a completed chunk is a
+curve of its own that is drawn once and then left alone (only chunks near
+the visible area get a curve), and only the growing end is updated per row.
 """
 
 from __future__ import annotations
@@ -58,12 +60,15 @@ DEFAULT_WIDTH_M = 1.0
 #: Grid spacings (m): the 10 cm squares, and coarser lines for zoomed-out views.
 GRID_STEPS_M = (0.1, 1.0, 10.0, 100.0)
 GRID_COLOURS = ("#e4e4e4", "#c4c4c4", "#9a9a9a", "#707070")
-GRID_MIN_PX = 6.0  # a grid level whose lines would be closer than this is hidden
+GRID_MIN_PX = 8.0  # a grid level whose lines would be closer than this is hidden
 
-#: Most points a path may hand to pyqtgraph before it is cut to the visible area.
-POINT_BUDGET = 20_000
 #: Largest decimation cell allowed, as a fraction of one screen pixel.
 PIXEL_FRACTION = 0.5
+#: Follow mode re-centres once the robot is this many pixels off the centre.
+FOLLOW_SLACK_PX = 3.0
+#: Most history rows one refresh takes in (an hour arriving at once is taken in over
+#: several frames instead of freezing the window for one long one).
+MAX_ROWS_PER_REFRESH = 10_000
 
 #: Sensor axis arrows and robot heading arrow (m, drawn to scale).
 AXIS_ARROW_M = 0.025
@@ -82,13 +87,15 @@ class _Grow:
         self.data = np.empty((256, width))
         self.n = 0
 
-    def extend(self, rows: np.ndarray) -> None:
-        need = self.n + len(rows)
+    def extend(self, *columns: np.ndarray) -> None:
+        """Append rows given column by column (each 1-D, of equal length)."""
+        need = self.n + len(columns[0])
         if need > len(self.data):
             grown = np.empty((max(need, 2 * len(self.data)), self.data.shape[1]))
             grown[: self.n] = self.data[: self.n]
             self.data = grown
-        self.data[self.n : need] = rows
+        for j, col in enumerate(columns):
+            self.data[self.n : need, j] = col
         self.n = need
 
     @property
@@ -100,18 +107,19 @@ class PathDecimator:
     """Multi-resolution, incrementally decimated copy of one path (no Qt).
 
     Level ``k`` keeps a point where the path enters a new square cell of side
-    ``LEVEL_EPS_M[k]`` (cells are nested: 4 x 4 cells of level k make one of
-    level k+1), so every kept point is a point of the path, the first is
-    always kept, and a dropped point lies in the cell of the kept point before
-    it (at most ``sqrt(2) * eps`` away from the drawn line).
-    Points are stored in chunks of ``CHUNK`` with bounding boxes so the part
-    near a view rectangle is found without looking at every point.
+    ``LEVEL_EPS_M[k]`` = 0.5 mm * 2**k (cells are nested: 2 x 2 cells of level
+    k make one of level k+1), so every kept point is a point of the path, the
+    first is always kept, and a dropped point lies in the cell of the kept
+    point before it (at most ``sqrt(2) * eps`` away from the drawn line).
+    Each level is cut into chunks of ``CHUNK`` points with bounding boxes: a
+    completed chunk never changes, so it can be drawn once and left alone,
+    and the chunks near a view rectangle are found without looking at points.
     """
 
     EPS0_M = 0.0005
-    LEVELS = 6
-    LEVEL_EPS_M = (0.0005, 0.002, 0.008, 0.032, 0.128, 0.512)  # EPS0_M * 4**k
-    CHUNK = 2048
+    LEVELS = 11
+    LEVEL_EPS_M = tuple(0.0005 * 2.0**k for k in range(11))  # 0.5 mm ... 0.512 m
+    CHUNK = 1024
 
     def __init__(self) -> None:
         self.clear()
@@ -119,11 +127,11 @@ class PathDecimator:
     def clear(self) -> None:
         """Forget the path."""
         self.rows_seen = 0
-        self._last_cell: np.ndarray | None = None  # level-0 cell of the newest finite row
+        self._last_cell: tuple[int, int] | None = None  # level-0 cell of the newest finite row
         self._last_point: tuple[float, float] | None = None
         self._bounds = np.array([np.inf, -np.inf, np.inf, -np.inf])  # xmin, xmax, ymin, ymax
         self._points = [_Grow(2) for _ in range(self.LEVELS)]
-        self._boxes = [_Grow(4) for _ in range(self.LEVELS)]  # xmin, xmax, ymin, ymax
+        self._boxes = [_Grow(4) for _ in range(self.LEVELS)]  # per completed chunk
 
     @property
     def last_point(self) -> tuple[float, float] | None:
@@ -136,7 +144,12 @@ class PathDecimator:
         return tuple(map(float, self._bounds)) if self._last_point is not None else None
 
     def level_size(self, level: int) -> int:
+        """Points kept at ``level``."""
         return self._points[level].n
+
+    def chunk_count(self, level: int) -> int:
+        """Completed (never changing) chunks of ``level``."""
+        return self._boxes[level].n
 
     def update(self, x: np.ndarray, y: np.ndarray) -> int:
         """Take the rows of ``x``, ``y`` (whole columns, m) beyond ``rows_seen``.
@@ -147,42 +160,42 @@ class PathDecimator:
         self.rows_seen = len(x)
         if not len(new_x):
             return 0
-        pts = np.column_stack((new_x, new_y))
-        finite = np.isfinite(pts).all(axis=1)
-        if not finite.all():
-            pts = pts[finite]
-        if not len(pts):
+        finite = np.isfinite(new_x) & np.isfinite(new_y)
+        px, py = (new_x, new_y) if finite.all() else (new_x[finite], new_y[finite])
+        if not len(px):
             return len(new_x)
-        cells = np.floor(pts / self.EPS0_M).astype(np.int64)
+        cx = np.floor(px / self.EPS0_M).astype(np.int64)
+        cy = np.floor(py / self.EPS0_M).astype(np.int64)
         prev = self._last_cell
-        self._last_cell = cells[-1].copy()
-        self._last_point = (float(pts[-1, 0]), float(pts[-1, 1]))
-        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        self._last_cell = (int(cx[-1]), int(cy[-1]))
+        self._last_point = (float(px[-1]), float(py[-1]))
         b = self._bounds
-        b[:] = min(b[0], lo[0]), max(b[1], hi[0]), min(b[2], lo[1]), max(b[3], hi[1])
+        b[:] = min(b[0], px.min()), max(b[1], px.max()), min(b[2], py.min()), max(b[3], py.max())
         for k in range(self.LEVELS):
-            ck = cells >> (2 * k)  # floor division by 4**k: the nested coarser cell
-            keep = np.empty(len(ck), dtype=bool)
-            keep[1:] = (ck[1:] != ck[:-1]).any(axis=1)
-            keep[0] = prev is None or bool(((prev >> (2 * k)) != ck[0]).any())
-            pts, cells = pts[keep], cells[keep]
-            self._append(k, pts)
-            if not len(pts):
+            # Points kept at level k-1 are the only candidates at level k (nested cells),
+            # and the row before a candidate shares the cell of the candidate before it.
+            kx, ky = cx >> k, cy >> k  # floor division by 2**k: the enclosing cell of level k
+            keep = np.empty(len(kx), dtype=bool)
+            np.not_equal(kx[1:], kx[:-1], out=keep[1:])
+            keep[1:] |= ky[1:] != ky[:-1]
+            keep[0] = prev is None or (prev[0] >> k, prev[1] >> k) != (int(kx[0]), int(ky[0]))
+            if not keep.all():
+                px, py, cx, cy = px[keep], py[keep], cx[keep], cy[keep]
+            if not len(px):
                 break
+            self._append(k, px, py)
         return len(new_x)
 
-    def _append(self, k: int, pts: np.ndarray) -> None:
-        if not len(pts):
-            return
+    def _append(self, k: int, px: np.ndarray, py: np.ndarray) -> None:
         store, boxes = self._points[k], self._boxes[k]
-        store.extend(pts)
+        store.extend(px, py)
         full = store.n // self.CHUNK
         if full > boxes.n:
             done = store.data[boxes.n * self.CHUNK : full * self.CHUNK].reshape(
                 -1, self.CHUNK, 2
             )
-            lo, hi = done.min(axis=1), done.max(axis=1)
-            boxes.extend(np.column_stack((lo[:, 0], hi[:, 0], lo[:, 1], hi[:, 1])))
+            x, y = done[:, :, 0], done[:, :, 1]  # reduce along the long axis (fast)
+            boxes.extend(x.min(axis=1), x.max(axis=1), y.min(axis=1), y.max(axis=1))
 
     def level_for(self, pixel_m: float) -> int:
         """The coarsest level whose cell is at most ``PIXEL_FRACTION`` of a pixel."""
@@ -192,68 +205,36 @@ class PathDecimator:
                 level = k
         return level
 
-    def points(
-        self, level: int, rect: tuple[float, float, float, float] | None = None,
-        budget: int = POINT_BUDGET,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        """The points of ``level`` to draw: ``(x, y, connect)``.
-
-        All of them when there are at most ``budget`` or no ``rect``
-        (``connect`` None: one polyline); else only the chunks (and, if still
-        too many, the points and their neighbours) inside ``rect`` =
-        (xmin, xmax, ymin, ymax), with ``connect[i]`` False where the line
-        breaks after point i.
-        """
+    def points(self, level: int) -> tuple[np.ndarray, np.ndarray]:
+        """Every point kept at ``level``, then the newest point if it was not kept (m)."""
         pts = self._points[level].view
-        n = len(pts)
-        if n <= budget or rect is None:
-            return self._with_last(pts[:, 0], pts[:, 1], None, True)
-        idx = self._chunk_indices(level, rect, n)
-        if len(idx) > budget:
-            sel = pts[idx]
-            inside = _inside(sel, rect)
-            near = inside.copy()
-            near[1:] |= inside[:-1]
-            near[:-1] |= inside[1:]
-            idx = idx[near]
-        connect = np.zeros(len(idx), dtype=bool)
-        connect[:-1] = np.diff(idx) == 1
-        sel = pts[idx]
-        return self._with_last(sel[:, 0], sel[:, 1], connect, len(idx) and idx[-1] == n - 1)
+        return self._with_last(pts[:, 0], pts[:, 1])
 
-    def _with_last(self, x, y, connect, joined: bool):
-        """Append the newest point when the decimation dropped it, so the line ends where
-        the robot is; ``joined``: the points end with the level's newest kept point."""
+    def chunk_points(self, level: int, c: int) -> tuple[np.ndarray, np.ndarray]:
+        """Completed chunk ``c`` of ``level``, starting at the last point of chunk c-1
+        (so that consecutive chunks drawn apart still join). Views, not copies."""
+        pts = self._points[level].data[max(0, c * self.CHUNK - 1) : (c + 1) * self.CHUNK]
+        return pts[:, 0], pts[:, 1]
+
+    def live_points(self, level: int) -> tuple[np.ndarray, np.ndarray]:
+        """The growing part of ``level`` after the completed chunks (joined to them), and
+        the newest point if it was not kept: the line always ends where the path ends."""
+        start = max(0, self._boxes[level].n * self.CHUNK - 1)
+        pts = self._points[level].view[start:]
+        return self._with_last(pts[:, 0], pts[:, 1])
+
+    def chunks_in(self, level: int, rect: tuple[float, float, float, float]) -> np.ndarray:
+        """Indices of the completed chunks of ``level`` whose box meets
+        ``rect`` = (xmin, xmax, ymin, ymax)."""
+        b = self._boxes[level].view
+        x0, x1, y0, y1 = rect
+        return np.flatnonzero((b[:, 1] >= x0) & (b[:, 0] <= x1) & (b[:, 3] >= y0) & (b[:, 2] <= y1))
+
+    def _with_last(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         last = self._last_point
         if last is None or (len(x) and x[-1] == last[0] and y[-1] == last[1]):
-            return x, y, connect
-        x, y = np.append(x, last[0]), np.append(y, last[1])
-        if connect is not None:
-            connect = np.append(connect, False)
-            if len(connect) > 1:
-                connect[-2] = bool(joined)
-        return x, y, connect
-
-    def _chunk_indices(self, level: int, rect, n: int) -> np.ndarray:
-        c = self.CHUNK
-        boxes = self._boxes[level].view
-        x0, x1, y0, y1 = rect
-        hit = (boxes[:, 1] >= x0) & (boxes[:, 0] <= x1) & (boxes[:, 3] >= y0) & (boxes[:, 2] <= y1)
-        ids = list(np.flatnonzero(hit))
-        if len(boxes) * c < n:
-            ids.append(len(boxes))  # the growing last chunk: always considered
-        parts, prev = [], -2
-        for i in ids:
-            start = i * c if (i == prev + 1 or i == 0) else i * c - 1  # join to the point before
-            parts.append(np.arange(start, min((i + 1) * c, n)))
-            prev = i
-        return np.concatenate(parts) if parts else np.empty(0, dtype=np.int64)
-
-
-def _inside(pts: np.ndarray, rect) -> np.ndarray:
-    x0, x1, y0, y1 = rect
-    x, y = pts[:, 0], pts[:, 1]
-    return (x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)
+            return x, y
+        return np.append(x, last[0]), np.append(y, last[1])
 
 
 def _rotate(points: np.ndarray, yaw: float, x: float, y: float) -> np.ndarray:
@@ -295,16 +276,95 @@ class _MapViewBox(pg.ViewBox):
 
 
 class _Path:
-    """One drawn path: its decimator, its curve and what was last drawn."""
+    """One drawn path: its decimator and its curves in the view box.
 
-    def __init__(self, key, colour: str, width: float, columns: tuple[str, str]) -> None:
+    The completed chunks of the level in use that lie near the view are one
+    curve each and are never touched again while level and area stay; only
+    the ``live`` curve (the growing end, at most one chunk) changes with
+    every new row, so a refresh costs the same after an hour as after a minute.
+    """
+
+    def __init__(self, vb, key, colour: str, width: float, columns: tuple[str, str]) -> None:
+        self.vb = vb
         self.key = key
         self.columns = columns
+        self.pen = pg.mkPen(colour, width=width)
+        self.z = 5 if key == "robot" else 4
         self.decimator = PathDecimator()
-        self.curve = pg.PlotCurveItem(pen=pg.mkPen(colour, width=width), skipFiniteCheck=True)
-        self.curve.setZValue(5 if key == "robot" else 4)
-        self.drawn: tuple | None = None  # (level, clip rect or None, rows) last drawn
-        self.shown_points = 0
+        self.live = self._curve()
+        self.chunks: dict[int, pg.PlotCurveItem] = {}
+        self.visible = True
+        self.level: int | None = None  # level drawn; None: draw everything anew
+        self.clip: tuple | None = None  # area whose chunks are drawn (m)
+        self.done = 0  # completed chunks of the level already considered
+        self.rows = -1  # decimator rows the live curve shows
+
+    def _curve(self) -> pg.PlotCurveItem:
+        curve = pg.PlotCurveItem(pen=self.pen, skipFiniteCheck=True)
+        curve.setZValue(self.z)
+        self.vb.addItem(curve, ignoreBounds=True)
+        return curve
+
+    def forget_items(self) -> None:
+        """Remove the chunk curves and empty the live one (drawn anew next time)."""
+        for curve in self.chunks.values():
+            self.vb.removeItem(curve)
+        self.chunks.clear()
+        self.live.setData(np.empty(0), np.empty(0))
+        self.level = self.clip = None
+        self.rows = -1
+
+    def set_visible(self, on: bool) -> None:
+        self.visible = on
+        self.forget_items()  # hidden paths are not kept up to date; shown ones start anew
+        self.live.setVisible(on)
+
+    def draw(self, level: int, view: tuple, clip: tuple) -> None:
+        """Bring the curves up to date for ``level``; ``view`` is the visible area and
+        ``clip`` the larger area to draw chunks for when the view leaves the last one."""
+        dec = self.decimator
+        if level != self.level:
+            self.forget_items()
+            self.level = level
+        count = dec.chunk_count(level)
+        if self.clip is None or not _contains(self.clip, view):
+            self.clip = clip
+            wanted = set(dec.chunks_in(level, clip).tolist())
+            for c in set(self.chunks) - wanted:
+                self.vb.removeItem(self.chunks.pop(c))
+            self._add_chunks(wanted - set(self.chunks))
+            self.done = count
+        elif count > self.done:
+            new = dec.chunks_in(level, self.clip)
+            self._add_chunks(new[new >= self.done].tolist())
+            self.done = count
+        if dec.rows_seen != self.rows:
+            self.live.setData(*dec.live_points(level))
+            self.rows = dec.rows_seen
+
+    def _add_chunks(self, chunks) -> None:
+        for c in chunks:
+            curve = self._curve()
+            curve.setData(*self.decimator.chunk_points(self.level, c))
+            self.chunks[c] = curve
+
+    def data(self) -> tuple[np.ndarray, np.ndarray]:
+        """The points drawn, in path order, without the repeated joining points."""
+        curves = [self.chunks[c] for c in sorted(self.chunks)] + [self.live]
+        parts = [c.getData() for c in curves]
+        parts = [(np.asarray(x), np.asarray(y)) for x, y in parts if x is not None and len(x)]
+        if not parts:
+            return np.empty(0), np.empty(0)
+        x = np.concatenate([p[0] for p in parts])
+        y = np.concatenate([p[1] for p in parts])
+        keep = np.ones(len(x), dtype=bool)
+        keep[1:] = (x[1:] != x[:-1]) | (y[1:] != y[:-1])
+        return x[keep], y[keep]
+
+    @property
+    def shown_points(self) -> int:
+        return sum(len(c.getData()[0] if c.getData()[0] is not None else ())
+                   for c in [*self.chunks.values(), self.live])
 
 
 class MapView(QWidget):
@@ -400,7 +460,7 @@ class MapView(QWidget):
         self.path_bar = QHBoxLayout()
         second.addLayout(self.path_bar)
         second.addStretch(1)
-        self.pose_label = QLabel("")
+        self.pose_label = QLabel(_pose_text(0.0, 0.0, 0.0))
         second.addWidget(self.pose_label)
         self.toolbar = QVBoxLayout()
         self.toolbar.setSpacing(2)
@@ -408,20 +468,26 @@ class MapView(QWidget):
         self.toolbar.addLayout(second)
 
     def _build_robot_items(self) -> None:
+        # Everything on the robot is drawn in base_link inside one group that the pose moves.
+        self.body = pg.ItemGroup()
+        self.body.setZValue(20)
+        self.vb.addItem(self.body, ignoreBounds=True)
         pen = pg.mkPen(ROBOT_COLOUR, width=2)
         self.robot_outline = pg.PlotCurveItem(pen=pen, skipFiniteCheck=True)
         self.robot_heading = pg.PlotCurveItem(pen=pen, connect="pairs", skipFiniteCheck=True)
+        self.body.addItem(self.robot_outline)
+        self.body.addItem(self.robot_heading)
+        self._body_key: tuple | None = None
+        self._body_size = 0.1
         # A marker of fixed screen size, so the robot can be found when zoomed far out.
         self.robot_marker = pg.ArrowItem(
             angle=180, headLen=14, tailLen=0, brush=ROBOT_COLOUR, pen=pg.mkPen(ROBOT_COLOUR)
         )
-        for z, item in enumerate((self.robot_outline, self.robot_heading, self.robot_marker)):
-            item.setZValue(20 + z)
-            self.vb.addItem(item, ignoreBounds=True)
+        self.robot_marker.setZValue(25)
+        self.vb.addItem(self.robot_marker, ignoreBounds=True)
 
     def _add_path(self, key, label: str, colour: str, width: float, columns) -> None:
-        path = _Path(key, colour, width, columns)
-        self.vb.addItem(path.curve, ignoreBounds=True)
+        path = _Path(self.vb, key, colour, width, columns)
         self.paths[key] = path
         check = QCheckBox(label)
         check.setIcon(_colour_icon(colour))
@@ -445,8 +511,8 @@ class MapView(QWidget):
                 t = pg.TextItem(text, color=colour, anchor=(0.5, 0.5))
                 labels.append(t)
             for item in (axes, dot, *labels):
-                item.setZValue(30)
-                self.vb.addItem(item, ignoreBounds=True)
+                item.setZValue(1)
+                self.body.addItem(item)
             self.sensor_items.append({"dot": dot, "axes": axes, "labels": labels})
             self._add_path(k, f"sensor {k + 1}", colour, 1.0, (f"s{k}_wx", f"s{k}_wy"))
             self.path_checks[k].setToolTip(
@@ -513,7 +579,7 @@ class MapView(QWidget):
         rx, ry = self._robot_xy()
         boxes = [(rx, rx, ry, ry)]
         for path in self.paths.values():
-            if path.curve.isVisible() and path.decimator.bounds is not None:
+            if path.visible and path.decimator.bounds is not None:
                 boxes.append(path.decimator.bounds)
         arr = np.array(boxes, dtype=float)
         x0, x1 = arr[:, 0].min(), arr[:, 1].max()
@@ -526,26 +592,21 @@ class MapView(QWidget):
     def set_path_visible(self, key, visible: bool) -> None:
         """Show or hide one path: ``"robot"`` or a sensor index (0-based)."""
         path = self.paths[key]
-        path.curve.setVisible(bool(visible))
-        path.drawn = None
+        if path.visible != bool(visible):
+            path.set_visible(bool(visible))
         if self.path_checks[key].isChecked() != bool(visible):
             self.path_checks[key].setChecked(bool(visible))
         self._dirty = True
 
     def path_data(self, key) -> tuple[np.ndarray, np.ndarray]:
-        """The points the curve of a path currently holds (m, odom)."""
-        x, y = self.paths[key].curve.getData()
-        if x is None:
-            return np.empty(0), np.empty(0)
-        return np.asarray(x), np.asarray(y)
+        """The points drawn for a path (m, odom), in path order."""
+        return self.paths[key].data()
 
     def clear_paths(self) -> None:
         """Forget the drawn paths (the session was reset)."""
         for path in self.paths.values():
             path.decimator.clear()
-            path.curve.setData(np.empty(0), np.empty(0))
-            path.drawn = None
-            path.shown_points = 0
+            path.forget_items()
         self._seen = None
         self._dirty = True
 
@@ -555,12 +616,15 @@ class MapView(QWidget):
         hist = self.ctx.session.history
         return {
             "rows": len(hist) if hist is not None else 0,
+            "behind": max((len(hist) - p.decimator.rows_seen for p in self.paths.values()),
+                          default=0) if hist is not None else 0,
             "refreshes": len(self._refresh_ms),
             "refresh_p50_ms": float(np.percentile(ms, 50)),
             "refresh_p95_ms": float(np.percentile(ms, 95)),
             "refresh_max_ms": float(ms.max()),
             "points": {k: p.shown_points for k, p in self.paths.items()},
-            "levels": {k: (p.drawn[0] if p.drawn else None) for k, p in self.paths.items()},
+            "levels": {k: p.level for k, p in self.paths.items()},
+            "chunk_curves": {k: len(p.chunks) for k, p in self.paths.items()},
         }
 
     # -- refresh ----------------------------------------------------------------------------------
@@ -576,101 +640,101 @@ class MapView(QWidget):
         self._seen = key
         self._dirty = False
         self._ensure_sensors()
-        if data_changed and hist is not None:
-            self._take_rows(hist)
+        behind = self._take_rows(hist) if hist is not None else False
         self._draw_robot()
-        self._draw_sensors()
         if self.follow_check.isChecked() and (data_changed or self._follow_pending):
-            self._follow_pending = False
-            self._show(self._robot_xy(), self.visible_width())
+            self._follow()
         self._draw_paths()
-        self._dirty = False  # our own range changes above need nothing more
+        self._dirty = behind  # our own range changes above need nothing more
         self._refresh_ms.append((time.perf_counter() - t0) * 1e3)
         if len(self._refresh_ms) > 20_000:
             del self._refresh_ms[:10_000]
 
-    def _take_rows(self, hist) -> None:
+    def _follow(self) -> None:
+        """Centre the robot; a drift below ``FOLLOW_SLACK_PX`` is left alone (a pan
+        repaints the whole map, which far out is most of the frame budget)."""
+        rx, ry = self._robot_xy()
+        cx, cy = self.view_centre()
+        pixel = self.visible_width() / max(self.vb.width(), 1.0)
+        if self._follow_pending or math.hypot(rx - cx, ry - cy) > FOLLOW_SLACK_PX * pixel:
+            self._show((rx, ry), self.visible_width())
+        self._follow_pending = False
+
+    def _take_rows(self, hist) -> bool:
+        """Feed new rows to the decimators; True when some are left for the next frame."""
+        behind = False
         for path in self.paths.values():
             dec = path.decimator
             if len(hist) < dec.rows_seen or getattr(self, "_dropped", 0) != hist.dropped_rows:
                 dec.clear()  # cleared, or the oldest rows were let go: start again
-                path.drawn = None
+                path.forget_items()
             if path.columns[0] in hist.index:
-                dec.update(hist.column(path.columns[0]), hist.column(path.columns[1]))
+                end = min(len(hist), dec.rows_seen + MAX_ROWS_PER_REFRESH)
+                dec.update(hist.column(path.columns[0])[:end], hist.column(path.columns[1])[:end])
+                behind |= end < len(hist)
         self._dropped = hist.dropped_rows
+        return behind
 
     def _draw_paths(self) -> None:
         (x0, x1), (y0, y1) = self.vb.viewRange()
-        width, height = x1 - x0, y1 - y0
+        width, height = float(x1 - x0), float(y1 - y0)
         pixel = width / max(self.vb.width(), 1.0)
         view = (x0, x1, y0, y1)
+        clip = (x0 - width, x1 + width, y0 - height, y1 + height)
         for path in self.paths.values():
-            if not path.curve.isVisible():
-                continue
-            dec = path.decimator
-            level = dec.level_for(pixel)
-            rows = dec.rows_seen
-            if path.drawn is not None:
-                lvl, clip, drawn_rows = path.drawn
-                same_data = drawn_rows == rows and lvl == level
-                if same_data and (clip is None or _contains(clip, view)):
-                    continue
-            clip = None
-            if dec.level_size(level) > POINT_BUDGET:
-                clip = (x0 - width, x1 + width, y0 - height, y1 + height)
-            x, y, connect = dec.points(level, clip)
-            path.curve.setData(x, y, connect="all" if connect is None else connect)
-            path.drawn = (level, clip, rows)
-            path.shown_points = len(x)
+            if path.visible:
+                path.draw(path.decimator.level_for(pixel), view, clip)
 
     def _robot_xy(self) -> tuple[float, float]:
         pose = self.ctx.session.pose
         return pose.x, pose.y
 
-    def _draw_robot(self) -> None:
-        pose = self.ctx.session.pose
+    def _build_body(self) -> None:
+        """Robot outline, heading arrow and sensor axes in base_link (m); they move as
+        one group carried by the pose. Rebuilt when the geometry changes."""
         mounts = self.ctx.session.mounts
         front = max([m.x for m in mounts] + [0.05]) + 0.025
         half = max([abs(m.y) for m in mounts] + [0.04]) + 0.015
+        self._body_size = front + 0.035
         body = np.array([(-0.035, -half), (front, -half), (front, half), (-0.035, half),
                          (-0.035, -half)])
-        outline = _rotate(body, pose.yaw, pose.x, pose.y)
-        self.robot_outline.setData(outline[:, 0], outline[:, 1])
-        segs = np.array(_arrow_segments((0.0, 0.0), (1.0, 0.0), HEADING_ARROW_M, 0.02))
-        heading = _rotate(segs, pose.yaw, pose.x, pose.y)
+        self.robot_outline.setData(body[:, 0], body[:, 1])
+        heading = np.array(_arrow_segments((0.0, 0.0), (1.0, 0.0), HEADING_ARROW_M, 0.02))
         self.robot_heading.setData(heading[:, 0], heading[:, 1])
-        self.robot_marker.setPos(pose.x, pose.y)
-        # ArrowItem: angle 0 points left, positive angles turn clockwise on the screen
-        self.robot_marker.setStyle(angle=180 - math.degrees(pose.yaw))
-        pixel = self.visible_width() / max(self.vb.width(), 1.0)
-        self.robot_marker.setVisible(bool((front + 0.035) / pixel < 25))
-
-    def _draw_sensors(self) -> None:
-        pose = self.ctx.session.pose
-        mounts = self.ctx.session.mounts
         for k, items in enumerate(self.sensor_items):
             if k >= len(mounts):
                 continue
             m = mounts[k]
-            (sx, sy), = _rotate(np.array([(m.x, m.y)]), pose.yaw, pose.x, pose.y)
-            items["dot"].setData([sx], [sy])
-            a = pose.yaw + m.yaw
-            y_axis = (math.cos(a), math.sin(a))  # sensor +Y: robot forward
-            x_axis = (math.sin(a), -math.cos(a))  # sensor +X: robot right
-            segs = (_arrow_segments((sx, sy), x_axis, AXIS_ARROW_M, 0.006)
-                    + _arrow_segments((sx, sy), y_axis, AXIS_ARROW_M, 0.006))
-            arr = np.array(segs)
+            items["dot"].setData([m.x], [m.y])
+            y_axis = (math.cos(m.yaw), math.sin(m.yaw))  # sensor +Y: robot forward
+            x_axis = (math.sin(m.yaw), -math.cos(m.yaw))  # sensor +X: robot right
+            arr = np.array(_arrow_segments((m.x, m.y), x_axis, AXIS_ARROW_M, 0.006)
+                           + _arrow_segments((m.x, m.y), y_axis, AXIS_ARROW_M, 0.006))
             items["axes"].setData(arr[:, 0], arr[:, 1])
             for label, (ux, uy) in zip(items["labels"], (x_axis, y_axis), strict=True):
-                label.setPos(sx + 1.35 * AXIS_ARROW_M * ux, sy + 1.35 * AXIS_ARROW_M * uy)
-            pixel = self.visible_width() / max(self.vb.width(), 1.0)
-            detail = bool(AXIS_ARROW_M / pixel > 12)
-            items["axes"].setVisible(detail)
+                label.setPos(m.x + 1.35 * AXIS_ARROW_M * ux, m.y + 1.35 * AXIS_ARROW_M * uy)
+        self._body_key = (mounts, len(self.sensor_items))
+
+    def _draw_robot(self) -> None:
+        """Move the robot group to the pose; show details only when they are big enough."""
+        if self._body_key != (self.ctx.session.mounts, len(self.sensor_items)):
+            self._build_body()
+        pose = self.ctx.session.pose
+        self.body.setPos(pose.x, pose.y)
+        self.body.setRotation(math.degrees(pose.yaw))  # CCW in odom (the view flips y)
+        pixel = self.visible_width() / max(self.vb.width(), 1.0)
+        small = self._body_size / pixel < 25
+        _show(self.robot_marker, small)
+        self.robot_marker.setPos(pose.x, pose.y)
+        if small:
+            # ArrowItem: tip at its position, angle 0 points left (-x), angles turn clockwise
+            # on the screen; so the tip leads in the heading direction
+            self.robot_marker.setStyle(angle=180 - math.degrees(pose.yaw))
+        for items in self.sensor_items:
+            _show(items["axes"], AXIS_ARROW_M / pixel > 12)
             for label in items["labels"]:
-                label.setVisible(bool(AXIS_ARROW_M / pixel > 30))
-        self.pose_label.setText(
-            f"x {pose.x:+.3f} m  y {pose.y:+.3f} m  yaw {math.degrees(pose.yaw_wrapped):+.1f}°"
-        )
+                _show(label, AXIS_ARROW_M / pixel > 30)
+        self.pose_label.setText(_pose_text(pose.x, pose.y, pose.yaw_wrapped))
 
     def _update_grid(self) -> None:
         (x0, x1), (y0, y1) = self.vb.viewRange()
@@ -692,10 +756,20 @@ class MapView(QWidget):
             item.setVisible(True)
 
 
+def _show(item, on: bool) -> None:
+    """setVisible only on a change (each call into Qt costs; most frames change nothing)."""
+    if item.isVisible() != bool(on):
+        item.setVisible(bool(on))
+
+
 def _contains(outer, inner) -> bool:
     return outer[0] <= inner[0] and inner[1] <= outer[1] and outer[2] <= inner[2] and (
         inner[3] <= outer[3]
     )
+
+
+def _pose_text(x: float, y: float, yaw: float) -> str:
+    return f"x {x:+.3f} m  y {y:+.3f} m  yaw {math.degrees(yaw):+.1f}°"
 
 
 def _format_length(m: float) -> str:
