@@ -27,22 +27,6 @@ from mm_pc.trilateration import plane_distances
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _keep_singletons_alive() -> None:
-    """PySide6-Essentials 6.12.0 on Python 3.11 drops a reference to True per Signal.emit and
-    to None per void Qt call (/work/notes/requests-views.md): the process aborts with
-    bool_dealloc/none_dealloc. Add references that are never released (a list of spares
-    would be freed at exit and abort then). Remove once the dependency excludes 6.12.0."""
-    import ctypes
-    import sys
-
-    from PySide6 import __version__ as pyside_version
-
-    if pyside_version == "6.12.0" and sys.version_info < (3, 12):
-        for obj in (None, True, False):
-            ctypes.c_ssize_t.from_address(id(obj)).value += 1 << 40  # ob_refcnt
-
-
-_keep_singletons_alive()
 
 
 def make_view(qtbot) -> mv.MapsView:

@@ -35,26 +35,6 @@ from mm_pc.monitor.resolution_panel import ResolutionPanel, validate_cpi
 from mm_pc.monitor.session import MonitorSession, sensor_columns
 from mm_pc.monitor.sim_feed import DEFAULT_DEVICES, sim_replies
 
-
-def _shield_singletons_from_pyside_6_12_0() -> None:
-    """PySide6-Essentials 6.12.0 on Python 3.11 drops one reference to None per call of a void
-    Qt method (setText, beginResetModel, ...) and one to True per Signal.emit; the process
-    aborts ("none_dealloc"/"bool_dealloc") after a few thousand calls. Until the dependency
-    pin excludes that version (/work/notes/requests-views.md), give these singletons
-    references that are never released (a list would be freed at exit and abort then).
-    ob_refcnt is PyObject's first field; Python 3.12+ makes them immortal anyway."""
-    import ctypes
-    import sys
-
-    from PySide6 import __version__ as pyside_version
-
-    if pyside_version == "6.12.0" and sys.version_info < (3, 12):
-        for obj in (None, True, False):
-            ctypes.c_ssize_t.from_address(id(obj)).value += 1 << 40
-
-
-_shield_singletons_from_pyside_6_12_0()
-
 IMAGES = os.path.join(os.path.dirname(__file__), os.pardir, "docs", "images")
 
 
