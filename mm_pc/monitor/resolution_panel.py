@@ -47,7 +47,7 @@ class _SensorRow:
         self.device = device
         self.edit = QLineEdit()
         self.edit.setPlaceholderText(f"{CPI_MIN}..{CPI_MAX}")
-        self.edit.setMaximumWidth(70)
+        self.edit.setMinimumWidth(90)
         self.edit.setToolTip(f"counts per inch of both axes, {ALLOWED} (Enter sets)")
         self.set_button = QPushButton("Set")
         self.current = QLabel("now: –")
