@@ -15,7 +15,7 @@ pytest.importorskip("PySide6")
 
 from mcap.reader import make_reader
 from mcap.writer import Writer
-from rclpy.serialization import deserialize_message
+from rclpy.serialization import deserialize_message, serialize_message
 
 from mm_interfaces.msg import SensorData
 from mm_interfaces.srv import GetSamples
@@ -43,10 +43,17 @@ DEVICES = ("/dev/spidev1.0", "/dev/spidev1.1")
 
 
 @pytest.fixture(autouse=True)
-def _pyside_612_refcount_guard():
-    """PySide6 6.12.0 drops references to None/True per Qt call (see bench_gui); no-op elsewhere."""
+def _pyside_612_refcount_guard(qapp):
+    """PySide6 6.12.0 drops references to None/True per Qt call (see bench_gui); topped up
+    every 20 ms while a test runs (the views' paint calls drop thousands a second)."""
+    from PySide6.QtCore import QTimer
+
     pyside_refcount_guard()
+    timer = QTimer()
+    timer.timeout.connect(pyside_refcount_guard)
+    timer.start(20)
     yield
+    timer.stop()
     pyside_refcount_guard()
 
 
@@ -167,6 +174,38 @@ def test_file_is_ros2_mcap_that_rclpy_decodes(recording):
     assert msgs[-1][1].sequence == msgs[-2][1].sequence == len(replies) - 1
 
 
+def test_a_file_with_only_sensor_data_groups_by_log_time(tmp_path, recording):
+    """E.g. a rosbag2 MCAP of a SensorData topic: messages with one log time form one reply."""
+    _, replies = recording
+    path = tmp_path / "bag.mcap"
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start(profile="ros2", library="test")
+        name = "mm_interfaces/msg/SensorData"
+        sid = w.register_schema(name, "ros2msg", ros2msg_definition(name).encode())
+        cid = w.register_channel("/mm_beagle/sensor_data", "cdr", sid, {"offered_qos_profiles": ""})
+        for k, rep in enumerate(replies[:4]):
+            for r in rep.readings:
+                data = serialize_message(_sensor_msg(r))
+                w.add_message(cid, 1_000_000_000 + k * 10_000_000, data, r.stamp_ns)
+        w.finish()
+    back = read_replies(path)
+    assert [b.readings for b in back] == [r.readings for r in replies[:4]]
+    assert [b.received_s for b in back] == [1.0, 1.01, 1.02, 1.03]
+    assert all(b.rtt_s == 0.0 for b in back)
+
+
+def _sensor_msg(r: Reading) -> SensorData:
+    from builtin_interfaces.msg import Time
+
+    return SensorData(
+        stamp=Time(sec=r.stamp_ns // 10**9, nanosec=r.stamp_ns % 10**9), id=r.id, seq=r.seq,
+        x_total_disp=r.x_total, y_total_disp=r.y_total, x_speed=r.x_speed, y_speed=r.y_speed,
+        x_counts=r.x_counts, y_counts=r.y_counts, cpi=r.cpi, samples=r.samples,
+        interval=r.interval,
+    )  # fmt: skip
+
+
 def test_schema_of_a_nested_type_lists_each_dependency_once():
     text = ros2msg_definition("std_msgs/msg/Float64MultiArray")
     assert text.count("MSG: std_msgs/MultiArrayLayout\n") == 1
@@ -280,6 +319,34 @@ def test_single_polls_fetched_while_recording_go_into_the_file(qtbot, tmp_path):
     bridge.samples_received.emit("/dev/spidev1.0", res)  # after: no error, not recorded
     ((device, back),) = read_samples(path)
     assert device == "/dev/spidev1.0" and list(back.dx) == [4] and back.next_seq == 2
+
+
+def test_menu_actions_ask_for_the_file_and_speed(qtbot, tmp_path, monkeypatch, recording):
+    import mm_pc.monitor.recording as recording_mod
+    import mm_pc.monitor.replay as replay_mod
+
+    window = make_window(qtbot, tmp_path)
+    path = tmp_path / "menu.mcap"
+    monkeypatch.setattr(
+        recording_mod.QFileDialog, "getSaveFileName", lambda *a, **k: (str(path), "")
+    )
+    window.record_action.trigger()  # File > Record…
+    assert window.ctx.recorder is not None and window.ctx.recorder.path == path
+    window.record_action.trigger()  # File > Stop recording
+    assert window.ctx.recorder is None and read_replies(path) == []
+    monkeypatch.setattr(
+        replay_mod.QFileDialog, "getOpenFileName", lambda *a, **k: (str(recording[0]), "")
+    )
+    monkeypatch.setattr(replay_mod.QInputDialog, "getItem", lambda *a, **k: ("max", True))
+    window.open_replay()  # File > Replay…
+    replayer = window.replayer
+    assert replayer.speed == math.inf
+    with qtbot.waitSignal(replayer.finished, timeout=10_000):
+        pass
+    assert window.ctx.session.stats.replies == len(recording[1])
+    monkeypatch.setattr(replay_mod.QInputDialog, "getItem", lambda *a, **k: ("1x", False))
+    window.open_replay()  # speed dialog cancelled: nothing starts
+    assert window.replayer is replayer
 
 
 def test_unwritable_path_shows_why_and_attaches_nothing(qtbot, tmp_path):
