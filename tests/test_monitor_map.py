@@ -20,6 +20,7 @@ from hypothesis import strategies as st
 from PySide6.QtCore import QPointF, Qt
 from PySide6.QtGui import QColor, QImage
 
+from mm_pc.geometry import SensorMount
 from mm_pc.monitor.context import MonitorContext
 from mm_pc.monitor.direction_widget import (
     GAINS_PX_PER_MM,
@@ -313,6 +314,8 @@ def test_zoom_slider_sets_the_visible_width_and_follows_the_wheel(view, ctx):
 
 
 def test_follow_recentres_on_the_robot_and_a_pan_ends_it(view, ctx):
+    assert view.follow_check.isChecked()  # the default
+    view.follow_check.setChecked(False)
     view.set_visible_width(0.5, (5.0, 5.0))
     view.follow_check.setChecked(True)
     view.refresh()  # following was switched on: centred at once
@@ -450,6 +453,21 @@ def test_sensor_axes_point_right_and_forward(view, ctx):
     assert xdir == pytest.approx(right)
     assert ydir == pytest.approx(forward)
     assert view.sensor_items[0]["axes"].isVisible()
+
+
+def test_a_new_geometry_moves_the_sensor_markers(view, ctx):
+    feed(ctx, seconds=3)
+    view.refresh()
+    mounts = (SensorMount(0.08, -0.05, 0.1), SensorMount(0.02, 0.06))
+    ctx.session.configure_odometry(mounts=mounts)
+    ctx.odometry_changed.emit()
+    view.refresh()
+    pose = ctx.session.pose
+    for k, m in enumerate(mounts):
+        sx, sy = view.sensor_items[k]["dot"].getData()
+        c, s = math.cos(pose.yaw), math.sin(pose.yaw)
+        assert world(view, sx[0], sy[0]) == pytest.approx(
+            (pose.x + c * m.x - s * m.y, pose.y + s * m.x + c * m.y))
 
 
 def test_map_screenshot(view, ctx):

@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 from PySide6.QtCore import QPointF, QRectF, Qt
-from PySide6.QtGui import QColor, QFont, QPainter, QPen, QPolygonF
+from PySide6.QtGui import QColor, QFont, QFontMetricsF, QPainter, QPen, QPolygonF
 from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
 
 from .context import MonitorContext
@@ -62,7 +62,7 @@ class DirectionWidget(QWidget):
 
     def radius_px(self) -> float:
         """Radius of the faint reference circle (px)."""
-        return 0.40 * min(self.width(), self.height())
+        return 0.36 * min(self.width(), self.height())
 
     def set_sample(self, dx: float, dy: float, speed: float, peak: float) -> None:
         """Show displacement ``dx, dy`` (m), ``speed`` (m/s); ``peak`` (m) sets the auto gain."""
@@ -82,7 +82,7 @@ class DirectionWidget(QWidget):
         p.setRenderHint(QPainter.RenderHint.Antialiasing)
         p.fillRect(self.rect(), Qt.GlobalColor.white)
         w, h = self.width(), self.height()
-        cx, cy, r = w / 2, h / 2 + 6, self.radius_px()
+        cx, cy, r = w / 2, h / 2 + 4, self.radius_px()
         faint = QPen(QColor("#d0d0d0"), 1)
         p.setPen(faint)
         p.drawEllipse(QPointF(cx, cy), r, r)
@@ -102,13 +102,18 @@ class DirectionWidget(QWidget):
         bold = QFont(self.font())
         bold.setBold(True)
         p.setFont(bold)
-        p.drawText(QRectF(4, 2, w - 8, 16), Qt.AlignmentFlag.AlignLeft, f"sensor {self.index + 1}")
+        line = QFontMetricsF(bold).height()
+        title = QRectF(4, 2, w - 8, line)
+        p.drawText(title, Qt.AlignmentFlag.AlignLeft, f"sensor {self.index + 1}")
+        p.drawText(title, Qt.AlignmentFlag.AlignRight, f"{self.speed * 1e3:.1f} mm/s")
         p.setFont(small)
-        p.drawText(QRectF(4, 2, w - 8, 16), Qt.AlignmentFlag.AlignRight, self.device)
-        bottom = QRectF(4, h - 18, w - 8, 16)
-        p.drawText(bottom, Qt.AlignmentFlag.AlignLeft, f"{self.speed * 1e3:.1f} mm/s")
+        p.setPen(QColor("#606060"))
+        small_line = QFontMetricsF(small).height()
+        p.drawText(QRectF(4, 2 + line, w - 8, small_line), Qt.AlignmentFlag.AlignLeft,
+                   self.device)
         mode = "auto" if self.gain_setting is None else "fixed"
-        p.drawText(bottom, Qt.AlignmentFlag.AlignRight, f"{mode} ×{self.gain / 1e3:g} px/mm")
+        p.drawText(QRectF(4, h - small_line - 2, w - 8, small_line), Qt.AlignmentFlag.AlignRight,
+                   f"gain ×{self.gain / 1e3:g} px/mm ({mode})")
         p.end()
 
     def _draw_arrow(self, p: QPainter, cx: float, cy: float, vx: float, vy: float) -> None:

@@ -442,6 +442,7 @@ class MapView(QWidget):
         self.width_label.setMinimumWidth(60)
         bar.addWidget(self.width_label)
         self.follow_check = QCheckBox("Follow robot")
+        self.follow_check.setChecked(True)
         self.follow_check.setToolTip("keep the robot in the centre; dragging the map ends it")
         self.follow_check.toggled.connect(self._on_follow)
         bar.addWidget(self.follow_check)
