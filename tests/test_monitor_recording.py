@@ -19,7 +19,6 @@ from rclpy.serialization import deserialize_message, serialize_message
 
 from mm_interfaces.msg import SensorData
 from mm_interfaces.srv import GetSamples
-from mm_pc.monitor.bench_gui import pyside_refcount_guard
 from mm_pc.monitor.context import MonitorConfig, MonitorContext
 from mm_pc.monitor.main_window import MainWindow
 from mm_pc.monitor.readings import Reading, Reply
@@ -40,21 +39,6 @@ from mm_pc.monitor.session import MonitorSession
 from mm_pc.monitor.sim_feed import sim_replies
 
 DEVICES = ("/dev/spidev1.0", "/dev/spidev1.1")
-
-
-@pytest.fixture(autouse=True)
-def _pyside_612_refcount_guard(qapp):
-    """PySide6 6.12.0 drops references to None/True per Qt call (see bench_gui); topped up
-    every 20 ms while a test runs (the views' paint calls drop thousands a second)."""
-    from PySide6.QtCore import QTimer
-
-    pyside_refcount_guard()
-    timer = QTimer()
-    timer.timeout.connect(pyside_refcount_guard)
-    timer.start(20)
-    yield
-    timer.stop()
-    pyside_refcount_guard()
 
 
 def odd_reply() -> Reply:

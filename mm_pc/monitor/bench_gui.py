@@ -33,7 +33,6 @@ tab skipped, so the bench runs whatever the views contain.
 
 from __future__ import annotations
 
-import ctypes
 import math
 import os
 import sys
@@ -44,39 +43,10 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["bench_gui", "pyside_refcount_guard"]
+__all__ = ["bench_gui"]
 
 FRAME_HZ = 30.0
 GOAL_P95_MS = 16.0
-
-_guard_base: dict[int, int] = {}
-
-
-def pyside_refcount_guard(margin: int = 300_000) -> int:
-    """Work around PySide6 6.12.0 on CPython < 3.12; does nothing elsewhere.
-
-    That release drops one reference to ``True`` per ``Signal.emit`` and one
-    to ``None`` per call of a void Qt method, so a busy window aborts with
-    "Fatal Python error: bool_dealloc/none_dealloc" within minutes. This
-    tops ``None``/``True``/``False`` up to ``margin`` references above their
-    count at the first call, held by lists that are deliberately never freed
-    (freeing them would give the lost references back at exit and abort
-    there). Call it often (every frame); returns the references added.
-    Remove once the dependency excludes 6.12.0 (see /work/notes/requests-views.md).
-    """
-    import PySide6
-
-    if PySide6.__version__ != "6.12.0" or sys.version_info >= (3, 12):
-        return 0
-    added = 0
-    for obj in (None, True, False):
-        base = _guard_base.setdefault(id(obj), sys.getrefcount(obj))
-        missing = base + margin - sys.getrefcount(obj)
-        if missing > 0:
-            refs = [obj] * missing
-            ctypes.pythonapi.Py_IncRef(ctypes.py_object(refs))  # never freed, on purpose
-            added += missing
-    return added
 
 
 def _rss_mb() -> float:
@@ -90,15 +60,13 @@ def _pct(values, q: float) -> float:
 
 
 class _Pump:
-    """Processes Qt events (and keeps the refcount guard topped up) until a deadline."""
+    """Processes Qt events until a deadline (or until ``predicate()`` holds)."""
 
     def __init__(self, app) -> None:
         self.app = app
-        self.guard_refs = 0
 
     def until(self, deadline: float, predicate=None) -> bool:
         while True:
-            self.guard_refs += pyside_refcount_guard()
             self.app.processEvents()
             if predicate is not None and predicate():
                 return True
@@ -173,7 +141,6 @@ def bench_gui(
 
     app = QApplication.instance() or QApplication(["mm-bench"])
     pump = _Pump(app)
-    pump.guard_refs += pyside_refcount_guard()
     with ExitStack() as stack:
         tmp = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="mm_bench_gui_")))
         if node:
@@ -187,8 +154,6 @@ def bench_gui(
         if bridge is not None:
             stack.callback(bridge.stop)
         result = _run(window, bridge, pump, hours, rate_hz, frames, trajectory)
-    result["refcount_guard_refs"] = pump.guard_refs
-    result["refcount_guard_mb"] = round(pump.guard_refs * 8 / 1e6, 1)  # one pointer each
     return result
 
 
