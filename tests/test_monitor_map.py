@@ -6,9 +6,7 @@ Run the hour-of-data timing with ``-s`` to see it printed:
 
 from __future__ import annotations
 
-import ctypes
 import math
-import sys
 import time
 from pathlib import Path
 
@@ -40,14 +38,6 @@ from mm_pc.monitor.map_view import (
 from mm_pc.monitor.session import MonitorSession
 from mm_pc.monitor.sim_feed import DEFAULT_DEVICES, sim_replies
 from mm_pc.odometry import Pose2D
-
-# PySide6-Essentials 6.12.0 drops references to True/False (per Signal.emit, see
-# /work/notes/requests-views.md) and to None (seen here in pyqtgraph's TextItem.setVisible);
-# without this the process aborts with "bool_dealloc"/"none_dealloc" after a few hundred
-# replies. Remove once the dependency pin excludes 6.12.0.
-if sys.version_info < (3, 12):
-    for _b in (True, False, None):
-        ctypes.c_ssize_t.from_address(id(_b)).value += 1 << 40
 
 IMAGES = Path(__file__).resolve().parent.parent / "docs" / "images"
 
