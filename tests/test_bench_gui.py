@@ -42,10 +42,12 @@ def test_bench_gui_reports_every_figure(qapp):
     assert r["rows"] > r["rows_after_history"] + r["replies"] // 2  # live rows on top
     assert {"Map", "Graphs"} <= set(r["tab_p95_ms"])
     assert all(math.isfinite(v) and v > 0 for v in r["tab_p95_ms"].values())
+    assert set(r["tab_catch_up_frames"]) == set(r["tab_p95_ms"])
+    assert all(3 <= n <= 300 for n in r["tab_catch_up_frames"].values())
 
 
 def test_bench_gui_refuses_bad_arguments(capsys):
-    for bad in ({"hours": 0}, {"hours": -1.0}, {"rate_hz": 0}, {"frames": 0}):
+    for bad in ({"hours": 0}, {"hours": -1.0}, {"rate_hz": 0}, {"frames": 0}, {"max_catch_up": -1}):
         with pytest.raises(ValueError, match="must be"):
             bench_gui(**bad)
     with pytest.raises(SystemExit):

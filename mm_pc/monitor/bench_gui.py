@@ -18,11 +18,15 @@ What :func:`bench_gui` does, in order:
    :class:`~.ros_bridge.RosBridge` polling it at ``rate_hz``, so live
    replies keep arriving (the first one is a new baseline: the node's
    counters are not the fast-forwarded ones).
-4. On every tab in turn, ``frames`` frames at ~30 Hz: events are processed
-   between frames (live replies are taken there, as in the real window);
-   a frame is ``window.frame()`` (the views' ``refresh``) plus the
-   ``processEvents`` right after it, which paints. Frame time = both,
-   measured with ``perf_counter``; ``refresh_ms_*`` = ``window.frame()`` alone.
+4. On every tab in turn: first unmeasured catch-up frames until three in a
+   row are within 16 ms (at most ``max_catch_up``; reported per tab as
+   ``tab_catch_up_frames``/``tab_catch_up_s``: what a user waits on the
+   first visit of a tab after the hour), then ``frames`` measured frames at
+   ~30 Hz. Events are processed between frames (live replies are taken
+   there, as in the real window); a frame is ``window.frame()`` (the views'
+   ``refresh``) plus the ``processEvents`` right after it, which paints.
+   Frame time = both, measured with ``perf_counter``; ``refresh_ms_*`` =
+   ``window.frame()`` alone.
 5. Memory: resident set size (psutil) before the fast-forward, after it,
    after each tab's frames (``memory_after_tab_mb``) and at the end.
 
@@ -93,26 +97,50 @@ def _fast_forward(ctx, hours: float, rate_hz: float, trajectory: str) -> int:
     return n
 
 
-def _measure_tab(window, pump: _Pump, frames: int) -> tuple[list[float], list[float], str]:
-    """(frame ms, refresh ms, error) of ``frames`` frames of the current tab at ~30 Hz."""
-    app = pump.app
-    total, refresh = [], []
-    period = 1.0 / FRAME_HZ
-    next_frame = time.perf_counter()
-    for _ in range(frames):
-        next_frame += period
-        pump.until(next_frame)
+class _Frames:
+    """Paced frames of the current tab: ``window.frame()`` then the paint (``processEvents``)."""
+
+    def __init__(self, window, pump: _Pump) -> None:
+        self.window, self.pump = window, pump
+        self.period = 1.0 / FRAME_HZ
+        self.next = time.perf_counter()
+
+    def one(self) -> tuple[float, float]:
+        """(frame ms, refresh ms) of the next frame, ~1/30 s after the previous one."""
+        self.next = max(self.next + self.period, time.perf_counter())
+        self.pump.until(self.next)
         t0 = time.perf_counter()
-        try:
-            window.frame()
-            t1 = time.perf_counter()
-            app.processEvents()
-        except Exception as e:  # a view under construction may raise anything
-            return total, refresh, f"{type(e).__name__}: {e}"
+        self.window.frame()
+        t1 = time.perf_counter()
+        self.pump.app.processEvents()
         t2 = time.perf_counter()
-        total.append((t2 - t0) * 1e3)
-        refresh.append((t1 - t0) * 1e3)
-    return total, refresh, ""
+        return (t2 - t0) * 1e3, (t1 - t0) * 1e3
+
+
+def _measure_tab(window, pump: _Pump, frames: int, max_catch_up: int) -> dict:
+    """Catch-up, then ``frames`` measured frames of the current tab at ~30 Hz.
+
+    Catch-up: unmeasured frames until three in a row are within the goal
+    (at most ``max_catch_up``): a view first shown after the hour takes its
+    history in then (this is what a user waits for on the first visit of a
+    tab). Returns {"frames", "refresh", "catch_up_frames", "catch_up_s", "error"}.
+    """
+    out = {"frames": [], "refresh": [], "catch_up_frames": 0, "catch_up_s": 0.0, "error": ""}
+    paced = _Frames(window, pump)
+    try:
+        fast = 0
+        while fast < 3 and out["catch_up_frames"] < max_catch_up:
+            ms, _ = paced.one()
+            fast = fast + 1 if ms <= GOAL_P95_MS else 0
+            out["catch_up_frames"] += 1
+            out["catch_up_s"] += ms / 1e3
+        for _ in range(frames):
+            ms, refresh_ms = paced.one()
+            out["frames"].append(ms)
+            out["refresh"].append(refresh_ms)
+    except Exception as e:  # a view under construction may raise anything
+        out["error"] = f"{type(e).__name__}: {e}"
+    return out
 
 
 def bench_gui(
@@ -121,13 +149,16 @@ def bench_gui(
     frames: int = 300,
     node: bool = True,
     trajectory: str = "figure_eight",
+    max_catch_up: int = 300,
 ) -> dict:
     """Run the GUI benchmark (see the module doc); a JSON-ready dict.
 
     ``hours``: simulated history fed before measuring (> 0); ``rate_hz``:
     replies per second of the history and of the live bridge (1..500);
     ``frames``: frames measured per tab (>= 1); ``node``: poll a real
-    mm-beagle sim node while measuring.
+    mm-beagle sim node while measuring; ``max_catch_up``: most unmeasured
+    frames a tab gets to take in the history first (0 = measure from the
+    first frame).
     """
     from .ros_bridge import validate_rate
 
@@ -136,6 +167,8 @@ def bench_gui(
     rate_hz = validate_rate(rate_hz)
     if not (isinstance(frames, int) and frames >= 1):
         raise ValueError(f"frames must be an integer >= 1, got {frames!r}")
+    if not (isinstance(max_catch_up, int) and max_catch_up >= 0):
+        raise ValueError(f"max_catch_up must be an integer >= 0, got {max_catch_up!r}")
     os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
     from PySide6.QtWidgets import QApplication
 
@@ -153,7 +186,7 @@ def bench_gui(
         stack.callback(window.close)
         if bridge is not None:
             stack.callback(bridge.stop)
-        result = _run(window, bridge, pump, hours, rate_hz, frames, trajectory)
+        result = _run(window, bridge, pump, hours, rate_hz, frames, trajectory, max_catch_up)
     return result
 
 
@@ -175,7 +208,7 @@ def _build_window(tmp: Path, rate_hz: float, node: bool):
     return window, bridge
 
 
-def _run(window, bridge, pump: _Pump, hours, rate_hz, frames, trajectory) -> dict:
+def _run(window, bridge, pump: _Pump, hours, rate_hz, frames, trajectory, max_catch_up) -> dict:
     ctx = window.ctx
     pump.until(time.perf_counter() + 0.2)
     rss_start = _rss_mb()
@@ -193,19 +226,21 @@ def _run(window, bridge, pump: _Pump, hours, rate_hz, frames, trajectory) -> dic
             raise RuntimeError("the mm-beagle sim node did not answer within 30 s")
         live_replies0 = bridge.replies
     t_frames = time.perf_counter()
-    per_tab, all_frames, all_refresh, errors, first, tab_mb = {}, [], [], {}, {}, {}
+    per_tab, all_frames, all_refresh, errors, tab_mb = {}, [], [], {}, {}
+    catch_up_frames, catch_up_s = {}, {}
     for i in range(window.tabs.count()):
         name = window.tabs.tabText(i)
         window.tabs.setCurrentIndex(i)
-        total, refresh, error = _measure_tab(window, pump, frames)
+        m = _measure_tab(window, pump, frames, max_catch_up)
         tab_mb[name] = round(_rss_mb(), 1)
-        if error:
-            errors[name] = error
-        if total:
-            first[name] = round(total[0], 3)
-            per_tab[name] = _pct(total, 95)
-            all_frames += total
-            all_refresh += refresh
+        catch_up_frames[name] = m["catch_up_frames"]
+        catch_up_s[name] = round(m["catch_up_s"], 3)
+        if m["error"]:
+            errors[name] = m["error"]
+        if m["frames"]:
+            per_tab[name] = _pct(m["frames"], 95)
+            all_frames += m["frames"]
+            all_refresh += m["refresh"]
     frames_s = time.perf_counter() - t_frames
     rss_end = _rss_mb()
     hist = ctx.session.history
@@ -220,7 +255,8 @@ def _run(window, bridge, pump: _Pump, hours, rate_hz, frames, trajectory) -> dic
         "refresh_ms_p50": _pct(all_refresh, 50),
         "refresh_ms_p95": _pct(all_refresh, 95),
         "tab_p95_ms": per_tab,
-        "tab_first_frame_ms": first,
+        "tab_catch_up_frames": catch_up_frames,
+        "tab_catch_up_s": catch_up_s,
         "goal_p95_ms": GOAL_P95_MS,
         "memory_mb": round(rss_end, 1),
         "memory_before_mb": round(rss_start, 1),
