@@ -19,6 +19,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 
 from mm_interfaces.msg import SensorData
 from mm_interfaces.srv import GetSamples
+from mm_pc.geometry import DEFAULT_MOUNTS, SensorMount
 from mm_pc.monitor.context import MonitorConfig, MonitorContext
 from mm_pc.monitor.main_window import MainWindow
 from mm_pc.monitor.readings import Reading, Reply
@@ -438,6 +439,22 @@ def test_replay_of_other_sensors_gets_a_new_session_with_the_same_settings(qtbot
     assert new is not old and new.devices == ("/dev/a", "/dev/b")
     assert new.method == "two-sensor" and new.calibration is old.calibration
     assert new.pose.x == pytest.approx(0.2, abs=2e-5)
+
+
+def test_a_recording_with_more_sensors_than_mounts_is_refused(qtbot, tmp_path):
+    path = tmp_path / "three.mcap"
+    rec = McapRecorder(path)
+    mounts = (*DEFAULT_MOUNTS, SensorMount(-0.05, 0.0))
+    for r in sim_replies(
+        "straight", 50.0, 0.2, devices=("/dev/a", "/dev/b", "/dev/c"), mounts=mounts
+    ):
+        rec.write_reply(r)
+    rec.close()
+    window = make_window(qtbot, tmp_path)
+    before = session_state(window.ctx.session)
+    assert start_replay(window, path, "max") is None
+    assert "3 sensors need 3 mounts, the geometry has 2" in window.statusBar().currentMessage()
+    assert session_state(window.ctx.session) == before
 
 
 @pytest.mark.parametrize(

@@ -240,10 +240,15 @@ def start_replay(window, path: str | Path, speed=1.0) -> Replayer | None:
     if not devices:
         window.statusBar().showMessage(f"replay: {path} holds no sensor readings", 15000)
         return None
+    ctx = window.ctx
+    try:
+        MonitorSession(devices=devices, mounts=ctx.session.mounts)  # can the geometry take them?
+    except ValueError as e:
+        window.statusBar().showMessage(f"replay: {path} cannot be shown: {e}", 15000)
+        return None
     old = getattr(window, "replayer", None)
     if old is not None and not old.done:
         old.stop()
-    ctx = window.ctx
     polling, connected = _detach_bridge(ctx)
     _prepare_session(ctx, devices)
     replayer = Replayer(ctx, replies, speed, parent=window)
