@@ -369,6 +369,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"mm-beagle: {exc}", file=sys.stderr)
         code = 2
     finally:
+        ros_spin.stopping()
         if node is not None:
             print("mm-beagle: shutting down, stopping the poller", file=sys.stderr)
             node.shutdown()

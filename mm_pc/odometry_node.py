@@ -233,6 +233,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"mm-odometry: {exc}", file=sys.stderr)
         code = 2
     finally:
+        ros_spin.stopping()
         if node is not None:
             node.destroy_node()
         if rclpy.ok():

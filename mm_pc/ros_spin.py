@@ -34,6 +34,18 @@ def init(argv: list[str] | None) -> threading.Event:
     return stop
 
 
+def stopping() -> None:
+    """Ignore further SIGINT/SIGTERM: the node is already shutting down.
+
+    Python restores the default handlers during interpreter finalisation, so
+    an impatient second Ctrl-C arriving then would kill the process with
+    SIGINT (exit -2) instead of the clean exit 0; an ignored signal stays
+    ignored through finalisation.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+
+
 def spin_until(node: Node, stop: threading.Event) -> None:
     """Spin ``node`` until ``stop`` is set or the context shuts down (checked every 0.1 s)."""
     executor = SingleThreadedExecutor()
