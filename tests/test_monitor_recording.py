@@ -62,6 +62,14 @@ def odd_reply() -> Reply:
             lift_events=3,
             lift_events_total=77 + k,
             interval=0.0105,
+            x_disp=0.21 * 0.0105,
+            y_disp=-0.33 * 0.0105,
+            x_total_counts=7085 + k,
+            y_total_counts=-94488 - k,
+            x_lift_est_counts=1.5,
+            y_lift_est_counts=-2.5,
+            x_lift_est_disp=0.0000238,
+            y_lift_est_disp=-0.0000397,
         )
         for k, dev in enumerate(DEVICES)
     )
@@ -152,7 +160,8 @@ def test_file_is_ros2_mcap_that_rclpy_decodes(recording):
     assert last.stamp.sec * 10**9 + last.stamp.nanosec == want.stamp_ns
     assert (last.seq, last.x_counts, last.cpi, last.samples) == (4243, -16, 3200, 11)
     assert last.x_total_disp == 1.125 and last.y_lift_est_total_disp == -0.0042
-    assert last.x_disp == pytest.approx(0.21 * 0.0105)
+    assert last.x_disp == want.x_disp and last.y_total_counts == want.y_total_counts
+    assert last.x_lift_est_counts == 1.5 and last.y_lift_est_disp == want.y_lift_est_disp
     assert msgs[-1][1].publish_time == want.stamp_ns
     # every message of one reply shares log time and sequence number
     assert msgs[-1][1].log_time == msgs[-2][1].log_time
@@ -187,7 +196,8 @@ def _sensor_msg(r: Reading) -> SensorData:
         stamp=Time(sec=r.stamp_ns // 10**9, nanosec=r.stamp_ns % 10**9), id=r.id, seq=r.seq,
         x_total_disp=r.x_total, y_total_disp=r.y_total, x_speed=r.x_speed, y_speed=r.y_speed,
         x_counts=r.x_counts, y_counts=r.y_counts, cpi=r.cpi, samples=r.samples,
-        interval=r.interval,
+        interval=r.interval, x_disp=r.x_disp, y_disp=r.y_disp,
+        x_total_counts=r.x_total_counts, y_total_counts=r.y_total_counts,
     )  # fmt: skip
 
 

@@ -231,10 +231,14 @@ def test_reading_from_msg_reads_every_field():
         id="/dev/x", stamp=Stamp(), seq=7, x_total_disp=0.1, y_total_disp=0.2,
         x_lift_est_total_disp=0.01, y_lift_est_total_disp=0.02, x_speed=1.0, y_speed=2.0,
         x_counts=3, y_counts=4, cpi=800, samples=10, lift_events=1, lift_events_total=2,
-        interval=0.01,
+        interval=0.01, x_disp=0.001, y_disp=0.002, x_total_counts=6, y_total_counts=12,
+        x_lift_est_counts=0.5, y_lift_est_counts=1.5, x_lift_est_disp=1e-5, y_lift_est_disp=2e-5,
     )  # fmt: skip
     for k, v in values.items():
         setattr(msg, k, v)
     r = Reading.from_msg(msg)
     assert r.stamp_ns == 2_000_000_005
     assert (r.x_total, r.y_lift_total, r.cpi, r.lift_events_total) == (0.1, 0.02, 800, 2)
+    assert (r.x_disp, r.y_total_counts, r.y_lift_est_counts, r.y_lift_est_disp) == (
+        0.001, 12, 1.5, 2e-5,
+    )

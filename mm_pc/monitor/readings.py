@@ -21,6 +21,8 @@ class Reading:
     ``x_lift_total``/``y_lift_total``: the node's estimate of what lifts lost
     (not included in the measured totals); ``seq``: polls done so far (it
     goes back when the node restarts); ``stamp_ns``: time of the newest poll.
+    Every other field of ``SensorData`` is kept too, so a recording holds the
+    reply exactly.
     """
 
     id: str
@@ -39,6 +41,14 @@ class Reading:
     lift_events: int = 0
     lift_events_total: int = 0
     interval: float = 0.0
+    x_disp: float = 0.0
+    y_disp: float = 0.0
+    x_total_counts: int = 0
+    y_total_counts: int = 0
+    x_lift_est_counts: float = 0.0
+    y_lift_est_counts: float = 0.0
+    x_lift_est_disp: float = 0.0
+    y_lift_est_disp: float = 0.0
 
     @classmethod
     def from_msg(cls, msg) -> Reading:
@@ -60,6 +70,14 @@ class Reading:
             lift_events=int(msg.lift_events),
             lift_events_total=int(msg.lift_events_total),
             interval=float(msg.interval),
+            x_disp=float(msg.x_disp),
+            y_disp=float(msg.y_disp),
+            x_total_counts=int(msg.x_total_counts),
+            y_total_counts=int(msg.y_total_counts),
+            x_lift_est_counts=float(msg.x_lift_est_counts),
+            y_lift_est_counts=float(msg.y_lift_est_counts),
+            x_lift_est_disp=float(msg.x_lift_est_disp),
+            y_lift_est_disp=float(msg.y_lift_est_disp),
         )
 
 

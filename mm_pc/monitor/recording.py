@@ -4,11 +4,7 @@ File layout (MCAP profile ``ros2``, schemas ``ros2msg``, messages ``cdr``):
 
 ``/mm_beagle/sensor_data_replies`` -- ``mm_interfaces/msg/SensorData``
     One message per sensor per reply, built from each :class:`Reading`
-    (stamp from ``stamp_ns``). Fields the monitor does not keep are written
-    as follows: ``x_disp``/``y_disp`` = speed x interval (what the node
-    computed them from); ``x_total_counts``, ``y_total_counts`` and the
-    per-interval lift estimates ``*_lift_est_counts``/``*_lift_est_disp``
-    are 0 (a :class:`Reading` does not carry them).
+    (stamp from ``stamp_ns``), every field as the node served it.
 ``/mm_monitor/reply_meta`` -- ``std_msgs/msg/Float64MultiArray``
     One message per reply, ``data = [received_s, rtt_s]``: the exact
     monotonic arrival time and round-trip time (s) of the reply.
@@ -177,6 +173,8 @@ _INT_RANGES = {
     "lift_events": (0, 2**32 - 1),
     "seq": (0, 2**64 - 1),
     "lift_events_total": (0, 2**64 - 1),
+    "x_total_counts": (-(2**63), 2**63 - 1),
+    "y_total_counts": (-(2**63), 2**63 - 1),
     "stamp_ns": (0, (2**31 - 1) * 1_000_000_000),
 }
 
@@ -197,8 +195,14 @@ def _serialize_reading(r: Reading) -> bytes:
         return ros.serialize(SensorData(
             stamp=Time(sec=r.stamp_ns // 1_000_000_000, nanosec=r.stamp_ns % 1_000_000_000),
             id=r.id,
-            x_disp=r.x_speed * r.interval,
-            y_disp=r.y_speed * r.interval,
+            x_disp=r.x_disp,
+            y_disp=r.y_disp,
+            x_total_counts=r.x_total_counts,
+            y_total_counts=r.y_total_counts,
+            x_lift_est_counts=r.x_lift_est_counts,
+            y_lift_est_counts=r.y_lift_est_counts,
+            x_lift_est_disp=r.x_lift_est_disp,
+            y_lift_est_disp=r.y_lift_est_disp,
             x_speed=r.x_speed,
             y_speed=r.y_speed,
             x_counts=r.x_counts,
@@ -358,8 +362,6 @@ class McapRecorder:
                     "rate_hz": f"{self.rate_hz:g}",
                     "replies": str(self.replies),
                     "reply_meta": f"{META_TOPIC}: data = [received_s, rtt_s] (s, monotonic)",
-                    "not_recorded": "x_total_counts, y_total_counts, *_lift_est_counts, "
-                    "*_lift_est_disp are 0; x_disp/y_disp = speed * interval",
                 },
             )
             self._writer.finish()

@@ -158,15 +158,6 @@ class Replayer(QObject):
 # -- session and bridge hand-over ---------------------------------------------------------------
 
 
-def _forget_baselines(session: MonitorSession, keep_t0: bool) -> None:
-    # The session has no public call for this yet (requested): without it the
-    # first reply after a switch between live and recorded data would be taken
-    # as a delta against the other source's totals.
-    session._prev.clear()
-    if not keep_t0:
-        session._t0_ns = None
-
-
 def _session_like(old: MonitorSession) -> MonitorSession:
     new = MonitorSession(
         mounts=old.mounts,
@@ -190,7 +181,7 @@ def _prepare_session(ctx, devices: tuple[str, ...]) -> None:
         ctx.session_reset.emit()
         return
     ctx.reset()
-    _forget_baselines(ctx.session, keep_t0=False)
+    ctx.session.forget_baselines(keep_t0=False)
 
 
 def _detach_bridge(ctx) -> tuple[bool, bool]:
@@ -213,7 +204,7 @@ def _reattach_bridge(ctx, polling: bool, connected: bool) -> None:
     bridge = ctx.bridge
     if bridge is None:
         return
-    _forget_baselines(ctx.session, keep_t0=True)
+    ctx.session.forget_baselines(keep_t0=True)
     if connected:
         bridge.data_received.connect(ctx.on_reply)
     if polling:

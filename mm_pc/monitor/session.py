@@ -342,6 +342,17 @@ class MonitorSession:
             )
         self.history.append(row)
 
+    def forget_baselines(self, keep_t0: bool = True) -> None:
+        """Take the next reply as a new baseline (switching between live and recorded data).
+
+        Without this the first reply of the other source would be taken as a
+        delta against this source's totals. ``keep_t0=False`` also restarts
+        the time axis at the next reply.
+        """
+        self._prev.clear()
+        if not keep_t0:
+            self._t0_ns = None
+
     # -- reset ------------------------------------------------------------------------------
 
     @property

@@ -74,6 +74,10 @@ def _reply(devices, totals, d, seq, samples, start_ns, cpi, rtt_s) -> Reply:
                 cpi=cpi,
                 samples=samples,
                 interval=interval,
+                x_disp=dx,
+                y_disp=dy,
+                x_total_counts=round(float(m_to_counts(totals[k, 0], cpi))),
+                y_total_counts=round(float(m_to_counts(totals[k, 1], cpi))),
             )
         )
     return Reply(tuple(readings), received_s=stamp / 1e9, rtt_s=rtt_s)
