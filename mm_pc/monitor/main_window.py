@@ -218,6 +218,9 @@ class MainWindow(QMainWindow):
         replay = QAction("Re&play…", self)
         replay.triggered.connect(self.open_replay)
         file_menu.addAction(replay)
+        stop_replay = QAction("S&top replay", self)
+        stop_replay.triggered.connect(self.stop_replay)
+        file_menu.addAction(stop_replay)
         export = QAction("&Export view as PNG…", self)
         export.setShortcut(QKeySequence("Ctrl+E"))
         export.triggered.connect(self.export_png)
@@ -327,6 +330,15 @@ class MainWindow(QMainWindow):
         from .replay import open_replay
 
         open_replay(self)
+
+    def stop_replay(self) -> None:
+        """Stop a running replay (live polling resumes if it was on)."""
+        replayer = getattr(self, "replayer", None)
+        if replayer is None or replayer.done:
+            self.statusBar().showMessage("no replay is running", 3000)
+            return
+        replayer.stop()
+        self.statusBar().showMessage("replay stopped", 3000)
 
     def export_png(self) -> None:
         from .export import export_current_view
