@@ -114,9 +114,16 @@ UNOBSERVED_VARIANCE = 1e6
 
 
 class InputError(ValueError):
-    """A message that cannot be used. ``kind``: 'invalid' (malformed) or 'unusable'."""
+    """A message that cannot be used. ``kind``: 'invalid' (malformed) or 'unusable'.
+
+    ``stamp``: the message's stamp (s) when it was readable, else None.
+    """
 
     kind = "invalid"
+
+    def __init__(self, message: str, stamp: float | None = None) -> None:
+        super().__init__(message)
+        self.stamp = stamp
 
 
 class UnusableInputError(InputError):
@@ -276,7 +283,7 @@ def navsat_input(
     _frame(msg.header, frame, "NavSatFix")
     status = int(msg.status.status)
     if status in (NAVSAT_STATUS_NO_FIX, NAVSAT_STATUS_UNKNOWN):
-        raise UnusableInputError(f"NavSatFix status {status} is not a fix")
+        raise UnusableInputError(f"NavSatFix status {status} is not a fix", stamp)
     if status not in NAVSAT_STATUS_FIXES:
         raise InputError(f"NavSatFix status must be in -2..2, got {status}")
     lat, lon = _finite("latitude", msg.latitude), _finite("longitude", msg.longitude)
@@ -287,7 +294,9 @@ def navsat_input(
     cov = _navsat_covariance(msg, default_sigma)
     worst = math.sqrt(float(np.linalg.eigvalsh(np.array(cov))[-1]))
     if worst > max_sigma:
-        raise UnusableInputError(f"GPS fix too inaccurate: sigma {worst:.2f} m > {max_sigma:g} m")
+        raise UnusableInputError(
+            f"GPS fix too inaccurate: sigma {worst:.2f} m > {max_sigma:g} m", stamp
+        )
     return PositionInput(stamp, source, (float(x), float(y)), cov)
 
 
@@ -327,7 +336,7 @@ def imu_input(
     _frame(msg.header, frame, "Imu")
     cov = msg.orientation_covariance
     if float(cov[0]) == -1.0:
-        raise UnusableInputError("Imu has no orientation (orientation_covariance[0] == -1)")
+        raise UnusableInputError("Imu has no orientation (orientation_covariance[0] == -1)", stamp)
     o = msg.orientation
     yaw = quaternion_yaw(o.x, o.y, o.z, o.w) + offset
     var = _finite("Imu yaw variance", cov[8])
@@ -352,12 +361,14 @@ def range_input(
     _frame(msg.header, frame, "Range")
     r, lo, hi = float(msg.range), float(msg.min_range), float(msg.max_range)
     if math.isnan(lo) or math.isnan(hi) or lo < 0 or lo > hi:
-        raise InputError(f"Range limits must satisfy 0 <= min_range <= max_range, got {lo}, {hi}")
+        raise InputError(
+            f"Range limits must satisfy 0 <= min_range <= max_range, got {lo:g}, {hi:g}"
+        )
     if math.isinf(r):
         what = "too close" if r < 0 else "nothing detected"
-        raise UnusableInputError(f"Range {r} (REP 117: {what})")
+        raise UnusableInputError(f"Range {r} (REP 117: {what})", stamp)
     if not lo <= r <= hi:
-        raise InputError(f"Range {r} m outside [min_range, max_range] = [{lo}, {hi}] m")
+        raise InputError(f"Range {r:g} m outside [min_range, max_range] = [{lo:g}, {hi:g}] m")
     return RangeInput(stamp, source, beacon, r, sigma)
 
 
@@ -446,16 +457,25 @@ class SourceCounts:
 class FusionCore:
     """Feeds input records to a :class:`PoseEKF` in stamp order and counts what happened.
 
-    Order. Records are queued by stamp and processed once every live
-    odometry source has reached that stamp (the *horizon*: the smallest
-    newest stamp among the odometry sources heard from within ``stale_s`` of
-    the newest odometry stamp). So a measurement is applied after the
-    prediction to its time, whatever order the messages arrive in (at a fast
-    replay one topic's queue runs ahead of another's). With no odometry at
-    all, or after :meth:`flush` (the caller's "no odometry for a while"),
-    records are processed on arrival. Unstamped headings are applied on
-    arrival. A measurement more than ``max_delay_s`` older than the newest
-    processed odometry is *stale* and dropped (its position is history).
+    Order. Records are queued and processed in stamp order, each once no
+    periodic source (odometry, GPS, compass, beacons) can still deliver an
+    older one: source s, last heard at stamp t_s with an average interval
+    p_s, is not expected before t_s + p_s, so a record at stamp t goes in
+    when t <= t_s for every such source, or t < t_s + 0.9 p_s (0.1 p_s for
+    jitter). A measurement is thus applied after the prediction to its time
+    and before the next, whichever topic's queue runs ahead (at a fast replay
+    they drift apart by seconds of stamp time; on a robot a fix comes some
+    100 ms late). The output lags by at most a fraction of the slowest
+    source's interval. A source not heard for ``max_delay_s`` beyond its
+    interval (behind the newest odometry stamp) is no longer waited for (nor
+    is one heard only once beyond its last stamp: its interval is unknown), and
+    a record of it that still comes more than ``max_delay_s`` behind the
+    processed odometry is *stale* and dropped. Wire contacts (events, no
+    interval) and unstamped headings are never waited for; a late contact
+    is applied on arrival. With no odometry at all, or after :meth:`flush`
+    (the caller's "no odometry for a while"), records are processed on
+    arrival. An odometry increment faster than ``max_speed`` (m/s) is
+    *invalid* and starts a new baseline (a reset or corrupt odometry).
 
     Motion model. Mouse odometry is the motion model; wheel odometry is a
     stand-in used only when the mouse odometry has been silent for more than
@@ -489,6 +509,7 @@ class FusionCore:
         wires: Sequence[PerimeterSegment] = (),
         wire_var: float = 0.03**2,
         wire_max_distance: float = 2.0,
+        max_speed: float = 5.0,
         max_queue: int = 10000,
     ) -> None:
         if len(wheel_noise) != 3 or not all(math.isfinite(q) and q >= 0 for q in wheel_noise):
@@ -496,6 +517,8 @@ class FusionCore:
         for name, v in (("stale_s", stale_s), ("max_delay_s", max_delay_s)):
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"{name} must be a finite number of seconds > 0, got {v}")
+        if not (math.isfinite(max_speed) and max_speed > 0):
+            raise ValueError(f"max_speed must be a finite number of m/s > 0, got {max_speed}")
         if reacquire_after < 0 or max_queue < 1:
             raise ValueError("reacquire_after must be >= 0 and max_queue >= 1")
         self.ekf = ekf
@@ -506,6 +529,7 @@ class FusionCore:
         self.wires = tuple(wires)
         self.wire_var = float(wire_var)
         self.wire_max_distance = float(wire_max_distance)
+        self.max_speed = float(max_speed)
         self.max_queue = int(max_queue)
         self.counts: dict[str, SourceCounts] = {}
         self.notices: list[tuple[str, str]] = []
@@ -518,6 +542,8 @@ class FusionCore:
         self._queue: list = []
         self._seq = itertools.count()
         self._pushed: dict[str, float] = {}  # newest stamp pushed per odometry source
+        self._heard: dict[str, float] = {}  # newest stamp per periodic source
+        self._period: dict[str, float] = {}  # average interval (s) per periodic source
         self._backwards: dict[str, int] = {}
         self._idle = False
         self._mouse_prev: MotionInput | None = None
@@ -535,6 +561,11 @@ class FusionCore:
             c.last_reason = reason
 
     @property
+    def idle(self) -> bool:
+        """True after :meth:`flush` until the next odometry record (records go in on arrival)."""
+        return self._idle
+
+    @property
     def pending(self) -> int:
         """Records waiting for the odometry to reach their stamp."""
         return len(self._queue)
@@ -542,7 +573,7 @@ class FusionCore:
     # -- input ------------------------------------------------------------------------------
 
     def push(self, record) -> None:
-        """Queue one record and process everything the horizon allows."""
+        """Queue one record and process everything that can no longer be overtaken."""
         if isinstance(record, MotionInput):
             if not self._accept_motion_stamp(record):
                 return
@@ -560,16 +591,38 @@ class FusionCore:
             self.count(record.source, "stale", reason)
             self.notices.append((f"stale {record.source}", f"{record.source}: {reason}"))
             return
+        if not isinstance(record, AxisInput):
+            self.heard(record.source, record.stamp)
         prio = _PRIORITY.get(record.source, 2)
-        heapq.heappush(self._queue, (record.stamp, prio, next(self._seq), record))
-        self._drain(self._horizon())
+        # same stamp: odometry first, then the fixes by source name (not by arrival: the
+        # result must not depend on which topic came first)
+        key = (record.stamp, prio, record.source, next(self._seq))
+        heapq.heappush(self._queue, (*key, record))
+        self._drain()
         while len(self._queue) > self.max_queue:
-            self._process(heapq.heappop(self._queue)[3])
+            self._process(heapq.heappop(self._queue)[-1])
+
+    def heard(self, source: str, stamp: float | None) -> None:
+        """Periodic ``source`` delivered something stamped ``stamp`` s (used or not).
+
+        Also for readings that were not usable (a GPS without fix still ticks),
+        so that the source's next record is expected at the right time.
+        """
+        if stamp is None or not math.isfinite(stamp):
+            return
+        last = self._heard.get(source)
+        if last is not None and stamp <= last:
+            return
+        if last is not None:
+            gap = stamp - last
+            p = self._period.get(source)
+            self._period[source] = gap if p is None else 0.8 * p + 0.2 * gap
+        self._heard[source] = stamp
 
     def flush(self) -> None:
         """Process everything queued; until the next odometry record, process on arrival."""
         self._idle = True
-        self._drain(math.inf)
+        self._drain(everything=True)
 
     def _accept_motion_stamp(self, rec: MotionInput) -> bool:
         last = self._pushed.get(rec.source)
@@ -584,7 +637,7 @@ class FusionCore:
             self.notices.append(
                 (f"restart {rec.source}", f"{rec.source}: time jumped back; new baseline")
             )
-            self._drain(math.inf)
+            self._drain(everything=True)
             self._forget(rec.source)
         self._backwards[rec.source] = 0
         self._pushed[rec.source] = rec.stamp
@@ -596,17 +649,29 @@ class FusionCore:
         else:
             self._wheel_hist.clear()
         self._motion_stamp = None
+        self._heard.clear()
+        self._period.clear()
 
-    def _horizon(self) -> float:
+    def _horizon(self) -> tuple[float, float]:
+        """(tie, strict): records at stamps <= tie or < strict cannot be overtaken."""
         if self._idle or not self._pushed:
-            return math.inf
+            return math.inf, math.inf
         newest = max(self._pushed.values())
-        return min(t for t in self._pushed.values() if t >= newest - self.stale_s)
+        tie = strict = math.inf
+        for source, t in self._heard.items():
+            p = self._period.get(source)
+            if t + (p or 0.0) + self.max_delay_s < newest:
+                continue  # gone quiet: not waited for
+            tie = min(tie, t)
+            if p is not None:  # heard once only: its interval is not known yet
+                strict = min(strict, t + 0.9 * p)
+        return tie, strict
 
-    def _drain(self, horizon: float) -> None:
+    def _drain(self, everything: bool = False) -> None:
+        tie, strict = (math.inf, math.inf) if everything else self._horizon()
         q = self._queue
-        while q and q[0][0] <= horizon:
-            self._process(heapq.heappop(q)[3])
+        while q and (q[0][0] <= tie or q[0][0] < strict):
+            self._process(heapq.heappop(q)[-1])
 
     def _process(self, rec) -> None:
         if isinstance(rec, MotionInput):
@@ -625,11 +690,19 @@ class FusionCore:
     def _predict(self, rec: MotionInput, before: MotionInput, q=None) -> None:
         try:
             inc = pose_increment(before.pose, rec.pose)
+            dt = rec.stamp - before.stamp
+            moved = math.hypot(inc[0], inc[1])
+            if moved > self.max_speed * dt + 0.05:
+                raise ValueError(
+                    f"odometry jumped {moved:.2f} m in {dt:.3f} s (> max_speed "
+                    f"{self.max_speed:g} m/s); new baseline"
+                )
             self.ekf.predict(*inc, q=q(inc) if q else None)
         except ValueError as exc:
             self.count(rec.source, "invalid", str(exc))
+            self.notices.append((f"jump {rec.source}", f"{rec.source}: {exc}"))
             return
-        self.last_increment = (*inc, rec.stamp - before.stamp)
+        self.last_increment = (*inc, dt)
         self.count(rec.source, "accepted")
 
     def _mouse(self, rec: MotionInput) -> None:

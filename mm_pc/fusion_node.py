@@ -165,7 +165,14 @@ PARAMETERS = {
     ),
     "max_delay": (
         1.0,
-        _ro("fixes older than the odometry by more (s) are dropped", **_range(0.01, 3600.0)),
+        _ro(
+            "a quiet source is waited for this long (s, stamps); later fixes are dropped",
+            **_range(0.01, 3600.0),
+        ),
+    ),
+    "max_speed": (
+        5.0,
+        _ro("odometry faster than this (m/s) is a reset or corrupt", **_range(0.01, 1000.0)),
     ),
     "reacquire_after": (
         10,
@@ -269,6 +276,7 @@ class FusionNode(Node):
             wires=wires,
             wire_var=p["wire_sigma"] ** 2,
             wire_max_distance=p["wire_max_distance"],
+            max_speed=p["max_speed"],
         )
         self.throttle = WarnThrottle(5.0)
         self._subscribe()
@@ -387,6 +395,7 @@ class FusionNode(Node):
                 record = convert(msg)
             except InputError as exc:
                 self.core.count(source, exc.kind, str(exc))
+                self.core.heard(source, exc.stamp)  # the sensor ticked, without a reading
                 self._warn(f"{source} {exc.kind}", f"{source}: ignored ({exc.kind}): {exc}")
                 return
             except Exception as exc:  # a malformed message must never stop the node
