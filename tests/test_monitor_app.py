@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parents[1]
 STRAIGHT = {
     "backend": "sim",
     "sim_trajectory": "straight",
-    "sim_start_delay": 2.0,
+    "sim_start_delay": 4.0,
     "sim_duration": 3.0,
     "sim_loop": False,
 }
@@ -53,7 +53,7 @@ def test_monitor_connects_counts_everything_and_survives_a_restart(qtbot, tmp_pa
         with beagle_process(STRAIGHT, env=dict(os.environ), log_path=log) as proc:
             wait_until(qtbot, lambda: "connected to /mm_beagle" in window.state_label.text())
             wait_until(qtbot, lambda: "ms" in window.rtt_label.text(), 5)
-            # the run: 2 s still, 3 s at 0.2 m/s, then still; wait for it to end
+            # the run: 4 s still, 3 s at 0.2 m/s, then still; wait for it to end
             session = window.ctx.session
             wait_until(qtbot, lambda: session.pose.x > 0.59, 20)
             qtbot.wait(600)

@@ -38,56 +38,60 @@ def test_straight_run_ends_where_the_robot_stopped(method, tmp_path):
         "sim_start_delay": 4.0,
         "sim_duration": 2.0,
     }
-    with beagle_process(beagle, env=dict(os.environ), log_path=str(tmp_path / "beagle.log")):
-        client = BeagleClient("odo_test_client")
-        assert client.wait(30)
-        got: list[Odometry] = []
-        paths: list[Path] = []
-        lock = threading.Lock()
+    # mm-odometry first: it waits for the service, so its baseline is the node's first
+    # reply, long before the robot starts (a late start under load missed part of the run)
+    params = {"beagle": "/mm_beagle", "rate": 50.0, "method": method, "path_rate": 5.0}
+    odo = subprocess.Popen(
+        odometry_command(params, ns),
+        env=dict(os.environ),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    try:
+        with beagle_process(beagle, env=dict(os.environ), log_path=str(tmp_path / "beagle.log")):
+            client = BeagleClient("odo_test_client")
+            assert client.wait(30)
+            got: list[Odometry] = []
+            paths: list[Path] = []
+            lock = threading.Lock()
 
-        def on_odom(m):
-            with lock:
-                got.append(m)
-
-        client.node.create_subscription(Odometry, f"{ns}/mm_odometry/odom", on_odom, 10)
-        client.node.create_subscription(Path, f"{ns}/mm_odometry/path", paths.append, 10)
-        params = {"beagle": "/mm_beagle", "rate": 50.0, "method": method, "path_rate": 5.0}
-        odo = subprocess.Popen(
-            odometry_command(params, ns),
-            env=dict(os.environ),
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-        )
-        try:
-            deadline = time.monotonic() + 25
-            final = None
-            while time.monotonic() < deadline:
-                time.sleep(0.2)
+            def on_odom(m):
                 with lock:
-                    last = got[-1] if got else None
-                if (
-                    last is not None
-                    and last.pose.pose.position.x > 0.39
-                    and last.twist.twist.linear.x == 0
-                ):
-                    final = last
-                    break
-            assert final is not None, f"no final pose; last: {got[-1] if got else None}"
-            pos = final.pose.pose.position
-            assert pos.x == pytest.approx(0.4, abs=0.002)
-            assert pos.y == pytest.approx(0.0, abs=0.002)
-            yaw = 2 * math.atan2(final.pose.pose.orientation.z, final.pose.pose.orientation.w)
-            assert yaw == pytest.approx(0.0, abs=0.005)
-            assert final.header.frame_id == "odom" and final.child_frame_id == "base_link"
-            # covariance grew with the 0.4 m travelled
-            assert final.pose.covariance[0] == pytest.approx(0.015**2 * 0.4, rel=0.05)
-            assert paths and len(paths[-1].poses) > 10
-        finally:
-            odo.send_signal(signal.SIGINT)
-            out, _ = odo.communicate(timeout=15)
-            client.close()
-        assert odo.returncode == 0, out
+                    got.append(m)
+
+            client.node.create_subscription(Odometry, f"{ns}/mm_odometry/odom", on_odom, 10)
+            client.node.create_subscription(Path, f"{ns}/mm_odometry/path", paths.append, 10)
+            try:
+                deadline = time.monotonic() + 25
+                final = None
+                while time.monotonic() < deadline:
+                    time.sleep(0.2)
+                    with lock:
+                        last = got[-1] if got else None
+                    if (
+                        last is not None
+                        and last.pose.pose.position.x > 0.39
+                        and last.twist.twist.linear.x == 0
+                    ):
+                        final = last
+                        break
+                assert final is not None, f"no final pose; last: {got[-1] if got else None}"
+                pos = final.pose.pose.position
+                assert pos.x == pytest.approx(0.4, abs=0.002)
+                assert pos.y == pytest.approx(0.0, abs=0.002)
+                yaw = 2 * math.atan2(final.pose.pose.orientation.z, final.pose.pose.orientation.w)
+                assert yaw == pytest.approx(0.0, abs=0.005)
+                assert final.header.frame_id == "odom" and final.child_frame_id == "base_link"
+                # covariance grew with the 0.4 m travelled
+                assert final.pose.covariance[0] == pytest.approx(0.015**2 * 0.4, rel=0.05)
+                assert paths and len(paths[-1].poses) > 10
+            finally:
+                client.close()
+    finally:
+        odo.send_signal(signal.SIGINT)
+        out, _ = odo.communicate(timeout=15)
+    assert odo.returncode == 0, out
 
 
 def test_bad_method_exits_with_a_message():
