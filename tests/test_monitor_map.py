@@ -181,8 +181,8 @@ def test_decimation_keeps_path_points_within_a_cell_and_is_incremental(steps, cu
     assert parts.bounds == (x.min(), x.max(), y.min(), y.max())
     index = {p: i for i, p in reversed(list(enumerate(zip(x.tolist(), y.tolist(), strict=True))))}
     for level, eps in enumerate(PathDecimator.LEVEL_EPS_M):
-        kx, ky = whole.points(level)
-        px, py = parts.points(level)
+        kx, ky = whole.points(level, x, y)
+        px, py = parts.points(level, x, y)
         np.testing.assert_array_equal(kx, px)
         np.testing.assert_array_equal(ky, py)
         assert (kx[0], ky[0]) == (x[0], y[0])
@@ -197,40 +197,63 @@ def test_decimation_keeps_path_points_within_a_cell_and_is_incremental(steps, cu
 
 def test_decimation_of_a_still_robot_keeps_first_and_last_only():
     dec = PathDecimator()
-    dec.update(np.full(1000, 0.25), np.full(1000, -1.0))
-    x, y = dec.points(0)
+    cx, cy = np.full(1000, 0.25), np.full(1000, -1.0)
+    dec.update(cx, cy)
+    x, y = dec.points(0, cx, cy)
     assert list(zip(x, y, strict=True)) == [(0.25, -1.0)]
-    dec.update(np.r_[np.full(1000, 0.25), [np.nan, 0.3]], np.r_[np.full(1000, -1.0), [0.0, -1.0]])
-    x, y = dec.points(0)
+    cx, cy = np.r_[cx, [np.nan, 0.3]], np.r_[cy, [0.0, -1.0]]
+    dec.update(cx, cy)
+    x, y = dec.points(0, cx, cy)
     assert list(zip(x, y, strict=True)) == [(0.25, -1.0), (0.3, -1.0)]  # NaN row skipped
+    assert dec.rows(0).tolist() == [0, 1001]  # row numbers, not coordinates, are kept
 
 
-def test_chunks_near_a_rectangle_hold_every_point_inside_it():
+def segments(x, y, connect=None) -> set:
+    """The segments of polylines as a set of ((x0, y0), (x1, y1))."""
+    joined = np.ones(len(x) - 1, dtype=bool) if connect is None else connect[:-1]
+    return {((x[i], y[i]), (x[i + 1], y[i + 1])) for i in np.flatnonzero(joined)}
+
+
+def test_runs_near_a_rectangle_hold_every_segment_meeting_it():
     t = np.linspace(0, 40 * math.pi, 50_000)
     x, y = np.cos(t) * (1 + t / 40), np.sin(t) * (1 + t / 40)
     dec = PathDecimator()
     dec.update(x, y)
-    level = 1
-    n, c = dec.level_size(level), PathDecimator.CHUNK
-    assert dec.chunk_count(level) == n // c
+    level, box = 1, PathDecimator.BOX
+    n = dec.level_size(level)
+    assert dec.box_count(level) == n // box and n % box  # an open box at the end
+    kx, ky = dec.points(level, x, y)
+    every = segments(kx, ky)
     rect = (0.5, 1.5, -0.3, 0.4)
-    ids = dec.chunks_in(level, rect)
-    assert 0 < len(ids) < dec.chunk_count(level)
-    shown = [dec.chunk_points(level, i) for i in ids] + [dec.live_points(level)]
-    sx = np.concatenate([p[0] for p in shown])
-    sy = np.concatenate([p[1] for p in shown])
-    allx, ally = dec.points(level)
-    inside = (allx >= 0.5) & (allx <= 1.5) & (ally >= -0.3) & (ally <= 0.4)
-    got = set(zip(sx.tolist(), sy.tolist(), strict=True))
-    assert all(p in got for p in zip(allx[inside].tolist(), ally[inside].tolist(), strict=True))
-    assert got <= set(zip(allx.tolist(), ally.tolist(), strict=True))
-    # chunk i starts with the last point of chunk i-1; the live part ends at the newest point
-    cx, cy = dec.chunk_points(level, 3)
-    assert (cx[0], cy[0]) == (allx[3 * c - 1], ally[3 * c - 1]) and len(cx) == c + 1
-    lx, ly = dec.live_points(level)
+    rows, connect = dec.runs_in(level, rect)
+    assert rows.dtype == np.int32 and not connect[-1]
+    got = segments(x[rows], y[rows], connect)
+    assert got <= every  # only segments of the path, none made up between runs
+    meeting = {s for s in every
+               if max(s[0][0], s[1][0]) >= 0.5 and min(s[0][0], s[1][0]) <= 1.5
+               and max(s[0][1], s[1][1]) >= -0.3 and min(s[0][1], s[1][1]) <= 0.4}
+    assert meeting <= got
+    assert len(got) < len(every) / 3  # the far boxes were left out
+    # the open box is always taken; a range of points gives the segments ending in it
+    rows, connect = dec.runs_in(level, (100.0, 101.0, 100.0, 101.0))
+    assert segments(x[rows], y[rows], connect) == segments(kx[(n // box) * box - 1 : n],
+                                                          ky[(n // box) * box - 1 : n])
+    rows, connect = dec.runs_in(level, (-9.0, 9.0, -9.0, 9.0), 100, 200)
+    assert segments(x[rows], y[rows], connect) == segments(kx[99:200], ky[99:200])
+    assert dec.runs_in(level, rect, 5, 5)[0].size == 0
+    # the newest point, not kept, ends the tail; the tail starts at the point before
+    lx, ly = dec.tail_points(level, n - 3, x, y)
+    assert (lx[0], ly[0]) == (kx[n - 4], ky[n - 4])
     assert (lx[-1], ly[-1]) == (x[-1], y[-1])
-    j = dec.chunk_count(level) * c - 1
-    assert (lx[0], ly[0]) == (allx[j], ally[j])
+
+
+def test_decimator_memory_is_four_bytes_a_kept_point_and_a_box():
+    dec = PathDecimator()
+    x = np.arange(100_000) * 0.002  # 2 mm a row: every level up to 2 mm keeps all
+    dec.update(x, np.zeros_like(x))
+    kept = sum(dec.level_size(k) for k in range(PathDecimator.LEVELS))
+    assert 3 * len(x) < kept < 4.1 * len(x)
+    assert dec.nbytes < 2 * kept * (4 + 32 / PathDecimator.BOX) + 11 * 256 * 36
 
 
 # -- the map ---------------------------------------------------------------------------------------

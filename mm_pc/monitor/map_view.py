@@ -24,8 +24,8 @@ import time
 
 import numpy as np
 import pyqtgraph as pg
-from PySide6.QtCore import Qt, Signal
-from PySide6.QtGui import QColor, QIcon, QPixmap
+from PySide6.QtCore import QPointF, QRectF, Qt, Signal
+from PySide6.QtGui import QColor, QIcon, QImage, QPainter, QPixmap, QTransform
 from PySide6.QtWidgets import (
     QCheckBox,
     QHBoxLayout,
@@ -70,6 +70,9 @@ FOLLOW_SLACK_PX = 3.0
 #: several frames instead of freezing the window for one long one).
 MAX_ROWS_PER_REFRESH = 10_000
 
+#: Width of the map's left axis (labels like "-123.4" fit).
+AXIS_WIDTH_PX = 62
+
 #: Sensor axis arrows and robot heading arrow (m, drawn to scale).
 AXIS_ARROW_M = 0.025
 HEADING_ARROW_M = 0.10
@@ -81,17 +84,17 @@ def sensor_colour(k: int) -> str:
 
 
 class _Grow:
-    """A float64 array that grows by doubling (amortised O(1) appends)."""
+    """A growing array (amortised O(1) appends by doubling) of ``dtype`` rows of ``width``."""
 
-    def __init__(self, width: int) -> None:
-        self.data = np.empty((256, width))
+    def __init__(self, width: int, dtype=np.float64) -> None:
+        self.data = np.empty((256, width), dtype=dtype)
         self.n = 0
 
     def extend(self, *columns: np.ndarray) -> None:
         """Append rows given column by column (each 1-D, of equal length)."""
         need = self.n + len(columns[0])
         if need > len(self.data):
-            grown = np.empty((max(need, 2 * len(self.data)), self.data.shape[1]))
+            grown = np.empty((max(need, 2 * len(self.data)), self.data.shape[1]), self.data.dtype)
             grown[: self.n] = self.data[: self.n]
             self.data = grown
         for j, col in enumerate(columns):
@@ -111,15 +114,20 @@ class PathDecimator:
     k make one of level k+1), so every kept point is a point of the path, the
     first is always kept, and a dropped point lies in the cell of the kept
     point before it (at most ``sqrt(2) * eps`` away from the drawn line).
-    Each level is cut into chunks of ``CHUNK`` points with bounding boxes: a
-    completed chunk never changes, so it can be drawn once and left alone,
-    and the chunks near a view rectangle are found without looking at points.
+
+    A level stores the *row numbers* of its kept points (int32, 4 bytes a
+    point), not coordinates: the coordinates stay in the caller's columns,
+    which every method that returns points takes as ``x``, ``y`` (the same
+    columns, or longer ones, as given to :meth:`update`). Each level is cut
+    into boxes of ``BOX`` points with bounding boxes (a box's segments start
+    at the last point of the box before), so the segments near a rectangle
+    are found without looking at the points far from it (:meth:`runs_in`).
     """
 
     EPS0_M = 0.0005
     LEVELS = 11
     LEVEL_EPS_M = tuple(0.0005 * 2.0**k for k in range(11))  # 0.5 mm ... 0.512 m
-    CHUNK = 1024
+    BOX = 32
 
     def __init__(self) -> None:
         self.clear()
@@ -129,9 +137,10 @@ class PathDecimator:
         self.rows_seen = 0
         self._last_cell: tuple[int, int] | None = None  # level-0 cell of the newest finite row
         self._last_point: tuple[float, float] | None = None
+        self._last_row = -1
         self._bounds = np.array([np.inf, -np.inf, np.inf, -np.inf])  # xmin, xmax, ymin, ymax
-        self._points = [_Grow(2) for _ in range(self.LEVELS)]
-        self._boxes = [_Grow(4) for _ in range(self.LEVELS)]  # per completed chunk
+        self._rows = [_Grow(1, np.int32) for _ in range(self.LEVELS)]
+        self._boxes = [_Grow(4) for _ in range(self.LEVELS)]  # per completed box
 
     @property
     def last_point(self) -> tuple[float, float] | None:
@@ -143,12 +152,17 @@ class PathDecimator:
         """(xmin, xmax, ymin, ymax) of every finite point seen (m); None when empty."""
         return tuple(map(float, self._bounds)) if self._last_point is not None else None
 
+    @property
+    def nbytes(self) -> int:
+        """Bytes held (capacity of the row and box arrays)."""
+        return sum(g.data.nbytes for g in (*self._rows, *self._boxes))
+
     def level_size(self, level: int) -> int:
         """Points kept at ``level``."""
-        return self._points[level].n
+        return self._rows[level].n
 
-    def chunk_count(self, level: int) -> int:
-        """Completed (never changing) chunks of ``level``."""
+    def box_count(self, level: int) -> int:
+        """Completed (never changing) boxes of ``level``."""
         return self._boxes[level].n
 
     def update(self, x: np.ndarray, y: np.ndarray) -> int:
@@ -156,19 +170,24 @@ class PathDecimator:
 
         Returns the number of new rows. Non-finite rows are skipped.
         """
-        new_x, new_y = x[self.rows_seen :], y[self.rows_seen :]
+        first = self.rows_seen
+        new_x, new_y = x[first:], y[first:]
         self.rows_seen = len(x)
         if not len(new_x):
             return 0
         finite = np.isfinite(new_x) & np.isfinite(new_y)
+        rows = np.arange(first, len(x), dtype=np.int32)
         px, py = (new_x, new_y) if finite.all() else (new_x[finite], new_y[finite])
         if not len(px):
             return len(new_x)
+        if len(px) < len(rows):
+            rows = rows[finite]
         cx = np.floor(px / self.EPS0_M).astype(np.int64)
         cy = np.floor(py / self.EPS0_M).astype(np.int64)
         prev = self._last_cell
         self._last_cell = (int(cx[-1]), int(cy[-1]))
         self._last_point = (float(px[-1]), float(py[-1]))
+        self._last_row = int(rows[-1])
         b = self._bounds
         b[:] = min(b[0], px.min()), max(b[1], px.max()), min(b[2], py.min()), max(b[3], py.max())
         for k in range(self.LEVELS):
@@ -180,55 +199,93 @@ class PathDecimator:
             keep[1:] |= ky[1:] != ky[:-1]
             keep[0] = prev is None or (prev[0] >> k, prev[1] >> k) != (int(kx[0]), int(ky[0]))
             if not keep.all():
-                px, py, cx, cy = px[keep], py[keep], cx[keep], cy[keep]
-            if not len(px):
+                rows, cx, cy = rows[keep], cx[keep], cy[keep]
+            if not len(rows):
                 break
-            self._append(k, px, py)
+            self._append(k, rows, x, y)
         return len(new_x)
 
-    def _append(self, k: int, px: np.ndarray, py: np.ndarray) -> None:
-        store, boxes = self._points[k], self._boxes[k]
-        store.extend(px, py)
-        full = store.n // self.CHUNK
+    def _append(self, k: int, rows: np.ndarray, x: np.ndarray, y: np.ndarray) -> None:
+        store, boxes = self._rows[k], self._boxes[k]
+        store.extend(rows)
+        full = store.n // self.BOX
         if full > boxes.n:
-            done = store.data[boxes.n * self.CHUNK : full * self.CHUNK].reshape(
-                -1, self.CHUNK, 2
-            )
-            x, y = done[:, :, 0], done[:, :, 1]  # reduce along the long axis (fast)
-            boxes.extend(x.min(axis=1), x.max(axis=1), y.min(axis=1), y.max(axis=1))
+            # a box's bounding box includes the last point of the box before (its first segment)
+            rows = store.data[:, 0]
+            first = np.arange(boxes.n, full) * self.BOX
+            seg = np.empty((len(first), self.BOX + 1), dtype=rows.dtype)
+            seg[:, 0] = rows[np.maximum(first - 1, 0)]
+            seg[:, 1:] = rows[first[0] : full * self.BOX].reshape(-1, self.BOX)
+            bx, by = x[seg], y[seg]  # reduce along the long axis (fast)
+            boxes.extend(bx.min(axis=1), bx.max(axis=1), by.min(axis=1), by.max(axis=1))
 
-    def level_for(self, pixel_m: float) -> int:
+    @classmethod
+    def level_for(cls, pixel_m: float) -> int:
         """The coarsest level whose cell is at most ``PIXEL_FRACTION`` of a pixel."""
         level = 0
-        for k, eps in enumerate(self.LEVEL_EPS_M):
+        for k, eps in enumerate(cls.LEVEL_EPS_M):
             if eps <= pixel_m * PIXEL_FRACTION:
                 level = k
         return level
 
-    def points(self, level: int) -> tuple[np.ndarray, np.ndarray]:
+    def rows(self, level: int, start: int = 0, stop: int | None = None) -> np.ndarray:
+        """Row numbers of the points ``start:stop`` kept at ``level`` (a view)."""
+        return self._rows[level].view[start:stop, 0]
+
+    def points(self, level: int, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Every point kept at ``level``, then the newest point if it was not kept (m)."""
-        pts = self._points[level].view
-        return self._with_last(pts[:, 0], pts[:, 1])
+        r = self.rows(level)
+        return self._with_last(x[r], y[r])
 
-    def chunk_points(self, level: int, c: int) -> tuple[np.ndarray, np.ndarray]:
-        """Completed chunk ``c`` of ``level``, starting at the last point of chunk c-1
-        (so that consecutive chunks drawn apart still join). Views, not copies."""
-        pts = self._points[level].data[max(0, c * self.CHUNK - 1) : (c + 1) * self.CHUNK]
-        return pts[:, 0], pts[:, 1]
-
-    def live_points(self, level: int) -> tuple[np.ndarray, np.ndarray]:
-        """The growing part of ``level`` after the completed chunks (joined to them), and
+    def tail_points(
+        self, level: int, start: int, x: np.ndarray, y: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The points kept at ``level`` from ``start - 1`` on (joined to those before), and
         the newest point if it was not kept: the line always ends where the path ends."""
-        start = max(0, self._boxes[level].n * self.CHUNK - 1)
-        pts = self._points[level].view[start:]
-        return self._with_last(pts[:, 0], pts[:, 1])
+        r = self.rows(level, max(0, start - 1))
+        return self._with_last(x[r], y[r])
 
-    def chunks_in(self, level: int, rect: tuple[float, float, float, float]) -> np.ndarray:
-        """Indices of the completed chunks of ``level`` whose box meets
-        ``rect`` = (xmin, xmax, ymin, ymax)."""
-        b = self._boxes[level].view
+    def runs_in(
+        self, level: int, rect: tuple[float, float, float, float], start: int = 0,
+        stop: int | None = None,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The polylines, among the segments ending at kept points ``start:stop`` of
+        ``level``, that may meet ``rect`` = (xmin, xmax, ymin, ymax) (m).
+
+        Returns (rows, connect): row numbers of the points and, per point, whether
+        it is joined to the next (False at the end of each polyline, the form
+        ``pyqtgraph.functions.arrayToQPath`` takes). Every segment that meets the
+        rectangle is in it (whole boxes are taken: more may be)."""
+        n = self._rows[level].n
+        stop = n if stop is None else min(stop, n)
+        if stop <= start:
+            return np.empty(0, np.int32), np.empty(0, bool)
+        B = self.BOX  # noqa: N806 - a constant's short name
+        done = self._boxes[level].n
+        b0, b1 = start // B, min(done, -(-stop // B))
+        boxes = self._boxes[level].view[b0:b1]
         x0, x1, y0, y1 = rect
-        return np.flatnonzero((b[:, 1] >= x0) & (b[:, 0] <= x1) & (b[:, 3] >= y0) & (b[:, 2] <= y1))
+        hit = b0 + np.flatnonzero(
+            (boxes[:, 1] >= x0) & (boxes[:, 0] <= x1) & (boxes[:, 3] >= y0) & (boxes[:, 2] <= y1)
+        )
+        lo = np.maximum(hit * B, start)
+        hi = np.minimum((hit + 1) * B, stop)
+        if stop > done * B:  # the open box at the end: no bounding box yet, always taken
+            lo = np.append(lo, max(done * B, start))
+            hi = np.append(hi, stop)
+        lo = np.maximum(lo - 1, 0)  # each run starts at the point before its first segment
+        if len(lo) > 1:  # join runs that follow each other
+            new = np.ones(len(lo), dtype=bool)
+            new[1:] = lo[1:] != hi[:-1] - 1
+            starts = np.flatnonzero(new)
+            lo, hi = lo[starts], np.append(hi[starts[1:] - 1], hi[-1])
+        lengths = hi - lo
+        total = int(lengths.sum())
+        ends = np.cumsum(lengths)
+        pos = np.arange(total) - np.repeat(ends - lengths - lo, lengths)
+        connect = np.ones(total, dtype=bool)
+        connect[ends - 1] = False
+        return self._rows[level].data[pos, 0], connect
 
     def _with_last(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         last = self._last_point
@@ -276,12 +333,12 @@ class _MapViewBox(pg.ViewBox):
 
 
 class _Path:
-    """One drawn path: its decimator and its curves in the view box.
+    """One drawn path: its decimator and the curve of its newest end.
 
-    The completed chunks of the level in use that lie near the view are one
-    curve each and are never touched again while level and area stay; only
-    the ``live`` curve (the growing end, at most one chunk) changes with
-    every new row, so a refresh costs the same after an hour as after a minute.
+    What the raster (:class:`_PathRaster`) holds is not drawn again: the
+    ``live`` curve only joins the last point the raster has to the newest
+    point of the path (one or a few points), so a refresh and a repaint cost
+    the same after an hour as after a minute.
     """
 
     def __init__(self, vb, key, colour: str, width: float, columns: tuple[str, str]) -> None:
@@ -289,82 +346,353 @@ class _Path:
         self.key = key
         self.columns = columns
         self.pen = pg.mkPen(colour, width=width)
-        self.z = 5 if key == "robot" else 4
         self.decimator = PathDecimator()
-        self.live = self._curve()
-        self.chunks: dict[int, pg.PlotCurveItem] = {}
+        self.live = pg.PlotCurveItem(pen=self.pen, skipFiniteCheck=True)
+        self.live.setZValue(5 if key == "robot" else 4)
+        self.vb.addItem(self.live, ignoreBounds=True)
         self.visible = True
-        self.level: int | None = None  # level drawn; None: draw everything anew
-        self.clip: tuple | None = None  # area whose chunks are drawn (m)
-        self.done = 0  # completed chunks of the level already considered
-        self.rows = -1  # decimator rows the live curve shows
-
-    def _curve(self) -> pg.PlotCurveItem:
-        curve = pg.PlotCurveItem(pen=self.pen, skipFiniteCheck=True)
-        curve.setZValue(self.z)
-        self.vb.addItem(curve, ignoreBounds=True)
-        return curve
+        self.shown: tuple | None = None  # (level, raster points, rows seen) the live curve shows
 
     def forget_items(self) -> None:
-        """Remove the chunk curves and empty the live one (drawn anew next time)."""
-        for curve in self.chunks.values():
-            self.vb.removeItem(curve)
-        self.chunks.clear()
+        """Empty the live curve (drawn anew next time)."""
         self.live.setData(np.empty(0), np.empty(0))
-        self.level = self.clip = None
-        self.rows = -1
+        self.shown = None
 
     def set_visible(self, on: bool) -> None:
         self.visible = on
-        self.forget_items()  # hidden paths are not kept up to date; shown ones start anew
+        self.forget_items()
         self.live.setVisible(on)
 
-    def draw(self, level: int, view: tuple, clip: tuple) -> None:
-        """Bring the curves up to date for ``level``; ``view`` is the visible area and
-        ``clip`` the larger area to draw chunks for when the view leaves the last one."""
-        dec = self.decimator
-        if level != self.level:
-            self.forget_items()
-            self.level = level
-        count = dec.chunk_count(level)
-        if self.clip is None or not _contains(self.clip, view):
-            self.clip = clip
-            wanted = set(dec.chunks_in(level, clip).tolist())
-            for c in set(self.chunks) - wanted:
-                self.vb.removeItem(self.chunks.pop(c))
-            self._add_chunks(wanted - set(self.chunks))
-            self.done = count
-        elif count > self.done:
-            new = dec.chunks_in(level, self.clip)
-            self._add_chunks(new[new >= self.done].tolist())
-            self.done = count
-        if dec.rows_seen != self.rows:
-            self.live.setData(*dec.live_points(level))
-            self.rows = dec.rows_seen
+    def draw_live(self, level: int, done: int, x: np.ndarray, y: np.ndarray) -> None:
+        """Show the path from kept point ``done - 1`` of ``level`` to its newest point."""
+        key = (level, done, self.decimator.rows_seen)
+        if key != self.shown:
+            self.live.setData(*self.decimator.tail_points(level, done, x, y))
+            self.shown = key
 
-    def _add_chunks(self, chunks) -> None:
-        for c in chunks:
-            curve = self._curve()
-            curve.setData(*self.decimator.chunk_points(self.level, c))
-            self.chunks[c] = curve
 
-    def data(self) -> tuple[np.ndarray, np.ndarray]:
-        """The points drawn, in path order, without the repeated joining points."""
-        curves = [self.chunks[c] for c in sorted(self.chunks)] + [self.live]
-        parts = [c.getData() for c in curves]
-        parts = [(np.asarray(x), np.asarray(y)) for x, y in parts if x is not None and len(x)]
-        if not parts:
-            return np.empty(0), np.empty(0)
-        x = np.concatenate([p[0] for p in parts])
-        y = np.concatenate([p[1] for p in parts])
-        keep = np.ones(len(x), dtype=bool)
-        keep[1:] = (x[1:] != x[:-1]) | (y[1:] != y[:-1])
-        return x[keep], y[keep]
+Rect = tuple[int, int, int, int]  # (u0, u1, v0, v1): pixels u0 <= u < u1, v0 <= v < v1
+
+
+def _meets(a: Rect, b: Rect) -> bool:
+    return a[0] < b[1] and b[0] < a[1] and a[2] < b[3] and b[2] < a[3]
+
+
+def _inside(inner: Rect, outer: Rect) -> bool:
+    return outer[0] <= inner[0] and inner[1] <= outer[1] and outer[2] <= inner[2] and (
+        inner[3] <= outer[3])
+
+
+def _minus(a: Rect, b: Rect) -> list[Rect]:
+    """``a`` without ``b``: up to four rectangles (bands above, below, left, right)."""
+    if not _meets(a, b):
+        return [a]
+    out = []
+    if a[2] < b[2]:
+        out.append((a[0], a[1], a[2], b[2]))
+    if b[3] < a[3]:
+        out.append((a[0], a[1], b[3], a[3]))
+    v0, v1 = max(a[2], b[2]), min(a[3], b[3])
+    if a[0] < b[0]:
+        out.append((a[0], b[0], v0, v1))
+    if b[1] < a[1]:
+        out.append((b[1], a[1], v0, v1))
+    return out
+
+
+def _tiles(r: Rect, size: int) -> list[Rect]:
+    return [(u, min(u + size, r[1]), v, min(v + size, r[3]))
+            for v in range(r[2], r[3], size) for u in range(r[0], r[1], size)]
+
+
+class _PathRaster(pg.GraphicsObject):
+    """The paths up to their newest kept points, as one image in screen pixels.
+
+    Painting it is one blit of the exposed part, whatever the length of the
+    history. Pixels are counted on a grid fixed at the last zoom (``grid``
+    px: the view box's pixels then); the image covers a rectangle of it:
+    the view and ``MARGIN_PX`` around, and, while that stays under
+    ``MAX_PIXELS``, the whole extent of the paths with half a view around
+    (so following the robot over its old laps never draws anything anew).
+    It is changed only where something changed:
+
+    * new kept points: their segments are drawn onto it (a few per frame) and
+      only their box on the screen is repainted;
+    * a pan (drag or follow) that brings the view within ``MARGIN_PX / 2`` of
+      the image's edge: the image is moved (pixels kept) and the strips
+      uncovered are drawn from the segments near them
+      (:meth:`PathDecimator.runs_in`) -- off the screen, so over the
+      following frames, at most ``BUDGET_S`` per refresh;
+    * a zoom, a resize, a path shown or hidden, the paths cleared: drawn anew,
+      the visible part at once (for an hour of laps over each other at 1 m
+      width: ~0.2 s), the rest over the following frames.
+
+    Paths are drawn in the order given (the robot last); segments added later
+    are drawn over older ones of other paths.
+    """
+
+    MARGIN_PX = 128
+    MAX_PIXELS = 4_000_000  # 16 MB
+    BUDGET_S = 0.004
+    TILE_PX = 256
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.setZValue(3)
+        self.image: QImage | None = None
+        self.dpr = 1
+        self.sx = self.sy = 1.0  # screen px per m (sy < 0: odom y points up)
+        self.gx = self.gy = 0.0  # odom point (m) at grid pixel (0, 0)
+        self.dx0 = self.dy0 = 0.0  # the view box's transform offsets when the grid was fixed
+        self.rect: Rect = (0, 0, 0, 0)  # grid pixels the image covers
+        self.view_size = (0.0, 0.0)
+        self.level = 0
+        self.keys: tuple = ()  # paths drawn, in drawing order
+        self.done: dict = {}  # path key -> kept points drawn (at ``level``)
+        self.todo: list[tuple[Rect, dict]] = []  # grid rects still to draw, points below upto
+        self.stale = True
+        self.stats = {"full": 0, "moves": 0, "commits": 0, "tiles": 0, "paints": 0,
+                      "full_ms": 0.0, "pending": 0}
+
+    # -- geometry -------------------------------------------------------------------------
 
     @property
-    def shown_points(self) -> int:
-        return sum(len(c.getData()[0] if c.getData()[0] is not None else ())
-                   for c in [*self.chunks.values(), self.live])
+    def ox(self) -> float:
+        """Odom x (m) of the image's left edge."""
+        return self.gx + self.rect[0] / self.sx
+
+    @property
+    def oy(self) -> float:
+        """Odom y (m) of the image's top edge."""
+        return self.gy + self.rect[2] / self.sy
+
+    @property
+    def img_w(self) -> int:
+        return self.rect[1] - self.rect[0]
+
+    @property
+    def img_h(self) -> int:
+        return self.rect[3] - self.rect[2]
+
+    def boundingRect(self) -> QRectF:  # noqa: N802 - Qt API
+        if self.image is None:
+            return QRectF()
+        return QRectF(self.ox, self.oy + self.img_h / self.sy, self.img_w / self.sx,
+                      -self.img_h / self.sy)
+
+    def data_rect(self, r: Rect, pad_px: float = 0.0) -> tuple[float, float, float, float]:
+        """Grid pixels ``r`` as (xmin, xmax, ymin, ymax) in odom (m)."""
+        u0, u1, v0, v1 = r
+        return (self.gx + (u0 - pad_px) / self.sx, self.gx + (u1 + pad_px) / self.sx,
+                self.gy + (v1 + pad_px) / self.sy, self.gy + (v0 - pad_px) / self.sy)
+
+    @property
+    def nbytes(self) -> int:
+        return self.image.sizeInBytes() if self.image is not None else 0
+
+    def invalidate(self) -> None:
+        """Draw everything anew at the next :meth:`sync`."""
+        self.stale = True
+
+    # -- keeping it up to date --------------------------------------------------------------
+
+    def sync(self, paths: list, columns: dict, level: int, transform: QTransform,
+             view_px: tuple[float, float], dpr: int, bounds) -> None:
+        """Bring the image up to date with the paths (in drawing order).
+
+        ``transform`` maps odom (m) to the view box's pixels, ``view_px`` is the
+        view box's size (logical px), ``columns[key]`` the path's (x, y) columns,
+        ``bounds`` (xmin, xmax, ymin, ymax) of all paths (m) or None.
+        """
+        sx, sy = transform.m11(), transform.m22()
+        keys = tuple(p.key for p in paths)
+        same_scale = abs(sx / self.sx - 1) < 1e-6 and abs(sy / self.sy - 1) < 1e-6
+        if (self.stale or self.image is None or not same_scale or keys != self.keys
+                or level != self.level or dpr != self.dpr or view_px != self.view_size):
+            self._layout(paths, level, transform, view_px, dpr)
+        view = self._view_rect(transform)
+        m = self.MARGIN_PX // 2
+        r = self.rect
+        if not _inside(view, (r[0] + m, r[1] - m, r[2] + m, r[3] - m)):
+            self._move(self._wanted_rect(view, bounds))
+        self._commit(paths, columns)
+        self._work(paths, columns, view)
+
+    def _view_rect(self, transform: QTransform) -> Rect:
+        """The view box in grid pixels (rounded outwards)."""
+        u0 = self.dx0 - transform.dx()
+        v0 = self.dy0 - transform.dy()
+        w, h = self.view_size
+        return (math.floor(u0), math.ceil(u0 + w), math.floor(v0), math.ceil(v0 + h))
+
+    def _wanted_rect(self, view: Rect, bounds) -> Rect:
+        """The view and a margin; with the paths' extent and half a view around if that fits."""
+        m = self.MARGIN_PX
+        r = (view[0] - m, view[1] + m, view[2] - m, view[3] + m)
+        if bounds is not None and all(map(math.isfinite, bounds)):
+            x0, x1, y0, y1 = bounds
+            hw, hh = (view[1] - view[0]) // 2 + m, (view[3] - view[2]) // 2 + m
+            u0, u1 = sorted(((x0 - self.gx) * self.sx, (x1 - self.gx) * self.sx))
+            v0, v1 = sorted(((y0 - self.gy) * self.sy, (y1 - self.gy) * self.sy))
+            big = (min(r[0], math.floor(u0) - hw), max(r[1], math.ceil(u1) + hw),
+                   min(r[2], math.floor(v0) - hh), max(r[3], math.ceil(v1) + hh))
+            if (big[1] - big[0]) * (big[3] - big[2]) * self.dpr**2 <= self.MAX_PIXELS:
+                r = big
+        return r
+
+    def _layout(self, paths, level, transform, view_px, dpr) -> None:
+        """A new grid at the view box's current pixels; everything to be drawn anew."""
+        self.sx, self.sy = transform.m11(), transform.m22()
+        self.dx0, self.dy0 = transform.dx(), transform.dy()
+        self.gx, self.gy = -self.dx0 / self.sx, -self.dy0 / self.sy  # grid (0, 0) = view corner
+        self.view_size, self.dpr, self.level = view_px, dpr, level
+        self.keys = tuple(p.key for p in paths)
+        self.done = {p.key: p.decimator.level_size(level) for p in paths}
+        self.prepareGeometryChange()
+        self.image, self.rect = None, (0, 0, 0, 0)
+        self.todo = []
+        self.stale = False
+        self.stats["full"] += 1
+        self.stats["full_ms"] = -1.0  # measured when the visible part is drawn
+
+    def _move(self, new: Rect) -> None:
+        """Make the image cover grid rect ``new``: pixels inside both are kept, the rest
+        is queued to be drawn."""
+        old, d = self.rect, self.dpr
+        w, h = new[1] - new[0], new[3] - new[2]
+        du, dv = new[0] - old[0], new[2] - old[2]
+        if self.image is not None and (w, h) == (self.img_w, self.img_h) and _meets(old, new):
+            a = np.frombuffer(self.image.bits(), np.uint32).reshape(h * d, -1)[:, : w * d]
+            U, V = du * d, dv * d  # noqa: N806 - device pixels
+            a[max(-V, 0) : h * d - max(V, 0), max(-U, 0) : w * d - max(U, 0)] = a[
+                max(V, 0) : h * d + min(V, 0), max(U, 0) : w * d + min(U, 0)]
+            a[: max(-V, 0)] = 0
+            a[h * d - max(V, 0) :] = 0
+            a[:, : max(-U, 0)] = 0
+            a[:, w * d - max(U, 0) :] = 0
+        else:
+            image = QImage(w * d, h * d, QImage.Format.Format_ARGB32_Premultiplied)
+            image.setDevicePixelRatio(d)
+            image.fill(0)
+            if self.image is not None and _meets(old, new):
+                painter = QPainter(image)
+                painter.setCompositionMode(QPainter.CompositionMode.CompositionMode_Source)
+                painter.drawImage(QPointF(-du, -dv), self.image)
+                painter.end()
+            self.image = image
+        self.prepareGeometryChange()
+        self.rect = new
+        kept = [(r, upto) for r, upto in self.todo if _meets(r, new)]
+        self.todo = [((max(r[0], new[0]), min(r[1], new[1]), max(r[2], new[2]),
+                       min(r[3], new[3])), upto) for r, upto in kept]
+        self.todo += [(r, dict(self.done)) for r in _minus(new, old)]
+        self.update()
+        self.stats["moves"] += 1
+
+    def _work(self, paths, columns, view: Rect) -> None:
+        """Draw the queued areas: those in view at once, the rest within the time budget."""
+        t0 = time.perf_counter()
+        later = []
+        for r, upto in self.todo:
+            if _meets(r, view):
+                seen = (max(r[0], view[0]), min(r[1], view[1]), max(r[2], view[2]),
+                        min(r[3], view[3]))
+                self._draw_area(paths, columns, seen, upto)
+                later += [(part, upto) for part in _minus(r, seen)]
+            else:
+                later.append((r, upto))
+        if self.stats["full_ms"] < 0:
+            self.stats["full_ms"] = (time.perf_counter() - t0) * 1e3
+        self.todo = []
+        while later:
+            r, upto = later.pop()
+            if time.perf_counter() - t0 > self.BUDGET_S:
+                self.todo = [*later, (r, upto)]
+                break
+            if r[1] - r[0] > self.TILE_PX or r[3] - r[2] > self.TILE_PX:
+                later += [(t, upto) for t in _tiles(r, self.TILE_PX)]
+                continue
+            self._draw_area(paths, columns, r, upto)
+        self.stats["pending"] = len(self.todo)
+
+    def finish(self, paths, columns) -> None:
+        """Draw every queued area now (tests, screenshots)."""
+        for r, upto in self.todo:
+            self._draw_area(paths, columns, r, upto)
+        self.todo = []
+        self.stats["pending"] = 0
+
+    def _draw_area(self, paths, columns, r: Rect, upto: dict) -> None:
+        """Draw, clipped to grid rect ``r``, the segments near it of the kept points
+        below ``upto[key]``."""
+        area = self.data_rect(r, pad_px=4.0)
+        u0, v0 = r[0] - self.rect[0], r[2] - self.rect[2]
+        clip = (u0, u0 + r[1] - r[0], v0, v0 + r[3] - r[2])
+        painter = QPainter(self.image)
+        painter.setClipRect(QRectF(clip[0], clip[2], clip[1] - clip[0], clip[3] - clip[2]))
+        for path in paths:
+            rows, connect = path.decimator.runs_in(self.level, area, 0, upto[path.key])
+            self._stroke(painter, path.pen, columns[path.key], rows, connect,
+                         (clip[0] - 4.0, clip[1] + 4.0, clip[2] - 4.0, clip[3] + 4.0))
+        painter.end()
+        self.update(QRectF(*self._odom_box(clip, 0.0)))
+        self.stats["tiles"] += 1
+
+    def _odom_box(self, px: tuple, pad: float) -> tuple[float, float, float, float]:
+        """Image pixels (u0, u1, v0, v1) as (x, y, width, height) in odom (m), for update()."""
+        x0, x1, y0, y1 = self.data_rect((px[0] + self.rect[0], px[1] + self.rect[0],
+                                         px[2] + self.rect[2], px[3] + self.rect[2]), pad)
+        return x0, y0, x1 - x0, y1 - y0
+
+    def _commit(self, paths, columns) -> None:
+        """Draw the segments of the points kept since the last call; repaint only their box."""
+        for path in paths:
+            dec = path.decimator
+            n, done = dec.level_size(self.level), self.done[path.key]
+            if n <= done:
+                continue
+            rows = dec.rows(self.level, max(0, done - 1), n)
+            painter = QPainter(self.image)
+            box = self._stroke(painter, path.pen, columns[path.key], rows, None)
+            painter.end()
+            self.done[path.key] = n
+            self.stats["commits"] += 1
+            if box is not None:
+                self.update(QRectF(*self._odom_box(box, 3.0)))
+
+    def _stroke(self, painter: QPainter, pen, xy, rows, connect, px_rect=None):
+        """Draw the points at ``rows`` of the columns ``xy`` as polylines (``connect`` as
+        for arrayToQPath, None: one line), only the segments that meet ``px_rect`` (image
+        pixels (u0, u1, v0, v1); None: all); returns their pixel box (u0, u1, v0, v1)."""
+        if len(rows) < 2:
+            return None
+        u = (xy[0][rows] - self.ox) * self.sx
+        v = (xy[1][rows] - self.oy) * self.sy
+        if px_rect is not None:
+            u, v, connect = _segments_meeting(u, v, connect, px_rect)
+            if len(u) < 2:
+                return None
+        painter.setPen(pen)
+        painter.drawPath(pg.functions.arrayToQPath(u, v, connect="all" if connect is None
+                                                   else connect))
+        return float(u.min()), float(u.max()), float(v.min()), float(v.max())
+
+    # -- painting ---------------------------------------------------------------------------
+
+    def paint(self, painter, option, widget=None) -> None:
+        if self.image is None:
+            return
+        self.stats["paints"] += 1
+        t = painter.transform()  # odom -> device
+        to_image = QTransform(1 / self.sx, 0, 0, 1 / self.sy, self.ox, self.oy) * t
+        if (abs(to_image.m11() - 1) < 1e-6 and abs(to_image.m22() - 1) < 1e-6
+                and to_image.m12() == 0 and to_image.m21() == 0):
+            # the usual case: same scale as drawn, a blit at whole pixels
+            painter.resetTransform()
+            painter.drawImage(QPointF(round(to_image.dx()), round(to_image.dy())), self.image)
+        else:  # zoomed since the last sync: stretched until the next one
+            painter.setTransform(to_image)
+            painter.drawImage(QPointF(0, 0), self.image)
 
 
 class MapView(QWidget):
@@ -397,7 +725,12 @@ class MapView(QWidget):
             axis.setPen(pg.mkPen("#444444"))
             axis.setTextPen(pg.mkPen("#222222"))
             axis.enableAutoSIPrefix(False)  # metres on both axes, whatever the zoom
+            # one level of ticks and labels: the axes are redrawn with every pan (follow)
+            axis.setStyle(maxTickLevel=1, maxTextLevel=1)
             self.plot.setLabel(side, name)
+        # a fixed width: labels growing a digit would resize the map, and a new size
+        # means drawing all paths anew
+        self.plot.getAxis("left").setWidth(AXIS_WIDTH_PX)
         self.grid = []
         for z, colour in enumerate(GRID_COLOURS):
             item = pg.PlotCurveItem(pen=pg.mkPen(colour, width=1), connect="pairs",
@@ -406,6 +739,8 @@ class MapView(QWidget):
             self.vb.addItem(item, ignoreBounds=True)
             self.grid.append(item)
 
+        self.raster = _PathRaster()
+        self.vb.addItem(self.raster, ignoreBounds=True)
         self._build_toolbar()
         self._build_robot_items()
         self._add_path("robot", "robot", ROBOT_COLOUR, 2.0, ("x", "y"))
@@ -600,21 +935,39 @@ class MapView(QWidget):
         self._dirty = True
 
     def path_data(self, key) -> tuple[np.ndarray, np.ndarray]:
-        """The points drawn for a path (m, odom), in path order."""
-        return self.paths[key].data()
+        """The points drawn for a path (m, odom), in path order: those of the raster (the
+        segments near its area) then the live end, without repeated joining points."""
+        path, hist, r = self.paths[key], self.ctx.session.history, self.raster
+        if hist is None or not path.visible or key not in r.done:
+            return np.empty(0), np.empty(0)
+        x, y = hist.column(path.columns[0]), hist.column(path.columns[1])
+        rows, _ = path.decimator.runs_in(r.level, r.data_rect(r.rect), 0, r.done[key])
+        lx, ly = path.live.getData()
+        lx = np.empty(0) if lx is None else np.asarray(lx)
+        ly = np.empty(0) if ly is None else np.asarray(ly)
+        px, py = np.concatenate((x[rows], lx)), np.concatenate((y[rows], ly))
+        keep = np.ones(len(px), dtype=bool)
+        keep[1:] = (px[1:] != px[:-1]) | (py[1:] != py[:-1])
+        return px[keep], py[keep]
 
     def clear_paths(self) -> None:
         """Forget the drawn paths (the session was reset)."""
         for path in self.paths.values():
             path.decimator.clear()
             path.forget_items()
+        self.raster.invalidate()
         self._seen = None
         self._dirty = True
 
     def render_stats(self) -> dict:
-        """What the last refreshes cost and drew (for benchmarks and tests)."""
+        """What the last refreshes cost and drew (for benchmarks and tests).
+
+        ``raster``: images drawn whole (``full``, the last in ``full_ms``),
+        moved (``shifts``), path ends drawn onto it (``commits``), paints;
+        ``memory_mb``: the decimators' arrays and the raster image."""
         ms = np.array(self._refresh_ms[-1000:]) if self._refresh_ms else np.zeros(1)
         hist = self.ctx.session.history
+        r = self.raster
         return {
             "rows": len(hist) if hist is not None else 0,
             "behind": max((len(hist) - p.decimator.rows_seen for p in self.paths.values()),
@@ -623,9 +976,13 @@ class MapView(QWidget):
             "refresh_p50_ms": float(np.percentile(ms, 50)),
             "refresh_p95_ms": float(np.percentile(ms, 95)),
             "refresh_max_ms": float(ms.max()),
-            "points": {k: p.shown_points for k, p in self.paths.items()},
-            "levels": {k: p.level for k, p in self.paths.items()},
-            "chunk_curves": {k: len(p.chunks) for k, p in self.paths.items()},
+            "points": {k: r.done.get(k, 0) for k in self.paths},
+            "levels": {k: r.level if k in r.done else None for k in self.paths},
+            "raster": {**r.stats, "size": (r.img_w, r.img_h)},
+            "memory_mb": {
+                "decimators": sum(p.decimator.nbytes for p in self.paths.values()) / 1e6,
+                "raster": r.nbytes / 1e6,
+            },
         }
 
     # -- refresh ----------------------------------------------------------------------------------
@@ -645,7 +1002,7 @@ class MapView(QWidget):
         self._draw_robot()
         if self.follow_check.isChecked() and (data_changed or self._follow_pending):
             self._follow()
-        self._draw_paths()
+        self._draw_paths(hist)
         self._dirty = behind  # our own range changes above need nothing more
         self._refresh_ms.append((time.perf_counter() - t0) * 1e3)
         if len(self._refresh_ms) > 20_000:
@@ -669,6 +1026,7 @@ class MapView(QWidget):
             if len(hist) < dec.rows_seen or getattr(self, "_dropped", 0) != hist.dropped_rows:
                 dec.clear()  # cleared, or the oldest rows were let go: start again
                 path.forget_items()
+                self.raster.invalidate()
             if path.columns[0] in hist.index:
                 end = min(len(hist), dec.rows_seen + MAX_ROWS_PER_REFRESH)
                 dec.update(hist.column(path.columns[0])[:end], hist.column(path.columns[1])[:end])
@@ -676,15 +1034,23 @@ class MapView(QWidget):
         self._dropped = hist.dropped_rows
         return behind
 
-    def _draw_paths(self) -> None:
-        (x0, x1), (y0, y1) = self.vb.viewRange()
-        width, height = float(x1 - x0), float(y1 - y0)
-        pixel = width / max(self.vb.width(), 1.0)
-        view = (x0, x1, y0, y1)
-        clip = (x0 - width, x1 + width, y0 - height, y1 + height)
-        for path in self.paths.values():
-            if path.visible:
-                path.draw(path.decimator.level_for(pixel), view, clip)
+    def _draw_paths(self, hist) -> None:
+        """Bring the raster and the live ends up to date (sensors first, the robot on top)."""
+        if hist is None:
+            return
+        pixel = self.visible_width() / max(self.vb.width(), 1.0)
+        level = PathDecimator.level_for(pixel)
+        order = [p for k, p in self.paths.items() if k != "robot"] + [self.paths["robot"]]
+        shown = [p for p in order if p.visible and p.columns[0] in hist.index]
+        columns = {p.key: (hist.column(p.columns[0]), hist.column(p.columns[1])) for p in shown}
+        dpr = max(1, round(self.plot.devicePixelRatioF()))
+        boxes = [p.decimator.bounds for p in shown if p.decimator.bounds is not None]
+        bounds = (min(b[0] for b in boxes), max(b[1] for b in boxes), min(b[2] for b in boxes),
+                  max(b[3] for b in boxes)) if boxes else None
+        self.raster.sync(shown, columns, level, self.vb.childTransform(),
+                         (float(self.vb.width()), float(self.vb.height())), dpr, bounds)
+        for p in shown:
+            p.draw_live(level, self.raster.done[p.key], *columns[p.key])
 
     def _robot_xy(self) -> tuple[float, float]:
         pose = self.ctx.session.pose
@@ -757,16 +1123,26 @@ class MapView(QWidget):
             item.setVisible(True)
 
 
+def _segments_meeting(u, v, connect, rect):
+    """The polylines (points ``u``, ``v``, ``connect`` as for arrayToQPath) cut down to
+    the segments whose bounding box meets ``rect`` = (u0, u1, v0, v1)."""
+    u0, u1, v0, v1 = rect
+    a, b = slice(0, -1), slice(1, None)
+    seg = ((np.maximum(u[a], u[b]) >= u0) & (np.minimum(u[a], u[b]) <= u1)
+           & (np.maximum(v[a], v[b]) >= v0) & (np.minimum(v[a], v[b]) <= v1))
+    if connect is not None:
+        seg &= connect[:-1]
+    keep = np.zeros(len(u), dtype=bool)
+    keep[:-1] = seg
+    keep[1:] |= seg
+    joined = np.append(seg, False)
+    return u[keep], v[keep], joined[keep]
+
+
 def _show(item, on: bool) -> None:
     """setVisible only on a change (each call into Qt costs; most frames change nothing)."""
     if item.isVisible() != bool(on):
         item.setVisible(bool(on))
-
-
-def _contains(outer, inner) -> bool:
-    return outer[0] <= inner[0] and inner[1] <= outer[1] and outer[2] <= inner[2] and (
-        inner[3] <= outer[3]
-    )
 
 
 def _pose_text(x: float, y: float, yaw: float) -> str:
