@@ -22,7 +22,8 @@ Stamps are sensor time: the node's clock at the start plus the run's time
   /perimeter/contact geometry_msgs/PointStamped when the robot's centre crosses a wire:
                      (NaN, NaN) = "a wire", as a robot knows it; with
                      ``perimeter_known_wire`` the wire's coordinate (other axis NaN)
-  ~/truth            nav_msgs/Odometry   the true pose, map -> base_link (plot frame)
+  ~/truth            nav_msgs/Odometry   the true pose, map -> base_link (plot frame), every
+                     ``truth_every`` requests and at the end
 
 With ``wait_for_subscribers`` > 0 it waits (at most ``wait_timeout`` s) until
 that many subscribers listen to the mouse odometry, so a fast replay does not
@@ -80,6 +81,13 @@ PARAMETERS = {
     ),
     "wait_timeout": (10.0, _ro("longest wait for them (s)", **_range(0.0, 3600.0))),
     "linger": (0.5, _ro("seconds to stay up after the last message", **_range(0.0, 60.0))),
+    "truth_every": (
+        1,
+        _ro(
+            "publish the truth every this many requests (and at the last)",
+            integer_range=[IntegerRange(from_value=1, to_value=10**6)],
+        ),
+    ),
     "mouse_dropout": (
         [0.0, 0.0],
         _ro("no mouse odometry from start s for duration s (duration 0 = none)"),
@@ -289,8 +297,10 @@ class FieldSimNode(Node):
 
     def publish_request(self, k: int, stamp: Time) -> int:
         """Everything the sensors reported at request end ``k``; the number of messages."""
-        self.truth_pub.publish(self._odom(stamp, self.p["map_frame"], self.sim.truth, k))
-        n = 1
+        n = 0
+        if k % self.p["truth_every"] == 0 or k == self.sim.t.size - 1:
+            self.truth_pub.publish(self._odom(stamp, self.p["map_frame"], self.sim.truth, k))
+            n += 1
         if self.mouse_published[k]:
             self.mouse_pub.publish(self._odom(stamp, self.p["odom_frame"], self.mouse, k))
             n += 1

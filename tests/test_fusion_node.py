@@ -519,30 +519,31 @@ def planar(m) -> tuple[float, float, float]:
 @pytest.mark.ros
 @pytest.mark.slow
 def test_fused_run_stays_within_decimetres_while_the_mouse_odometry_drifts_metres():
-    """The whole 206 m run at 40x, with the mouse lifted 30 s: fused error cm, raw error m."""
+    """The whole 206 m run at 30x, with the mouse lifted 30 s: fused error cm, raw error m."""
     pytest.importorskip("rclpy")
     from nav_msgs.msg import Odometry
-
-    from mm_pc.field_sim import DOCK
 
     env = ros_env()
     listen = Listener("fusion_test_listener")
     fused: list = []
     truth: dict = {}
-    raw: list = []
     listen.keep(Odometry, "/mm_fusion/odom", fused)
     listen.keep(Odometry, "/field_sim/truth", truth, key=stamp_key, depth=1000)
-    listen.keep(Odometry, "/mm_odometry/odom", raw, depth=1000)
     fusion = subprocess.Popen(
-        # max_delay 5 s of stamps = 125 ms of wall time at 40x: on a busy machine one topic's
-        # queue can fall that far behind another's, and the node waits for it
-        command("mm_pc.fusion_node", {"publish_rate": 50.0, "gps_frame": "gps", "max_delay": 5.0}),
+        # max_delay 20 s of stamps = 0.7 s of wall time at 30x: on a busy machine one topic
+        # was seen to fall 125 ms (4-5 s of stamps) behind another; the node waits that long
+        command("mm_pc.fusion_node", {"publish_rate": 50.0, "gps_frame": "gps", "max_delay": 20.0}),
         env=env,
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,
     )
-    sim_params = {"speed": 40.0, "wait_for_subscribers": 2, "mouse_dropout": "[100.0,30.0]"}
+    sim_params = {
+        "speed": 30.0,
+        "wait_for_subscribers": 1,
+        "mouse_dropout": "[100.0,30.0]",
+        "truth_every": 5,  # 120 truth messages/s are enough to check against
+    }
     try:
         sim = subprocess.run(
             command("mm_pc.field_sim_node", sim_params),
@@ -560,8 +561,7 @@ def test_fused_run_stays_within_decimetres_while_the_mouse_odometry_drifts_metre
     assert fusion.returncode == 0, log
     with listen.lock:
         matched = [(m, truth[stamp_key(m)]) for m in fused if stamp_key(m) in truth]
-        last_raw = raw[-1]
-    assert len(matched) > 100, f"{len(fused)} fused, {len(truth)} truth messages\n{log}"
+    assert len(matched) > 20, f"{len(fused)} fused, {len(truth)} truth messages\n{log}"
 
     def error(a, b) -> float:
         (ax, ay, _), (bx, by, _) = planar(a), planar(b)
@@ -571,11 +571,16 @@ def test_fused_run_stays_within_decimetres_while_the_mouse_odometry_drifts_metre
     assert stamp_key(final_fused) == max(truth)  # the estimate reached the end of the run
     fused_final = error(final_fused, final_truth)
     fused_max = max(error(a, b) for a, b in matched)
-    # the raw mouse odometry starts at its own origin: put it on the dock
-    rx, ry, _ = planar(last_raw)
-    c, s = math.cos(DOCK.yaw), math.sin(DOCK.yaw)
-    tx, ty, _ = planar(final_truth)
-    raw_final = math.hypot(DOCK.x + c * rx - s * ry - tx, DOCK.y + s * rx + c * ry - ty)
+    # the raw mouse odometry as published (same seed, same lift), put on the start pose
+    # (computed here: a third subscriber at 800 messages/s slowed the replay down)
+    from mm_pc.field_sim import simulate_field_run
+    from mm_pc.field_sim_node import compose, mouse_with_dropout, relative_poses
+
+    run = simulate_field_run(1)
+    assert planar(final_truth)[:2] == pytest.approx(tuple(run.truth[-1, :2]), abs=1e-9)
+    mouse, _ = mouse_with_dropout(relative_poses(run.raw, run.truth[0]), run.t, 100.0, 30.0)
+    raw_end = compose(run.truth[0], mouse[-1:])[0]
+    raw_final = math.hypot(*(raw_end[:2] - run.truth[-1, :2]))
     print(f"fused final {fused_final:.3f} m, max {fused_max:.3f} m; raw final {raw_final:.2f} m")
     assert fused_final < 0.5 and fused_max < 0.5
     assert raw_final > 3.0 and fused_final < raw_final / 20
