@@ -279,8 +279,8 @@ def test_paths_equal_history_and_markers_sit_at_the_pose(view, ctx):
     assert world(view, hx[1], hy[1]) == pytest.approx(
         (pose.x + 0.1 * math.cos(pose.yaw), pose.y + 0.1 * math.sin(pose.yaw)))
     for k, items in enumerate(view.sensor_items):
-        sx, sy = items["dot"].getData()
-        assert world(view, sx[0], sy[0]) == pytest.approx(
+        dot = items["dot"].pos()
+        assert world(view, dot.x(), dot.y()) == pytest.approx(
             (hist.last(f"s{k}_wx"), hist.last(f"s{k}_wy")))
     assert f"{pose.x:+.3f} m" in view.pose_label.text()
 
@@ -477,9 +477,9 @@ def test_a_new_geometry_moves_the_sensor_markers(view, ctx):
     view.refresh()
     pose = ctx.session.pose
     for k, m in enumerate(mounts):
-        sx, sy = view.sensor_items[k]["dot"].getData()
+        dot = view.sensor_items[k]["dot"].pos()
         c, s = math.cos(pose.yaw), math.sin(pose.yaw)
-        assert world(view, sx[0], sy[0]) == pytest.approx(
+        assert world(view, dot.x(), dot.y()) == pytest.approx(
             (pose.x + c * m.x - s * m.y, pose.y + s * m.x + c * m.y))
 
 

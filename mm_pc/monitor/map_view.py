@@ -25,9 +25,11 @@ import time
 import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import QPointF, QRectF, Qt, Signal
-from PySide6.QtGui import QColor, QIcon, QImage, QPainter, QPixmap, QTransform
+from PySide6.QtGui import QColor, QIcon, QImage, QPainter, QPainterPath, QPen, QPixmap, QTransform
 from PySide6.QtWidgets import (
     QCheckBox,
+    QGraphicsEllipseItem,
+    QGraphicsItem,
     QHBoxLayout,
     QLabel,
     QPushButton,
@@ -332,6 +334,59 @@ class _MapViewBox(pg.ViewBox):
             self.user_panned.emit()
 
 
+class _Lines(QGraphicsItem):
+    """Lines through points in odom metres with a cosmetic pen: what a PlotCurveItem
+    draws, without its per-frame work in Python (it computes its bounds again, from
+    the pixel size, whenever the view moves). ``setData``/``getData`` as there.
+
+    ``pad`` (m) is added around the points' box for the pen's width; the view sets
+    it when the zoom changes (:meth:`MapView._on_range_changed`).
+    """
+
+    def __init__(self, pen: QPen, connect: str = "all") -> None:
+        super().__init__()
+        self._pen = QPen(pen)
+        self._pen.setCosmetic(True)
+        self._connect = connect
+        self._x = self._y = np.empty(0)
+        self._path = QPainterPath()
+        self._box = QRectF()
+        self.pad = 0.0
+
+    def setData(self, x, y) -> None:  # noqa: N802 - as PlotCurveItem
+        self.prepareGeometryChange()
+        self._x, self._y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+        self._path = (pg.functions.arrayToQPath(self._x, self._y, connect=self._connect)
+                      if len(self._x) else QPainterPath())
+        self._box = self._path.boundingRect()
+
+    def getData(self) -> tuple[np.ndarray, np.ndarray]:  # noqa: N802 - as PlotCurveItem
+        return self._x, self._y
+
+    def set_pad(self, pad: float) -> None:
+        if pad != self.pad:
+            self.prepareGeometryChange()
+            self.pad = pad
+
+    def boundingRect(self) -> QRectF:  # noqa: N802 - Qt API
+        if not len(self._x):
+            return QRectF()
+        return self._box.adjusted(-self.pad, -self.pad, self.pad, self.pad)
+
+    def paint(self, painter, option, widget=None) -> None:
+        painter.setPen(self._pen)
+        painter.drawPath(self._path)
+
+
+def _dot(colour: str, size_px: float = 8.0) -> QGraphicsEllipseItem:
+    """A filled circle of ``size_px`` on the screen whatever the zoom, white rimmed."""
+    dot = QGraphicsEllipseItem(-size_px / 2, -size_px / 2, size_px, size_px)
+    dot.setFlag(QGraphicsItem.GraphicsItemFlag.ItemIgnoresTransformations)
+    dot.setBrush(QColor(colour))
+    dot.setPen(QPen(QColor("white")))
+    return dot
+
+
 class _Path:
     """One drawn path: its decimator and the curve of its newest end.
 
@@ -347,7 +402,7 @@ class _Path:
         self.columns = columns
         self.pen = pg.mkPen(colour, width=width)
         self.decimator = PathDecimator()
-        self.live = pg.PlotCurveItem(pen=self.pen, skipFiniteCheck=True)
+        self.live = _Lines(self.pen)
         self.live.setZValue(5 if key == "robot" else 4)
         self.vb.addItem(self.live, ignoreBounds=True)
         self.visible = True
@@ -732,9 +787,9 @@ class MapView(QWidget):
         # means drawing all paths anew
         self.plot.getAxis("left").setWidth(AXIS_WIDTH_PX)
         self.grid = []
+        self._grid_key: tuple | None = None  # (pixel size, area) the grid lines were made for
         for z, colour in enumerate(GRID_COLOURS):
-            item = pg.PlotCurveItem(pen=pg.mkPen(colour, width=1), connect="pairs",
-                                    skipFiniteCheck=True)
+            item = _Lines(pg.mkPen(colour, width=1), connect="pairs")
             item.setZValue(-10 + z)
             self.vb.addItem(item, ignoreBounds=True)
             self.grid.append(item)
@@ -809,8 +864,8 @@ class MapView(QWidget):
         self.body.setZValue(20)
         self.vb.addItem(self.body, ignoreBounds=True)
         pen = pg.mkPen(ROBOT_COLOUR, width=2)
-        self.robot_outline = pg.PlotCurveItem(pen=pen, skipFiniteCheck=True)
-        self.robot_heading = pg.PlotCurveItem(pen=pen, connect="pairs", skipFiniteCheck=True)
+        self.robot_outline = _Lines(pen)
+        self.robot_heading = _Lines(pen, connect="pairs")
         self.body.addItem(self.robot_outline)
         self.body.addItem(self.robot_heading)
         self._body_key: tuple | None = None
@@ -839,9 +894,8 @@ class MapView(QWidget):
         devices = self.ctx.session.devices
         for k in range(len(self.sensor_items), len(devices)):
             colour = sensor_colour(k)
-            dot = pg.ScatterPlotItem(size=8, brush=pg.mkBrush(colour), pen=pg.mkPen("w"))
-            axes = pg.PlotCurveItem(pen=pg.mkPen(colour, width=2), connect="pairs",
-                                    skipFiniteCheck=True)
+            dot = _dot(colour)
+            axes = _Lines(pg.mkPen(colour, width=2), connect="pairs")
             labels = []
             for text in ("X", "Y"):
                 t = pg.TextItem(text, color=colour, anchor=(0.5, 0.5))
@@ -872,6 +926,11 @@ class MapView(QWidget):
     def _on_range_changed(self, *_args) -> None:
         self._update_grid()
         width = self.visible_width()
+        pad = 3.0 * width / max(self.vb.width(), 1.0)  # 3 px: room for the pens' width
+        lines = [*self.grid, self.robot_outline, self.robot_heading,
+                 *(p.live for p in self.paths.values()), *(s["axes"] for s in self.sensor_items)]
+        for item in lines:
+            item.set_pad(pad)
         self.width_label.setText(_format_length(width))
         value = round(SLIDER_STEPS * math.log(max(width, 1e-9) / MIN_WIDTH_M)
                       / math.log(MAX_WIDTH_M / MIN_WIDTH_M))
@@ -1072,7 +1131,7 @@ class MapView(QWidget):
             if k >= len(mounts):
                 continue
             m = mounts[k]
-            items["dot"].setData([m.x], [m.y])
+            items["dot"].setPos(m.x, m.y)
             y_axis = (math.cos(m.yaw), math.sin(m.yaw))  # sensor +Y: robot forward
             x_axis = (math.sin(m.yaw), -math.cos(m.yaw))  # sensor +X: robot right
             arr = np.array(_arrow_segments((m.x, m.y), x_axis, AXIS_ARROW_M, 0.006)
@@ -1104,8 +1163,16 @@ class MapView(QWidget):
         self.pose_label.setText(_pose_text(pose.x, pose.y, pose.yaw_wrapped))
 
     def _update_grid(self) -> None:
+        """Grid lines over three views' width and height around the view: made again only
+        when the view leaves that area or the zoom changes (not with every follow step)."""
         (x0, x1), (y0, y1) = self.vb.viewRange()
         pixel = (x1 - x0) / max(self.vb.width(), 1.0)
+        key = self._grid_key
+        if key is not None and abs(key[0] / pixel - 1) < 1e-3 and _within((x0, x1, y0, y1), key[1]):
+            return
+        w, h = x1 - x0, y1 - y0
+        x0, x1, y0, y1 = x0 - w, x1 + w, y0 - h, y1 + h
+        self._grid_key = (pixel, (x0, x1, y0, y1))
         for step, item in zip(GRID_STEPS_M, self.grid, strict=True):
             if step / pixel < GRID_MIN_PX:
                 item.setVisible(False)
@@ -1119,8 +1186,14 @@ class MapView(QWidget):
             gy[0:nx:2], gy[1:nx:2] = y0, y1
             gx[nx::2], gx[nx + 1 :: 2] = x0, x1
             gy[nx::2] = gy[nx + 1 :: 2] = ys
-            item.setData(gx, gy, connect="pairs")
+            item.setData(gx, gy)
             item.setVisible(True)
+
+
+def _within(inner, outer) -> bool:
+    """(xmin, xmax, ymin, ymax) ``inner`` inside ``outer``."""
+    return outer[0] <= inner[0] and inner[1] <= outer[1] and outer[2] <= inner[2] and (
+        inner[3] <= outer[3])
 
 
 def _segments_meeting(u, v, connect, rect):
