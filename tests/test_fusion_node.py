@@ -15,6 +15,7 @@ import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -440,6 +441,28 @@ def test_core_rejects_bad_settings():
         core(stale_s=0.0)
 
 
+# --- the parameter file ----------------------------------------------------------------------
+
+PARAMS_FILE = Path(__file__).resolve().parents[1] / "mm_pc/config/mm_fusion.yaml"
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize(
+    ("module", "node"), [("mm_pc.fusion_node", "mm_fusion"), ("mm_pc.field_sim_node", "field_sim")]
+)
+def test_params_file_lists_every_parameter_with_its_default(module, node):
+    pytest.importorskip("rclpy")
+    import importlib
+
+    import yaml
+
+    parameters = importlib.import_module(module).PARAMETERS
+    params = yaml.safe_load(PARAMS_FILE.read_text())[node]["ros__parameters"]
+    assert set(params) == set(parameters)
+    for name, (default, _desc) in parameters.items():
+        assert params[name] == default, name
+
+
 # --- real processes ---------------------------------------------------------------------------
 
 
@@ -450,8 +473,10 @@ def ros_env() -> dict[str, str]:
     return isolated_ros_env(int(os.environ["ROS_DOMAIN_ID"]))
 
 
-def command(module: str, params: dict, namespace: str = "") -> list[str]:
+def command(module: str, params: dict, namespace: str = "", params_file: bool = False) -> list[str]:
     cmd = [sys.executable, "-m", module, "--ros-args"]
+    if params_file:
+        cmd += ["--params-file", str(PARAMS_FILE)]
     if namespace:
         cmd += ["-r", f"__ns:={namespace}"]
     for k, v in params.items():
@@ -532,7 +557,11 @@ def test_fused_run_stays_within_decimetres_while_the_mouse_odometry_drifts_metre
     fusion = subprocess.Popen(
         # max_delay 20 s of stamps = 0.7 s of wall time at 30x: on a busy machine one topic
         # was seen to fall 125 ms (4-5 s of stamps) behind another; the node waits that long
-        command("mm_pc.fusion_node", {"publish_rate": 50.0, "gps_frame": "gps", "max_delay": 20.0}),
+        command(
+            "mm_pc.fusion_node",
+            {"publish_rate": 50.0, "gps_frame": "gps", "max_delay": 20.0},
+            params_file=True,
+        ),
         env=env,
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
@@ -546,7 +575,7 @@ def test_fused_run_stays_within_decimetres_while_the_mouse_odometry_drifts_metre
     }
     try:
         sim = subprocess.run(
-            command("mm_pc.field_sim_node", sim_params),
+            command("mm_pc.field_sim_node", sim_params, params_file=True),
             env=env,
             capture_output=True,
             text=True,
