@@ -147,12 +147,17 @@ class MotionInput:
 
 @dataclass(frozen=True)
 class PositionInput:
-    """A position fix (x, y) m in the map frame with its 2x2 covariance (m^2)."""
+    """A position fix (x, y) m in the map frame with its 2x2 covariance (m^2).
+
+    ``gate_cov``: the covariance to gate with when ``cov`` is inflated for
+    time-correlated errors (:meth:`mm_pc.fusion.PoseEKF.update_position`).
+    """
 
     stamp: float
     source: str
     xy: tuple[float, float]
     cov: tuple[tuple[float, float], tuple[float, float]]
+    gate_cov: tuple[tuple[float, float], tuple[float, float]] | None = None
 
 
 @dataclass(frozen=True)
@@ -619,6 +624,10 @@ class FusionCore:
             self._period[source] = gap if p is None else 0.8 * p + 0.2 * gap
         self._heard[source] = stamp
 
+    def interval(self, source: str) -> float | None:
+        """Average interval (s) between ``source``'s messages, None before its second."""
+        return self._period.get(source)
+
     def flush(self) -> None:
         """Process everything queued; until the next odometry record, process on arrival."""
         self._idle = True
@@ -772,7 +781,9 @@ class FusionCore:
     def _apply(self, rec, ungated: bool):
         ekf = self.ekf
         if isinstance(rec, PositionInput):
-            return ekf.update_position(rec.xy, rec.cov, gate=None if ungated else GATE_2D)
+            return ekf.update_position(
+                rec.xy, rec.cov, gate=None if ungated else GATE_2D, gate_cov=rec.gate_cov
+            )
         if isinstance(rec, HeadingInput):
             return ekf.update_heading(rec.yaw, rec.var, gate=None if ungated else GATE_1D)
         if isinstance(rec, RangeInput):

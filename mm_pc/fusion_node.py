@@ -37,6 +37,7 @@ from __future__ import annotations
 import math
 import sys
 import time
+from dataclasses import replace
 
 import numpy as np
 import rclpy
@@ -54,11 +55,13 @@ from std_msgs.msg import Float64
 
 from . import ros_spin
 from .field_fixes import LocalGrid, rectangle_perimeter
+from .field_sim import gps_inflation
 from .fusion import PoseEKF
 from .fusion_msgs import (
     UNOBSERVED_VARIANCE,
     FusionCore,
     InputError,
+    PositionInput,
     WarnThrottle,
     heading_input,
     imu_input,
@@ -137,6 +140,14 @@ PARAMETERS = {
         _ro(
             "fixes with a larger sigma (m) are not used (HDOP 2 x 2.5 m / sqrt 2)",
             **_range(0.01, 1e3),
+        ),
+    ),
+    "gps_error_tau": (
+        30.0,
+        _ro(
+            "correlation time of the GPS error (s): fixes are weighted as what a stream "
+            "of them is worth (0 = independent fixes)",
+            **_range(0.0, 1e5),
         ),
     ),
     "compass_sigma": (
@@ -338,7 +349,12 @@ class FusionNode(Node):
             )
         if p["gps_topic"]:
             subs.append(
-                (NavSatFix, p["gps_topic"], "gps", lambda m: navsat_input(m, self.grid, **gps_kw))
+                (
+                    NavSatFix,
+                    p["gps_topic"],
+                    "gps",
+                    lambda m: self._gps(navsat_input(m, self.grid, **gps_kw)),
+                )
             )
         if p["compass_input"] == "imu":
             subs.append(
@@ -381,6 +397,22 @@ class FusionNode(Node):
         self.inputs = [f"{src} ({topic})" for _, topic, src, _ in subs]
         for msg_type, topic, source, convert in subs:
             self.create_subscription(msg_type, topic, self._callback(source, convert), qos)
+
+    def _gps(self, fix: PositionInput) -> PositionInput:
+        """Inflate a fix's covariance for the GPS error's correlation over gps_error_tau.
+
+        A filter takes each fix as independent news; fixes every 0.5 s of an
+        error that wanders over 30 s are not, and without this the filter
+        believes it averaged the error away. Gated with the fix's own covariance
+        (as :func:`mm_pc.field_sim.run_fusion` does).
+        """
+        tau = self.p["gps_error_tau"]
+        interval = self.core.interval(fix.source)
+        if tau <= 0 or not interval:
+            return fix
+        f = gps_inflation(interval, tau)
+        cov = tuple(tuple(f * v for v in row) for row in fix.cov)
+        return replace(fix, cov=cov, gate_cov=fix.cov)
 
     def _range_converter(self, beacon: Beacon):
         p = self.p

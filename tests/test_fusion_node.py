@@ -413,6 +413,17 @@ def test_a_lost_filter_reacquires_after_rejections_in_a_row():
     assert c.counts["gps"].reacquired == 1 and c.ekf.pose.x > 29.0
 
 
+def test_inflated_gps_fix_is_gated_with_its_own_covariance():
+    """R inflated 100x for correlated errors, gated with the fix's own 1 m^2: 4 m off fails."""
+    c = core()
+    inflated, own = ((100.0, 0.0), (0.0, 100.0)), ((1.0, 0.0), (0.0, 1.0))
+    c.push(PositionInput(1.0, "gps", (4.0, 0.0), inflated, gate_cov=own))
+    assert c.counts["gps"].rejected == 1 and c.ekf.pose.x == 0.0
+    c.push(PositionInput(1.1, "gps", (2.0, 0.0), inflated, gate_cov=own))
+    assert c.counts["gps"].accepted == 1
+    assert c.ekf.pose.x == pytest.approx(2.0 * 1e-4 / (1e-4 + 100.0))  # weighted as inflated
+
+
 def test_unnamed_wire_contact_takes_the_nearest_wire_or_is_unusable():
     c = FusionCore(
         PoseEKF(Pose2D(0.4, 5.0, 0.0), np.diag([0.04, 0.04, 0.01])),
