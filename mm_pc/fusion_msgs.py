@@ -466,14 +466,14 @@ class FusionCore:
     periodic source (odometry, GPS, compass, beacons) can still deliver an
     older one: source s, last heard at stamp t_s with an average interval
     p_s, is not expected before t_s + p_s, so a record at stamp t goes in
-    when t <= t_s for every such source, or t < t_s + 0.9 p_s (0.1 p_s for
-    jitter). A measurement is thus applied after the prediction to its time
-    and before the next, whichever topic's queue runs ahead (at a fast replay
-    they drift apart by seconds of stamp time; on a robot a fix comes some
-    100 ms late). The output lags by at most a fraction of the slowest
-    source's interval. A source not heard for ``max_delay_s`` beyond its
-    interval (behind the newest odometry stamp) is no longer waited for (nor
-    is one heard only once beyond its last stamp: its interval is unknown), and
+    when t < t_s + 0.9 p_s for every such source (0.1 p_s for jitter; t <= t_s
+    for a source heard only once, whose interval is not known yet). A
+    measurement is thus applied after the prediction to its time and before
+    the next, whichever topic's queue runs ahead (at a fast replay they drift
+    apart by seconds of stamp time; on a robot a fix comes some 100 ms late).
+    The output lags by at most a fraction of the slowest source's interval. A
+    source not heard for ``max_delay_s`` beyond its
+    interval (behind the newest odometry stamp) is no longer waited for, and
     a record of it that still comes more than ``max_delay_s`` behind the
     processed odometry is *stale* and dropped. Wire contacts (events, no
     interval) and unstamped headings are never waited for; a late contact
@@ -662,24 +662,27 @@ class FusionCore:
         self._period.clear()
 
     def _horizon(self) -> tuple[float, float]:
-        """(tie, strict): records at stamps <= tie or < strict cannot be overtaken."""
+        """(once, strict): a record at stamp t can no longer be overtaken if t <= once
+        (sources heard only once: their last stamp) and t < strict (the others:
+        t_s + 0.9 p_s)."""
         if self._idle or not self._pushed:
             return math.inf, math.inf
         newest = max(self._pushed.values())
-        tie = strict = math.inf
+        once = strict = math.inf
         for source, t in self._heard.items():
             p = self._period.get(source)
             if t + (p or 0.0) + self.max_delay_s < newest:
                 continue  # gone quiet: not waited for
-            tie = min(tie, t)
-            if p is not None:  # heard once only: its interval is not known yet
+            if p is None:
+                once = min(once, t)
+            else:
                 strict = min(strict, t + 0.9 * p)
-        return tie, strict
+        return once, strict
 
     def _drain(self, everything: bool = False) -> None:
-        tie, strict = (math.inf, math.inf) if everything else self._horizon()
+        once, strict = (math.inf, math.inf) if everything else self._horizon()
         q = self._queue
-        while q and (q[0][0] <= tie or q[0][0] < strict):
+        while q and q[0][0] <= once and (q[0][0] < strict or everything):
             self._process(heapq.heappop(q)[-1])
 
     def _process(self, rec) -> None:
