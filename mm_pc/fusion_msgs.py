@@ -471,11 +471,11 @@ class FusionCore:
     measurement is thus applied after the prediction to its time and before
     the next, whichever topic's queue runs ahead (at a fast replay they drift
     apart by seconds of stamp time; on a robot a fix comes some 100 ms late).
-    The output lags by at most a fraction of the slowest source's interval. A
-    source not heard for ``max_delay_s`` beyond its
-    interval (behind the newest odometry stamp) is no longer waited for, and
-    a record of it that still comes more than ``max_delay_s`` behind the
-    processed odometry is *stale* and dropped. Wire contacts (events, no
+    The output lags by the slowest source's latency plus a tenth of its
+    interval. A source not heard for ``max_delay_s`` beyond its interval
+    (behind the newest odometry stamp) is no longer waited for, and a record
+    of it that still comes more than ``max_delay_s`` behind the processed
+    odometry is *stale* and dropped. Wire contacts (events, no
     interval) and unstamped headings are never waited for; a late contact
     is applied on arrival. With no odometry at all, or after :meth:`flush`
     (the caller's "no odometry for a while"), records are processed on
