@@ -33,6 +33,7 @@ from mm_pc.monitor.map_view import (
     ROBOT_COLOUR,
     MapView,
     PathDecimator,
+    _PathRaster,
     sensor_colour,
 )
 from mm_pc.monitor.session import MonitorSession
@@ -298,6 +299,8 @@ def test_zoomed_out_path_is_decimated_but_still_from_the_history(view, ctx):
 def test_refresh_does_nothing_when_the_history_did_not_change(view, ctx):
     feed(ctx, seconds=2)
     view.refresh()
+    view.finish_drawing()  # nothing queued off the screen either
+    view.refresh()
     n = view.render_stats()["refreshes"]
     view.refresh()
     view.refresh()
@@ -496,6 +499,230 @@ def test_map_screenshot(view, ctx):
         assert has_colour(img, colour), colour
 
 
+# -- the raster of the paths ---------------------------------------------------------------------
+
+PATH_COLUMNS = (("x", "y"), ("s0_wx", "s0_wy"), ("s1_wx", "s1_wy"))
+
+
+def raster_array(view: MapView) -> np.ndarray:
+    """The raster image as an (h, w) array of premultiplied ARGB words (a copy)."""
+    img = view.raster.image
+    a = np.frombuffer(img.constBits(), np.uint32).reshape(img.height(), -1)
+    return a[:, : img.width()].copy()
+
+
+def to_raster_px(view: MapView, x, y) -> tuple[np.ndarray, np.ndarray]:
+    r = view.raster
+    return (np.asarray(x) - r.ox) * r.sx, (np.asarray(y) - r.oy) * r.sy
+
+
+def near_points(shape, u, v, radius: int) -> np.ndarray:
+    """Pixels within ``radius`` (square) of the points (u, v)."""
+    iu, iv = np.floor(u).astype(int), np.floor(v).astype(int)
+    out = np.zeros(shape, dtype=bool)
+    for du in range(-radius, radius + 1):
+        for dv in range(-radius, radius + 1):
+            ok = (iu + du >= 0) & (iu + du < shape[1]) & (iv + dv >= 0) & (iv + dv < shape[0])
+            out[iv[ok] + dv, iu[ok] + du] = True
+    return out
+
+
+def drawn_anew(view: MapView) -> np.ndarray:
+    """The raster as drawn at once from the decimators, on the same grid and area."""
+    r, hist = view.raster, view.ctx.session.history
+    fresh = _PathRaster()
+    for name in ("sx", "sy", "gx", "gy", "dx0", "dy0", "level", "keys", "dpr", "view_size"):
+        setattr(fresh, name, getattr(r, name))
+    fresh.done, fresh.stale = dict(r.done), False
+    fresh._move(r.rect)  # a new image for the area, all of it queued
+    shown = [p for p in view._drawing_order() if p.key in r.done]
+    fresh.finish(shown, {p.key: (hist.column(p.columns[0]), hist.column(p.columns[1]))
+                         for p in shown})
+    img = fresh.image
+    return np.frombuffer(img.constBits(), np.uint32).reshape(img.height(), -1).copy()
+
+
+def test_raster_pixels_lie_on_the_history_and_cover_it(view, ctx):
+    feed(ctx, seconds=30)
+    view.refresh()
+    view.fit_paths()
+    view.refresh()
+    view.finish_drawing()
+    hist = ctx.session.history
+    drawn = (raster_array(view) >> 24) > 0  # alpha: something drawn
+    near = np.zeros_like(drawn)
+    for cx, cy in PATH_COLUMNS:
+        u, v = to_raster_px(view, hist.column(cx), hist.column(cy))
+        assert u.min() > 0 and v.min() > 0 and u.max() < drawn.shape[1] and v.max() < drawn.shape[0]
+        # every row of the history is drawn, within a pixel
+        assert near_points(drawn.shape, u, v, 1)[drawn].sum() > 0
+        iu, iv = np.floor(u).astype(int), np.floor(v).astype(int)
+        hit = np.zeros(len(iu), dtype=bool)
+        for du in (-1, 0, 1):
+            for dv in (-1, 0, 1):
+                hit |= drawn[iv + dv, iu + du]
+        assert hit.all()
+        near |= near_points(drawn.shape, u, v, 3)
+    assert drawn.sum() > 2000
+    assert not (drawn & ~near).any()  # nothing drawn away from the history's points
+
+
+def test_the_raster_is_shown_where_the_paths_are(view, ctx):
+    feed(ctx, seconds=30)
+    view.follow_check.setChecked(False)
+    view.set_visible_width(0.8, (0.1, 0.3))
+    view.refresh()
+    view.body.setVisible(False)  # the sensor dot has the sensor's colour too
+    img = view.plot.viewport().grab().toImage().convertToFormat(QImage.Format.Format_RGB32)
+    a = np.frombuffer(img.constBits(), np.uint32).reshape(img.height(), -1)[:, : img.width()]
+    a = a.astype(np.int64)
+    r, g, b = (a >> 16) & 255, (a >> 8) & 255, a & 255
+    want = QColor(sensor_colour(0))
+    orange = (abs(r - want.red()) + abs(g - want.green()) + abs(b - want.blue())) < 60
+    to_screen = view.vb.childGroup.sceneTransform() * view.plot.viewportTransform()
+    hist = ctx.session.history
+    x, y = hist.column("s0_wx"), hist.column("s0_wy")
+    u = to_screen.m11() * x + to_screen.m21() * y + to_screen.dx()
+    v = to_screen.m12() * x + to_screen.m22() * y + to_screen.dy()
+    assert orange.sum() > 300
+    assert not (orange & ~near_points(orange.shape, u, v, 3)).any()
+    box = view.plot.mapFromScene(view.vb.sceneBoundingRect()).boundingRect()  # not the axes
+    inside = ((u > box.left() + 3) & (v > box.top() + 3) & (u < box.right() - 3)
+              & (v < box.bottom() - 3))
+    assert inside.sum() > 100
+    iu, iv = np.floor(u[inside]).astype(int), np.floor(v[inside]).astype(int)
+    hit = np.zeros(len(iu), dtype=bool)
+    for du in (-1, 0, 1):
+        for dv in (-1, 0, 1):
+            hit |= orange[iv + dv, iu + du]
+    assert hit.mean() > 0.97  # where the robot path or its outline is drawn over it: not seen
+
+
+def test_new_rows_are_drawn_onto_the_raster_not_all_anew(view, ctx):
+    replies = list(sim_replies("figure_eight", 50, 20))
+    view.follow_check.setChecked(False)
+    view.set_visible_width(2.0, (0.0, 0.0))
+    for r in replies[:600]:
+        ctx.on_reply(r)
+    view.refresh()
+    view.finish_drawing()
+    before, img0 = dict(view.render_stats()["raster"]), raster_array(view)
+    for r in replies[600:610]:
+        ctx.on_reply(r)
+        view.refresh()
+    after = view.render_stats()["raster"]
+    for key in ("full", "moves", "tiles"):
+        assert after[key] == before[key], key  # nothing drawn anew, nothing moved
+    assert after["commits"] == before["commits"] + 3 * 10  # three paths, ten rows
+    raster = view.raster
+    for key, path in view.paths.items():
+        assert raster.done[key] == path.decimator.level_size(raster.level)
+    changed = np.argwhere(raster_array(view) != img0)
+    assert len(changed) > 10
+    hist = ctx.session.history
+    boxes = [to_raster_px(view, hist.column(cx)[598:], hist.column(cy)[598:])
+             for cx, cy in PATH_COLUMNS]
+    u0 = min(u.min() for u, _ in boxes) - 3
+    u1 = max(u.max() for u, _ in boxes) + 3
+    v0 = min(v.min() for _, v in boxes) - 3
+    v1 = max(v.max() for _, v in boxes) + 3
+    assert np.all((changed[:, 1] >= u0) & (changed[:, 1] <= u1))  # only where the new rows are
+    assert np.all((changed[:, 0] >= v0) & (changed[:, 0] <= v1))
+    # the live ends start at the last point the raster has
+    for key, path in view.paths.items():
+        lx, ly = path.live.getData()
+        rows = path.decimator.rows(raster.level)
+        cx, cy = view.paths[key].columns
+        assert (lx[0], ly[0]) == (hist.column(cx)[rows[-1]], hist.column(cy)[rows[-1]])
+        assert (lx[-1], ly[-1]) == (hist.column(cx)[-1], hist.column(cy)[-1])
+
+
+def test_following_moves_the_raster_and_it_equals_one_drawn_anew(view, ctx):
+    replies = list(sim_replies("figure_eight", 50, 40))
+    for r in replies[:1500]:
+        ctx.on_reply(r)
+    view.set_visible_width(0.3)  # following; zoomed in so far that the image is the view
+    view.refresh()  # and a margin only (the paths' extent would be too many pixels)
+    raster = view.raster
+    margin = 2 * _PathRaster.MARGIN_PX
+    assert raster.img_w == pytest.approx(view.vb.width() + margin, abs=6)
+    assert raster.img_h == pytest.approx(view.vb.height() + margin, abs=6)
+    full = raster.stats["full"]
+    for r in replies[1500:1800]:
+        ctx.on_reply(r)
+        view.refresh()
+    assert raster.stats["full"] == full  # following never draws everything anew
+    assert raster.stats["moves"] > 5
+    view.finish_drawing()
+    moved, fresh = raster_array(view), drawn_anew(view)
+    drawn = ((moved >> 24) > 0) | ((fresh >> 24) > 0)
+    assert drawn.sum() > 1000
+    # the same pixels, but for the order of paths at crossings and joins of pieces
+    assert (moved != fresh)[drawn].mean() < 0.01
+
+
+def test_a_zoom_draws_the_raster_anew_stretching_the_old_until_then(view, ctx):
+    feed(ctx, seconds=20)
+    view.follow_check.setChecked(False)
+    view.set_visible_width(1.0, (0.35, 0.4))
+    view.refresh()
+    view.body.setVisible(False)
+    raster = view.raster
+    full, sx, paints = raster.stats["full"], raster.sx, raster.stats["paints"]
+    view.set_visible_width(0.5, (0.35, 0.4))
+    img = view.plot.grab().toImage()  # painted before the next refresh: the old image stretched
+    assert raster.stats["paints"] > paints and raster.sx == sx
+    assert has_colour(img, ROBOT_COLOUR)
+    view.refresh()
+    assert raster.stats["full"] == full + 1
+    assert raster.sx == pytest.approx(2 * sx, rel=1e-6)
+    assert raster.stats["full_ms"] > 0
+
+
+def test_off_screen_parts_are_drawn_over_the_next_frames(view, ctx):
+    feed(ctx, seconds=40)
+    view.follow_check.setChecked(False)
+    view.set_visible_width(0.6, (0.0, 0.5))
+    view.raster.BUDGET_S = 0.0  # nothing off the screen in this frame
+    view.refresh()
+    stats = view.render_stats()["raster"]
+    assert stats["pending"] > 0  # the paths' extent is on the image, most of it off the screen
+    shown = view.plot.viewport().grab().toImage()
+    view.finish_drawing()
+    view.plot.viewport().repaint()
+    assert view.plot.viewport().grab().toImage() == shown  # what is seen was complete
+    del view.raster.BUDGET_S
+    view.raster.invalidate()
+    view._dirty = True
+    frames = 0
+    while True:
+        view.refresh()  # no new rows: the work left brings the refresh back anyway
+        frames += 1
+        if not view.render_stats()["raster"]["pending"]:
+            break
+        assert frames < 200
+    n = view.render_stats()["refreshes"]
+    view.refresh()
+    assert view.render_stats()["refreshes"] == n  # all done: nothing brings it back
+
+
+def test_hiding_a_path_draws_the_raster_without_it(view, ctx):
+    feed(ctx, seconds=10)
+    view.fit_paths()
+    view.refresh()
+    view.finish_drawing()
+    full = view.raster.stats["full"]
+    view.set_path_visible(1, False)
+    view.refresh()
+    view.finish_drawing()
+    assert view.raster.stats["full"] == full + 1 and 1 not in view.raster.done
+    a = raster_array(view).astype(np.int64)
+    want = QColor(sensor_colour(1))
+    rgb = ((a >> 16) & 255, (a >> 8) & 255, a & 255)
+    assert not ((abs(rgb[0] - want.red()) + abs(rgb[1] - want.green())
+                 + abs(rgb[2] - want.blue()) < 30) & ((a >> 24) == 255)).any()
+
+
 # -- direction widgets -----------------------------------------------------------------------------
 
 
@@ -623,6 +850,7 @@ def test_an_hour_of_100hz_data_refreshes_cheaply(qtbot, qapp, capsys):
         view.follow_check.setChecked(follow)
         view.set_visible_width(width, (10.0, 10.0))
         view.refresh()
+        zoom_ms = view.render_stats()["raster"]["full_ms"]
         qapp.processEvents()
         refresh_ms, frame_ms = time_frames(view, ctx, qapp)
         t1 = time.perf_counter()
@@ -635,9 +863,17 @@ def test_an_hour_of_100hz_data_refreshes_cheaply(qtbot, qapp, capsys):
             f"{np.percentile(refresh_ms, 95):.2f} max {refresh_ms.max():.2f} ms; refresh + "
             f"repaint p50 {np.percentile(frame_ms, 50):.1f} p95 {np.percentile(frame_ms, 95):.1f}"
             f" max {frame_ms.max():.1f} ms; whole-widget repaint {grab_ms:.0f} ms; "
-            f"points {stats['points']['robot']} x 3, level {stats['levels']['robot']}"
+            f"points {stats['points']['robot']} x 3, level {stats['levels']['robot']}; "
+            f"zoom to it {zoom_ms:.0f} ms, raster {stats['raster']['size']} px"
         )
         if width >= 30:  # the whole path is in view: it starts and ends where the history does
             assert_path_from_history(view, "robot", hist, "x", "y")
+    memory = view.render_stats()["memory_mb"]
+    report.append(f"memory: decimators {memory['decimators']:.1f} MB, raster "
+                  f"{memory['raster']:.1f} MB")
+    # row numbers, 4 bytes, of ~4 x 360 000 kept points a path (2 mm a row: levels 0-2 keep
+    # all, then half, a quarter, ...), up to twice that while the arrays grow, and boxes
+    assert memory["decimators"] < 3 * 2 * 4 * 360_000 * (4 + 32 / PathDecimator.BOX) / 1e6
+    assert memory["raster"] <= _PathRaster.MAX_PIXELS * 4 / 1e6
     with capsys.disabled():
         print("\n" + "\n".join(report))
