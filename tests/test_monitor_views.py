@@ -130,7 +130,34 @@ def test_graph_curves_equal_the_history_window_in_mm(qtbot):
     _x, y = view.curves[(0, "disp", "y")].getOriginalDataset()
     assert 1.0 < np.median(np.abs(y)) < 3.0
     lo, hi = view.plots[(0, "disp")].viewRange()[0]
-    assert (lo, hi) == pytest.approx((t[-1] - 10.0, t[-1]))
+    assert (lo, hi) == pytest.approx((t[-1] - 10.0, t[-1] + 1.0))  # X_LEAD of the window ahead
+
+
+def test_graph_axes_move_only_when_the_data_reach_their_ends(qtbot):
+    ctx = make_ctx(30.0)
+    view = GraphsView(ctx)
+    qtbot.addWidget(view)
+    view.refresh()
+    plot = view.plots[(1, "speed")]
+    x_ranges, y_ranges = [], []
+    for _ in range(25):  # 2.5 s, 0.1 s a frame
+        more_replies(ctx, 10)
+        view.refresh()
+        t = ctx.session.history.column("t")
+        (x0, x1), (y0, y1) = plot.viewRange()
+        x_ranges.append((x0, x1))
+        y_ranges.append((y0, y1))
+        assert x1 - 1.0 - 1e-9 <= t[-1] <= x1  # the newest row in the lead at the end
+        assert x0 == pytest.approx(x1 - 11.0)
+        for axis in "xy":
+            cx, cy = view.curves[(1, "speed", axis)].getOriginalDataset()
+            assert cx[0] >= x0 and cx[-1] == t[-1]
+            i0 = int(np.searchsorted(t, x0))
+            np.testing.assert_array_equal(cx, t[i0:])  # every row from the range's start
+            assert y0 < cy.min() and cy.max() < y1  # the values in range, with room
+    # the time axis moved once a second (when the data reached its end), not every frame
+    assert 2 <= len(set(x_ranges)) <= 3
+    assert len(set(y_ranges)) <= 3
 
 
 def test_graph_window_length_is_respected(qtbot):
@@ -221,9 +248,9 @@ def test_graph_cost_does_not_grow_with_history_or_window(qtbot):
             times.append(time.perf_counter() - t0)
         t = hist.column("t")
         x, y = view.curves[(1, "speed", "y")].getOriginalDataset()
-        i0 = int(np.searchsorted(t, t[-1] - seconds))
-        if seconds == 10:  # every row of the window, nothing else
-            assert len(x) == len(t) - i0 <= 1001
+        i0 = int(np.searchsorted(t, view.plots[(1, "speed")].viewRange()[0][0]))
+        if seconds == 10:  # every row of the shown range (window and lead), nothing else
+            assert len(x) == len(t) - i0 <= 1101
             np.testing.assert_array_equal(y, hist.column("s1_vy")[i0:] * 1e3)
         else:  # 360 000 rows drawn as min/max of 256-row buckets, built up frame by frame
             assert bucket_size(len(t) - i0) == 256 and len(x) <= 2 * 1407 + 2 * 256

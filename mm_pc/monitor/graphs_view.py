@@ -7,6 +7,14 @@ with a binary search on t), so a redraw costs the same with a minute or an
 hour of history; a window of more than 4000 rows is drawn as the minimum
 and maximum of 1000-2000 buckets (spikes stay visible), kept from frame to
 frame so only newly completed buckets are computed.
+The axes are not moved with every frame: the time axis runs ``X_LEAD``
+(10 %) of the window ahead of the newest row and moves on only when the data
+reach its end (so the curves hold the window and up to the lead more), and
+a value axis changes only when the data leave it or fill less than
+``Y_SHRINK`` of it. Redrawing the axes' labels with every frame (and
+pyqtgraph's auto range, clipping and downsampling in Python) cost most of a
+frame: with an hour of history in the monitor window, frame p50 ~15 ->
+~6 ms, p95 ~20 -> ~9 ms.
 Paused, nothing is redrawn and the plots can be zoomed and panned; resuming
 jumps back to the live window.
 """
@@ -38,6 +46,13 @@ PLOTS = (
 AXIS_COLOURS = {"x": "#d62728", "y": "#1f77b4"}
 #: windows longer than 2 * MAX_BUCKETS rows are drawn min/max-decimated (a few px per bucket)
 MAX_BUCKETS = 2000
+#: the time axis runs this fraction of the window ahead of the newest row and moves only
+#: when the data reach its end (its labels are drawn again then, not with every frame)
+X_LEAD = 0.1
+#: the value axis is set from the data with room of this fraction of their span, and
+#: changed only when the data leave it or fill less than Y_SHRINK of it
+Y_PAD = 0.1
+Y_SHRINK = 0.4
 
 
 def bucket_size(rows: int, buckets: int = MAX_BUCKETS) -> int:
@@ -116,6 +131,8 @@ class GraphsView(QWidget):
         self._peaks: dict[str, PeakCache] = {}  # history column -> its bucket min/max
         self._rows_of: tuple = (None, 0)  # (history, dropped_rows) the caches belong to
         self._len = 0
+        self._x_range: tuple[float, float] | None = None  # time range shown (s)
+        self._y_ranges: dict[tuple[int, str], tuple[float, float]] = {}  # value range per plot
 
         self.window_box = QSpinBox()
         self.window_box.setRange(1, MAX_WINDOW_S)
@@ -164,10 +181,12 @@ class GraphsView(QWidget):
                 legend.setBrush(pg.mkBrush(255, 255, 255, 210))
                 for axis in ("x", "y"):
                     pen = pg.mkPen(AXIS_COLOURS[axis], width=1)
-                    curve = plot.plot([], [], pen=pen, name=f"{axis.upper()} ({unit})")
-                    curve.setClipToView(True)
-                    curve.setDownsampling(auto=True, method="peak")
+                    # no clipping or downsampling by pyqtgraph: the points are the window's
+                    # already (min/max buckets when long), and both cost with every frame
+                    curve = plot.plot([], [], pen=pen, name=f"{axis.upper()} ({unit})",
+                                      skipFiniteCheck=True)
                     self.curves[(k, key, axis)] = curve
+                plot.disableAutoRange()  # the ranges are set in refresh (rarely)
                 self.plots[(k, key)] = plot
         self._built_for = tuple(devices)
         self._apply_interaction()
@@ -205,9 +224,7 @@ class GraphsView(QWidget):
         self.pause_button.setText("Resume" if paused else "Pause")
         self._apply_interaction()
         if not paused:
-            for plot in self.plots.values():
-                plot.enableAutoRange(axis="y")
-            self._invalidate()
+            self._invalidate()  # back to the live window and value ranges
             self.refresh()
 
     def _apply_interaction(self) -> None:
@@ -216,6 +233,8 @@ class GraphsView(QWidget):
 
     def _invalidate(self, *_args) -> None:
         self._version = -1
+        self._x_range = None
+        self._y_ranges = {}
 
     def _on_reset(self) -> None:
         for cache in self._peaks.values():
@@ -242,18 +261,48 @@ class GraphsView(QWidget):
             for cache in self._peaks.values():
                 cache.clear()  # rows were dropped or cleared: bucket numbers moved
         self._rows_of, self._len = (hist, hist.dropped_rows), len(t)
-        rows = window_slice(t, self.window_s)
+        end = float(t[-1])
+        x0, _x1 = self._time_range(end)
+        rows = slice(int(np.searchsorted(t, x0, side="left")), len(t))
         size = bucket_size(rows.stop - rows.start)
         for k in range(len(self._built_for)):
             names = sensor_columns(k)
             for key, _title, fields, _unit in PLOTS:
+                lo, hi = np.inf, -np.inf
                 for axis, field in zip(("x", "y"), fields, strict=True):
                     cache = self._peaks.setdefault(names[field], PeakCache())
                     x, y = cache.window(t, hist.column(names[field]), rows.start, size)
-                    self.curves[(k, key, axis)].setData(x, y * 1e3)
-        end = float(t[-1])
-        for plot in self.plots.values():
-            plot.setXRange(end - self.window_s, end, padding=0.0)
+                    y = y * 1e3
+                    self.curves[(k, key, axis)].setData(x, y)
+                    finite = y[np.isfinite(y)]
+                    if len(finite):
+                        lo, hi = min(lo, float(finite.min())), max(hi, float(finite.max()))
+                self._set_value_range((k, key), lo, hi)
         shown = rows.stop - rows.start
         every = f", min/max of {size}-sample buckets" if size > 1 else ""
         self.note.setText(f"{shown} of {len(t)} samples in the window{every}, t = {end:.1f} s")
+
+    def _time_range(self, end: float) -> tuple[float, float]:
+        """The shown time range: ``window_s`` plus a lead of ``X_LEAD`` of it, moved on
+        only when the newest row ``end`` (s) passes its end (or the window changed)."""
+        lead = X_LEAD * self.window_s
+        rng = self._x_range
+        if rng is None or not rng[1] - lead - 1e-9 <= end <= rng[1]:
+            rng = self._x_range = (end - self.window_s, end + lead)
+            for plot in self.plots.values():
+                plot.setXRange(*rng, padding=0.0)
+        return rng
+
+    def _set_value_range(self, plot_key, lo: float, hi: float) -> None:
+        """Set a plot's value range to hold [lo, hi] with room, changed only when the data
+        leave the range or fill less than ``Y_SHRINK`` of it."""
+        if not lo <= hi:
+            return
+        span = max(hi - lo, 1e-3)
+        old = self._y_ranges.get(plot_key)
+        if old is not None and old[0] <= lo and hi <= old[1] and span >= Y_SHRINK * (
+                old[1] - old[0]):
+            return
+        rng = (lo - Y_PAD * span, hi + Y_PAD * span)
+        self._y_ranges[plot_key] = rng
+        self.plots[plot_key].setYRange(*rng, padding=0.0)
