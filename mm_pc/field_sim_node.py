@@ -43,7 +43,6 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PointStamped
 from nav_msgs.msg import Odometry as OdometryMsg
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-from rclpy.exceptions import NameValidationException, ParameterException
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus, Range
@@ -354,28 +353,18 @@ class FieldSimNode(Node):
         return True
 
 
+def _run(node: FieldSimNode, stop) -> None:
+    if not node.wait_for_listeners(stop) and not stop.is_set():
+        node.get_logger().warning(
+            f"fewer than {node.p['wait_for_subscribers']} subscribers after "
+            f"{node.p['wait_timeout']:g} s; replaying anyway"
+        )
+    if not stop.is_set() and node.replay(stop):
+        stop.wait(node.p["linger"])
+
+
 def main(argv: list[str] | None = None) -> int:
-    stop = ros_spin.init(argv)
-    node = None
-    code = 0
-    try:
-        node = FieldSimNode()
-        if not node.wait_for_listeners(stop) and not stop.is_set():
-            node.get_logger().warning(
-                f"fewer than {node.p['wait_for_subscribers']} subscribers after "
-                f"{node.p['wait_timeout']:g} s; replaying anyway"
-            )
-        if not stop.is_set() and node.replay(stop):
-            stop.wait(node.p["linger"])
-    except (ValueError, ParameterException, NameValidationException, OSError) as exc:
-        print(f"mm-field-sim: {exc}", file=sys.stderr)
-        code = 2
-    finally:
-        if node is not None:
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
-    return code
+    return ros_spin.run("mm-field-sim", FieldSimNode, _run, argv)
 
 
 if __name__ == "__main__":

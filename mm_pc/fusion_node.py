@@ -40,14 +40,12 @@ import time
 from dataclasses import replace
 
 import numpy as np
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, PoseStamped
 from nav_msgs.msg import Odometry as OdometryMsg
 from nav_msgs.msg import Path
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.clock import Clock, ClockType
-from rclpy.exceptions import NameValidationException, ParameterException
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu, NavSatFix, Range
@@ -587,39 +585,24 @@ def spin_fast(node: Node, stop) -> None:
     The default executor rebuilds its wait set (with every subscription's QoS
     event handlers) for each message: measured here at about 0.4 ms per
     message, which caps a 9-input node at a few thousand messages per second.
+    The EventsExecutor must only be used from this (the main) thread.
     """
     try:
         from rclpy.experimental import EventsExecutor
 
         executor = EventsExecutor()
     except ImportError:
-        ros_spin.spin_until(node, stop)
-        return
-    executor.add_node(node)
-    try:
-        while not stop.is_set() and rclpy.ok():
-            executor.spin_once(timeout_sec=0.1)
-    finally:
-        executor.shutdown()
+        executor = None
+    ros_spin.spin_until(node, stop, executor)
+
+
+def _run(node: FusionNode, stop) -> None:
+    spin_fast(node, stop)
+    node.get_logger().info(node.summary())
 
 
 def main(argv: list[str] | None = None) -> int:
-    stop = ros_spin.init(argv)
-    node = None
-    code = 0
-    try:
-        node = FusionNode()
-        spin_fast(node, stop)
-        node.get_logger().info(node.summary())
-    except (ValueError, ParameterException, NameValidationException, OSError) as exc:
-        print(f"mm-fusion: {exc}", file=sys.stderr)
-        code = 2
-    finally:
-        if node is not None:
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
-    return code
+    return ros_spin.run("mm-fusion", FusionNode, _run, argv)
 
 
 if __name__ == "__main__":

@@ -19,12 +19,10 @@ from __future__ import annotations
 import math
 import sys
 
-import rclpy
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry as OdometryMsg
 from nav_msgs.msg import Path
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 
 from mm_interfaces.srv import GetSensorData
@@ -223,22 +221,7 @@ class OdometryNode(Node):
 
 
 def main(argv: list[str] | None = None) -> int:
-    stop = ros_spin.init(argv)
-    node = None
-    code = 0
-    try:
-        node = OdometryNode()
-        ros_spin.spin_until(node, stop)
-    except (ValueError, ParameterException, OSError) as exc:
-        print(f"mm-odometry: {exc}", file=sys.stderr)
-        code = 2
-    finally:
-        ros_spin.stopping()
-        if node is not None:
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
-    return code
+    return ros_spin.run("mm-odometry", OdometryNode, ros_spin.spin_until, argv)
 
 
 if __name__ == "__main__":

@@ -5,11 +5,16 @@ from __future__ import annotations
 import signal
 import sys
 import threading
+from collections.abc import Callable
 
 import rclpy
+from rclpy.exceptions import NameValidationException, ParameterException
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
+
+#: errors of a node's set-up that mean "bad configuration": exit 2 with the message
+SETUP_ERRORS = (ValueError, ParameterException, NameValidationException, OSError)
 
 
 def init(argv: list[str] | None) -> threading.Event:
@@ -46,9 +51,48 @@ def stopping() -> None:
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
 
 
-def spin_until(node: Node, stop: threading.Event) -> None:
-    """Spin ``node`` until ``stop`` is set or the context shuts down (checked every 0.1 s)."""
-    executor = SingleThreadedExecutor()
+def spin_until(node: Node, stop: threading.Event, executor=None) -> None:
+    """Spin ``node`` until ``stop`` is set or the context shuts down (checked every 0.1 s).
+
+    ``executor``: the executor to use (default: a new SingleThreadedExecutor);
+    it is shut down on return.
+    """
+    executor = executor if executor is not None else SingleThreadedExecutor()
     executor.add_node(node)
-    while not stop.is_set() and rclpy.ok():
-        executor.spin_once(timeout_sec=0.1)
+    try:
+        while not stop.is_set() and rclpy.ok():
+            executor.spin_once(timeout_sec=0.1)
+    finally:
+        executor.shutdown()
+
+
+def run(
+    prog: str,
+    make_node: Callable[[], Node],
+    body: Callable[[Node, threading.Event], int | None],
+    argv: list[str] | None = None,
+    errors: tuple[type[BaseException], ...] = SETUP_ERRORS,
+) -> int:
+    """The ``main`` of a node: init, build, run ``body``, clean stop; the exit code.
+
+    A configuration error (``errors``) prints ``prog: message`` to stderr and
+    gives 2; ``body``'s return value (None = 0) otherwise. Ctrl-C and SIGTERM
+    end ``body`` through the stop event; the node is destroyed and rclpy shut
+    down whatever happened.
+    """
+    stop = init(argv)
+    node = None
+    code = 0
+    try:
+        node = make_node()
+        code = body(node, stop) or 0
+    except errors as exc:
+        print(f"{prog}: {exc}", file=sys.stderr)
+        code = 2
+    finally:
+        stopping()
+        if node is not None:
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+    return code
