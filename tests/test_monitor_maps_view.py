@@ -205,11 +205,11 @@ BAD_FIELDS = [
     ("cell", "abc", "cell size \\(m\\) must be a number"),
     ("cell", "0", "cell size \\(m\\) must be > 0"),
     ("cell", "-0.3", "cell size \\(m\\) must be > 0"),
-    ("cell", "inf", "must be finite"),
+    ("cell", "inf", "must be a finite number"),
     ("ny", "0", "rows ny must be 1..4000 cells"),
     ("ny", "2.5", "rows ny must be a whole number"),
     ("nx", "5000", "columns nx must be 1..4000 cells"),
-    ("x0", "nan", "origin x0 \\(m\\) must be finite"),
+    ("x0", "nan", "origin x0 \\(m\\) must be a finite number"),
     ("y0", "north", "origin y0 \\(m\\) must be a number"),
 ]
 

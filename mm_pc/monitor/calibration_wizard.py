@@ -41,10 +41,10 @@ from PySide6.QtWidgets import (
 
 from ..calibration import DEFAULT_MIN_DISTANCE_M, Calibration
 from .context import MonitorContext
+from .fields import ERROR_STYLE
 
 __all__ = ["CalibrationWizard", "parse_true_distance"]
 
-ERROR_STYLE = "color: #b00020"
 OK_STYLE = "color: #1b7a1b"
 PAGE_INTRO, PAGE_DRIVE, PAGE_DISTANCE, PAGE_RESULTS, PAGE_SAVE = range(5)
 

@@ -31,10 +31,10 @@ from PySide6.QtWidgets import (
 
 from ..filters import MAX_WINDOW, MIN_WINDOW, validate_window
 from .context import MonitorContext
+from .fields import ERROR_STYLE
 
 __all__ = ["FilterDialog", "parse_window"]
 
-ERROR_STYLE = "color: #b00020"
 
 
 def parse_window(text: str) -> int:

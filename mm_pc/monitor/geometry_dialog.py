@@ -45,22 +45,12 @@ from PySide6.QtWidgets import (
 
 from ..geometry import DEFAULT_GEOMETRY, RobotGeometry, SensorMount
 from .context import MonitorContext
+from .fields import ERROR_STYLE, parse_number
 
 __all__ = ["GeometryDialog", "geometry_from_yaml", "geometry_to_yaml", "parse_number"]
 
-ERROR_STYLE = "color: #b00020"
 YAML_VERSION = 1
 
-
-def parse_number(text: str, what: str) -> float:
-    """A finite number typed by the user; ValueError naming ``what`` otherwise."""
-    try:
-        v = float(text.strip())
-    except ValueError:
-        raise ValueError(f"{what} must be a number, got {text.strip()!r}") from None
-    if not math.isfinite(v):
-        raise ValueError(f"{what} must be a finite number, got {text.strip()!r}")
-    return v
 
 
 def geometry_to_yaml(geometry: RobotGeometry, sensor: int) -> str:

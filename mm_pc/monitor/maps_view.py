@@ -81,6 +81,7 @@ from ..coverage_map import (
     CoverageMap,
     UpdateResult,
 )
+from .fields import ERROR_STYLE, parse_number
 
 __all__ = [
     "FILLS",
@@ -133,7 +134,6 @@ CODE_PIXELS.flags.writeable = False
 PATH_COLOURS = {"truth": "#000000", "raw": "#ff7f0e", "fused": "#0050c8"}
 BEACON_COLOUR = "#7b2fbe"
 GPS_COLOUR = "#e6a800"
-ERROR_STYLE = "color: #b00020"
 _CIRCLE = np.linspace(0.0, 2.0 * math.pi, 73)
 
 
@@ -371,18 +371,9 @@ def _worker() -> concurrent.futures.ThreadPoolExecutor:
 # --- "New map…" ------------------------------------------------------------------------------
 
 
-def _parse_float(text: str, what: str) -> float:
-    try:
-        v = float(text.strip())
-    except ValueError:
-        raise ValueError(f"{what} must be a number, got {text!r}") from None
-    if not math.isfinite(v):
-        raise ValueError(f"{what} must be finite, got {text!r}")
-    return v
-
 
 def _parse_positive(text: str, what: str) -> float:
-    v = _parse_float(text, what)
+    v = parse_number(text, what)
     if v <= 0:
         raise ValueError(f"{what} must be > 0, got {text.strip()}")
     return v
@@ -496,13 +487,13 @@ class NewMapDialog(QDialog):
             "cell": (_parse_positive, "cell size (m)"),
             "ny": (_parse_cells, "rows ny"),
             "nx": (_parse_cells, "columns nx"),
-            "x0": (_parse_float, "origin x0 (m)"),
-            "y0": (_parse_float, "origin y0 (m)"),
+            "x0": (parse_number, "origin x0 (m)"),
+            "y0": (parse_number, "origin y0 (m)"),
         }
         if self.fill == "rectangle":
             parsers |= {
-                "rx": (_parse_float, "corner x (m)"),
-                "ry": (_parse_float, "corner y (m)"),
+                "rx": (parse_number, "corner x (m)"),
+                "ry": (parse_number, "corner y (m)"),
                 "rw": (_parse_positive, "width (m)"),
                 "rh": (_parse_positive, "height (m)"),
             }

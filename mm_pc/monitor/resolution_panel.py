@@ -19,11 +19,13 @@ from PySide6.QtWidgets import (
     QVBoxLayout,
 )
 
+from .fields import ERROR_STYLE
+
 __all__ = ["CPI_MAX", "CPI_MIN", "CPI_STEP", "ResolutionPanel", "validate_cpi"]
 
 CPI_MIN, CPI_MAX, CPI_STEP = 100, 6400, 100
 ALLOWED = f"allowed: {CPI_MIN}..{CPI_MAX} in steps of {CPI_STEP}"
-RED = "color: #b00020"
+RED = ERROR_STYLE
 
 
 def validate_cpi(value) -> int:
