@@ -379,7 +379,7 @@ class _Lines(QGraphicsItem):
         return self._x, self._y
 
     def set_pad(self, pad: float) -> None:
-        if pad != self.pad:
+        if abs(pad - self.pad) > 0.01 * pad:  # a zoom, not the last digits of a pan
             self.prepareGeometryChange()
             self.pad = pad
 
@@ -661,29 +661,25 @@ class _PathRaster(pg.GraphicsObject):
         self.stats["moves"] += 1
 
     def _work(self, paths, columns, view: Rect) -> None:
-        """Draw the queued areas: those in view at once, the rest within the time budget."""
+        """Draw the queued areas, in tiles: those meeting the view at once (whole: a sliver
+        costs as much as its tile), the rest nearest first within the time budget."""
         t0 = time.perf_counter()
+        tiles = [(t, upto) for r, upto in self.todo for t in _tiles(r, self.TILE_PX)]
         later = []
-        for r, upto in self.todo:
-            if _meets(r, view):
-                seen = (max(r[0], view[0]), min(r[1], view[1]), max(r[2], view[2]),
-                        min(r[3], view[3]))
-                self._draw_area(paths, columns, seen, upto)
-                later += [(part, upto) for part in _minus(r, seen)]
+        for tile, upto in tiles:
+            if _meets(tile, view):
+                self._draw_area(paths, columns, tile, upto)
             else:
-                later.append((r, upto))
+                later.append((tile, upto))
         if self.stats["full_ms"] < 0:
             self.stats["full_ms"] = (time.perf_counter() - t0) * 1e3
-        self.todo = []
-        while later:
-            r, upto = later.pop()
-            if time.perf_counter() - t0 > self.BUDGET_S:
-                self.todo = [*later, (r, upto)]
-                break
-            if r[1] - r[0] > self.TILE_PX or r[3] - r[2] > self.TILE_PX:
-                later += [(t, upto) for t in _tiles(r, self.TILE_PX)]
-                continue
-            self._draw_area(paths, columns, r, upto)
+        cu, cv = (view[0] + view[1]) / 2, (view[2] + view[3]) / 2
+        later.sort(key=lambda item: -abs((item[0][0] + item[0][1]) / 2 - cu)
+                   - abs((item[0][2] + item[0][3]) / 2 - cv))  # nearest last, popped first
+        while later and time.perf_counter() - t0 <= self.BUDGET_S:
+            tile, upto = later.pop()
+            self._draw_area(paths, columns, tile, upto)
+        self.todo = later
         self.stats["pending"] = len(self.todo)
 
     def finish(self, paths, columns) -> None:
