@@ -333,7 +333,8 @@ def test_menu_actions_ask_for_the_file_and_speed(qtbot, tmp_path, monkeypatch, r
         replay_mod.QFileDialog, "getOpenFileName", lambda *a, **k: (str(recording[0]), "")
     )
     monkeypatch.setattr(replay_mod.QInputDialog, "getItem", lambda *a, **k: ("max", True))
-    window.open_replay()  # File > Replay…
+    window.open_replay()  # File > Replay… (read in the background, then started)
+    qtbot.waitUntil(lambda: getattr(window, "replayer", None) is not None, timeout=10_000)
     replayer = window.replayer
     assert replayer.speed == math.inf
     with qtbot.waitSignal(replayer.finished, timeout=10_000):
@@ -341,6 +342,7 @@ def test_menu_actions_ask_for_the_file_and_speed(qtbot, tmp_path, monkeypatch, r
     assert window.ctx.session.stats.replies == len(recording[1])
     monkeypatch.setattr(replay_mod.QInputDialog, "getItem", lambda *a, **k: ("1x", False))
     window.open_replay()  # speed dialog cancelled: nothing starts
+    qtbot.wait(300)
     assert window.replayer is replayer
 
 
@@ -578,3 +580,28 @@ def test_recording_live_replies_from_the_node_and_replaying_them(qtbot, tmp_path
     fresh = make_window(qtbot, tmp_path)
     run_replay(qtbot, fresh, path, "max")
     assert_same_history(live, fresh.ctx.session)
+
+
+def test_a_recording_read_in_the_background_then_replays(qtbot, tmp_path):
+    """File > Replay reads on a worker thread; the window keeps running meanwhile."""
+    from mm_pc.monitor.context import MonitorConfig
+    from mm_pc.monitor.replay import load_in_background
+
+    path = tmp_path / "bg.mcap"
+    rec = McapRecorder(path)
+    for r in sim_replies("straight", 20, seconds=1.0):
+        rec.write_reply(r)
+    rec.close()
+    ctx = MonitorContext(MonitorSession(), None, MonitorConfig(calibration_file=tmp_path / "c"))
+    window = MainWindow(ctx)
+    qtbot.addWidget(window)
+    future = load_in_background(window, path, "max")
+    assert "reading bg.mcap" in window.statusBar().currentMessage()
+    qtbot.waitUntil(lambda: getattr(window, "replayer", None) is not None, timeout=10_000)
+    qtbot.waitUntil(lambda: window.replayer.done, timeout=10_000)
+    assert future.result()[0] == float("inf")
+    assert ctx.session.pose.x == pytest.approx(0.2, abs=1e-3)
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(b"not an mcap")
+    load_in_background(window, bad, 1.0)
+    qtbot.waitUntil(lambda: "replay:" in window.statusBar().currentMessage(), timeout=10_000)

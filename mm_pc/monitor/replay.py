@@ -22,6 +22,7 @@ was polling before; the replayed path stays on screen.
 
 from __future__ import annotations
 
+import concurrent.futures
 import math
 import time
 import warnings
@@ -214,19 +215,29 @@ def _reattach_bridge(ctx, polling: bool, connected: bool) -> None:
 # -- the window's File > Replay -----------------------------------------------------------------
 
 
+def load_recording(path: str | Path, speed=1.0) -> tuple[float, list]:
+    """(speed, replies) of a recording; ValueError saying what is wrong with either."""
+    return parse_speed(speed), read_replies(Path(path))
+
+
 def start_replay(window, path: str | Path, speed=1.0) -> Replayer | None:
     """Replay ``path`` into ``window`` at ``speed`` (1.0 = recorded pace, ``"max"``/inf).
 
+    Reads the file on the calling thread (the command line and tests);
+    File > Replay reads it in the background instead (:func:`open_replay`).
     Returns the running :class:`Replayer`, or None when the file or the speed
     is bad: then the reason is in the status bar and nothing changed.
     """
-    path = Path(path)
     try:
-        speed = parse_speed(speed)
-        replies = read_replies(path)
+        speed, replies = load_recording(path, speed)
     except ValueError as e:
         window.statusBar().showMessage(f"replay: {e}", 15000)
         return None
+    return begin_replay(window, Path(path), replies, speed)
+
+
+def begin_replay(window, path: Path, replies: list, speed: float) -> Replayer | None:
+    """Start replaying ``replies`` (read from ``path``); None (status bar says why) if unfit."""
     devices = next((tuple(r.id for r in rep.readings) for rep in replies if rep.readings), ())
     if not devices:
         window.statusBar().showMessage(f"replay: {path} holds no sensor readings", 15000)
@@ -261,8 +272,39 @@ def start_replay(window, path: str | Path, speed=1.0) -> Replayer | None:
     return replayer
 
 
-def open_replay(window) -> Replayer | None:
-    """File > Replay: choose a recording and a speed (1x, 2x, 5x, 10x, max), then replay."""
+def load_in_background(window, path: str | Path, speed) -> concurrent.futures.Future:
+    """Read the recording on a worker thread, then start it on the GUI thread.
+
+    An hour's recording takes tens of seconds to decode; the window stays
+    responsive meanwhile (the status bar says the file is being read).
+    """
+    path = Path(path)
+    pool = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="mm-replay-load")
+    future = pool.submit(load_recording, path, speed)
+    pool.shutdown(wait=False)
+    window.statusBar().showMessage(f"reading {path.name} …")
+    timer = QTimer(window)
+
+    def check() -> None:
+        if not future.done():
+            return
+        timer.stop()
+        timer.deleteLater()
+        try:
+            speed_, replies = future.result()
+        except ValueError as e:
+            window.statusBar().showMessage(f"replay: {e}", 15000)
+            return
+        begin_replay(window, path, replies, speed_)
+
+    timer.timeout.connect(check)
+    timer.start(100)
+    return future
+
+
+def open_replay(window) -> None:
+    """File > Replay: choose a recording and a speed (1x, 2x, 5x, 10x, max), then replay
+    (the file is read in the background)."""
     name, _ = QFileDialog.getOpenFileName(
         window, "Replay a recording", "", "MCAP recordings (*.mcap);;All files (*)"
     )
@@ -271,4 +313,5 @@ def open_replay(window) -> Replayer | None:
     choice, ok = QInputDialog.getItem(window, "Replay speed", "Speed", list(SPEEDS), 0, False)
     if not ok:
         return None
-    return start_replay(window, name, choice)
+    load_in_background(window, name, choice)
+    return None
