@@ -337,8 +337,7 @@ def test_menu_actions_ask_for_the_file_and_speed(qtbot, tmp_path, monkeypatch, r
     qtbot.waitUntil(lambda: getattr(window, "replayer", None) is not None, timeout=10_000)
     replayer = window.replayer
     assert replayer.speed == math.inf
-    with qtbot.waitSignal(replayer.finished, timeout=10_000):
-        pass
+    qtbot.waitUntil(lambda: replayer.done, timeout=10_000)
     assert window.ctx.session.stats.replies == len(recording[1])
     monkeypatch.setattr(replay_mod.QInputDialog, "getItem", lambda *a, **k: ("1x", False))
     window.open_replay()  # speed dialog cancelled: nothing starts
