@@ -661,22 +661,46 @@ def test_following_moves_the_raster_and_it_equals_one_drawn_anew(view, ctx):
     assert (moved != fresh)[drawn].mean() < 0.01
 
 
-def test_a_zoom_draws_the_raster_anew_stretching_the_old_until_then(view, ctx):
+def robot_pixels(view: MapView) -> int:
+    img = view.plot.viewport().grab().toImage().convertToFormat(QImage.Format.Format_RGB32)
+    a = np.frombuffer(img.constBits(), np.uint32).reshape(img.height(), -1).astype(np.int64)
+    want = QColor(ROBOT_COLOUR)
+    return int(((abs(((a >> 16) & 255) - want.red()) + abs(((a >> 8) & 255) - want.green())
+                 + abs((a & 255) - want.blue())) < 40).sum())
+
+
+def test_a_zoom_draws_the_raster_anew_over_frames_the_old_stretched_meanwhile(view, ctx):
     feed(ctx, seconds=20)
     view.follow_check.setChecked(False)
     view.set_visible_width(1.0, (0.35, 0.4))
     view.refresh()
     view.body.setVisible(False)
     raster = view.raster
+    raster.VISIBLE_BUDGET_S = 0.0  # one tile a refresh
     full, sx, paints = raster.stats["full"], raster.sx, raster.stats["paints"]
     view.set_visible_width(0.5, (0.35, 0.4))
-    img = view.plot.grab().toImage()  # painted before the next refresh: the old image stretched
-    assert raster.stats["paints"] > paints and raster.sx == sx
-    assert has_colour(img, ROBOT_COLOUR)
+    before_sync = robot_pixels(view)  # painted before the next refresh: the old image stretched
+    assert raster.stats["paints"] > paints and raster.sx == sx and before_sync > 200
     view.refresh()
     assert raster.stats["full"] == full + 1
     assert raster.sx == pytest.approx(2 * sx, rel=1e-6)
-    assert raster.stats["full_ms"] > 0
+    in_view = raster.stats["pending_in_view"]
+    assert in_view > 2 and raster.preview is not None and len(raster.veiled) == in_view
+    during = robot_pixels(view)  # the tiles not drawn yet show the old image stretched
+    frames = 1
+    while raster.stats["pending_in_view"]:
+        left = raster.stats["pending_in_view"]
+        view.refresh()  # no new rows: the tiles left in view bring the refresh back
+        frames += 1
+        assert raster.stats["pending_in_view"] in (left, left - 1)  # a step a refresh
+        assert frames < 10 * in_view
+    assert raster.preview is None and raster.veiled == []
+    assert raster.stats["full_frames"] == frames and raster.stats["full_ms"] > 0
+    done = robot_pixels(view)
+    assert during > 0.7 * done  # (one tile drawn of many: the rest was the stand-in)
+    view.finish_drawing()
+    view.plot.viewport().repaint()
+    assert robot_pixels(view) == done  # what is seen was complete
 
 
 def test_off_screen_parts_are_drawn_over_the_next_frames(view, ctx):
@@ -714,6 +738,8 @@ def test_hiding_a_path_draws_the_raster_without_it(view, ctx):
     full = view.raster.stats["full"]
     view.set_path_visible(1, False)
     view.refresh()
+    # not drawn over frames with the old image (it has the path) standing in
+    assert view.raster.preview is None and view.raster.stats["pending_in_view"] == 0
     view.finish_drawing()
     assert view.raster.stats["full"] == full + 1 and 1 not in view.raster.done
     a = raster_array(view).astype(np.int64)
@@ -850,7 +876,10 @@ def test_an_hour_of_100hz_data_refreshes_cheaply(qtbot, qapp, capsys):
         view.follow_check.setChecked(follow)
         view.set_visible_width(width, (10.0, 10.0))
         view.refresh()
+        while view.render_stats()["raster"]["pending_in_view"]:
+            view.refresh()
         zoom_ms = view.render_stats()["raster"]["full_ms"]
+        zoom_frames = view.render_stats()["raster"]["full_frames"]
         qapp.processEvents()
         refresh_ms, frame_ms = time_frames(view, ctx, qapp)
         t1 = time.perf_counter()
@@ -864,7 +893,8 @@ def test_an_hour_of_100hz_data_refreshes_cheaply(qtbot, qapp, capsys):
             f"repaint p50 {np.percentile(frame_ms, 50):.1f} p95 {np.percentile(frame_ms, 95):.1f}"
             f" max {frame_ms.max():.1f} ms; whole-widget repaint {grab_ms:.0f} ms; "
             f"points {stats['points']['robot']} x 3, level {stats['levels']['robot']}; "
-            f"zoom to it {zoom_ms:.0f} ms, raster {stats['raster']['size']} px"
+            f"zoom to it {zoom_ms:.0f} ms in {zoom_frames} refreshes, raster "
+            f"{stats['raster']['size']} px"
         )
         if width >= 30:  # the whole path is in view: it starts and ends where the history does
             assert_path_from_history(view, "robot", hist, "x", "y")

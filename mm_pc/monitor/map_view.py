@@ -475,6 +475,22 @@ def _tiles(r: Rect, size: int) -> list[Rect]:
             for v in range(r[2], r[3], size) for u in range(r[0], r[1], size)]
 
 
+class _Area:
+    """Drawing the segments near grid rect ``rect`` of the kept points below
+    ``upto[key]``, resumable: path ``k`` of the drawing order, its polylines
+    (``rows``, ``connect`` from :meth:`PathDecimator.runs_in`) drawn up to ``s``."""
+
+    def __init__(self, rect: Rect, upto: dict) -> None:
+        self.rect, self.upto = rect, upto
+        self.k = self.s = 0
+        self.rows: np.ndarray | None = None
+        self.connect: np.ndarray | None = None
+
+    @property
+    def fresh(self) -> bool:
+        return self.k == 0 and self.rows is None
+
+
 class _PathRaster(pg.GraphicsObject):
     """The paths up to their newest kept points, as one image in screen pixels.
 
@@ -493,18 +509,23 @@ class _PathRaster(pg.GraphicsObject):
       uncovered are drawn from the segments near them
       (:meth:`PathDecimator.runs_in`) -- off the screen, so over the
       following frames, at most ``BUDGET_S`` per refresh;
-    * a zoom, a resize, a path shown or hidden, the paths cleared: drawn anew,
-      the visible part at once (for an hour of laps over each other at 1 m
-      width: ~0.2 s), the rest over the following frames.
+    * a zoom or a resize: drawn anew, the visible part nearest the centre
+      first, ``VISIBLE_BUDGET_S`` per refresh, the old image stretched where
+      the new one is not drawn yet (an hour of laps over each other at 1 m
+      width: ~0.2 s of drawing, so ~20 frames); the rest over later frames;
+    * a path shown or hidden, the paths cleared: drawn anew, the visible part
+      at once (nothing else would be right to show).
 
     Paths are drawn in the order given (the robot last); segments added later
     are drawn over older ones of other paths.
     """
 
     MARGIN_PX = 128
-    MAX_PIXELS = 4_000_000  # 16 MB
+    MAX_PIXELS = 4_000_000  # 16 MB (a second, stretched, while a zoom is drawn)
     BUDGET_S = 0.004
+    VISIBLE_BUDGET_S = 0.008
     TILE_PX = 256
+    STEP_POINTS = 16_384  # drawn at once at most (a time budget is checked between steps)
 
     def __init__(self) -> None:
         super().__init__()
@@ -519,10 +540,15 @@ class _PathRaster(pg.GraphicsObject):
         self.level = 0
         self.keys: tuple = ()  # paths drawn, in drawing order
         self.done: dict = {}  # path key -> kept points drawn (at ``level``)
-        self.todo: list[tuple[Rect, dict]] = []  # grid rects still to draw, points below upto
+        self.todo: list[_Area] = []  # areas still to draw
         self.stale = True
+        # the image before a zoom (image, sx, sy, ox, oy), shown stretched under the tiles
+        # in view not drawn yet (``veiled``, odom rects)
+        self.preview: tuple | None = None
+        self.veiled: list[QRectF] = []
+        self._drawing_view = False  # the view's tiles after a new layout are not all drawn
         self.stats = {"full": 0, "moves": 0, "commits": 0, "tiles": 0, "paints": 0,
-                      "full_ms": 0.0, "pending": 0}
+                      "full_ms": 0.0, "full_frames": 0, "pending": 0, "pending_in_view": 0}
 
     # -- geometry -------------------------------------------------------------------------
 
@@ -579,7 +605,9 @@ class _PathRaster(pg.GraphicsObject):
         same_scale = abs(sx / self.sx - 1) < 1e-6 and abs(sy / self.sy - 1) < 1e-6
         if (self.stale or self.image is None or not same_scale or keys != self.keys
                 or level != self.level or dpr != self.dpr or view_px != self.view_size):
-            self._layout(paths, level, transform, view_px, dpr)
+            # the old image may stand in for a zoom or resize; not for other paths
+            keep = not self.stale and keys == self.keys and dpr == self.dpr
+            self._layout(paths, level, transform, view_px, dpr, keep)
         view = self._view_rect(transform)
         m = self.MARGIN_PX // 2
         r = self.rect
@@ -611,8 +639,13 @@ class _PathRaster(pg.GraphicsObject):
                 r = big
         return r
 
-    def _layout(self, paths, level, transform, view_px, dpr) -> None:
-        """A new grid at the view box's current pixels; everything to be drawn anew."""
+    def _layout(self, paths, level, transform, view_px, dpr, keep: bool) -> None:
+        """A new grid at the view box's current pixels; everything to be drawn anew.
+        ``keep``: the old image, if complete in view, stands in until then."""
+        if not keep:
+            self.preview = None
+        elif self.image is not None and not self.veiled:
+            self.preview = (self.image, self.sx, self.sy, self.ox, self.oy)
         self.sx, self.sy = transform.m11(), transform.m22()
         self.dx0, self.dy0 = transform.dx(), transform.dy()
         self.gx, self.gy = -self.dx0 / self.sx, -self.dy0 / self.sy  # grid (0, 0) = view corner
@@ -621,10 +654,12 @@ class _PathRaster(pg.GraphicsObject):
         self.done = {p.key: p.decimator.level_size(level) for p in paths}
         self.prepareGeometryChange()
         self.image, self.rect = None, (0, 0, 0, 0)
-        self.todo = []
+        self.todo, self.veiled = [], []
         self.stale = False
         self.stats["full"] += 1
-        self.stats["full_ms"] = -1.0  # measured when the visible part is drawn
+        self.stats["full_ms"] = 0.0  # drawing the visible part, over the frames it takes
+        self.stats["full_frames"] = 0
+        self._drawing_view = True
 
     def _move(self, new: Rect) -> None:
         """Make the image cover grid rect ``new``: pixels inside both are kept, the rest
@@ -653,57 +688,91 @@ class _PathRaster(pg.GraphicsObject):
             self.image = image
         self.prepareGeometryChange()
         self.rect = new
-        kept = [(r, upto) for r, upto in self.todo if _meets(r, new)]
-        self.todo = [((max(r[0], new[0]), min(r[1], new[1]), max(r[2], new[2]),
-                       min(r[3], new[3])), upto) for r, upto in kept]
-        self.todo += [(r, dict(self.done)) for r in _minus(new, old)]
+        self.todo = [a for a in self.todo if _meets(a.rect, new)]
+        for a in self.todo:
+            a.rect = (max(a.rect[0], new[0]), min(a.rect[1], new[1]), max(a.rect[2], new[2]),
+                      min(a.rect[3], new[3]))
+        self.todo += [_Area(r, dict(self.done)) for r in _minus(new, old)]
         self.update()
         self.stats["moves"] += 1
 
     def _work(self, paths, columns, view: Rect) -> None:
-        """Draw the queued areas, in tiles: those meeting the view at once (whole: a sliver
-        costs as much as its tile), the rest nearest first within the time budget."""
+        """Draw the queued areas in tiles, nearest the view's centre first: those meeting
+        the view (whole: a sliver costs as much as its tile) at once, or within
+        ``VISIBLE_BUDGET_S`` while the old image stands in; then the rest within
+        ``BUDGET_S``. At least one step is drawn per call."""
         t0 = time.perf_counter()
-        tiles = [(t, upto) for r, upto in self.todo for t in _tiles(r, self.TILE_PX)]
-        later = []
-        for tile, upto in tiles:
-            if _meets(tile, view):
-                self._draw_area(paths, columns, tile, upto)
-            else:
-                later.append((tile, upto))
-        if self.stats["full_ms"] < 0:
-            self.stats["full_ms"] = (time.perf_counter() - t0) * 1e3
         cu, cv = (view[0] + view[1]) / 2, (view[2] + view[3]) / 2
-        later.sort(key=lambda item: -abs((item[0][0] + item[0][1]) / 2 - cu)
-                   - abs((item[0][2] + item[0][3]) / 2 - cv))  # nearest last, popped first
-        while later and time.perf_counter() - t0 <= self.BUDGET_S:
-            tile, upto = later.pop()
-            self._draw_area(paths, columns, tile, upto)
-        self.todo = later
+        areas = []
+        for a in self.todo:
+            if a.fresh and (a.rect[1] - a.rect[0] > self.TILE_PX
+                            or a.rect[3] - a.rect[2] > self.TILE_PX):
+                areas += [_Area(t, a.upto) for t in _tiles(a.rect, self.TILE_PX)]
+            else:
+                areas.append(a)
+        areas.sort(key=lambda a: -abs((a.rect[0] + a.rect[1]) / 2 - cu)
+                   - abs((a.rect[2] + a.rect[3]) / 2 - cv))  # nearest last: popped first
+        seen = [a for a in areas if _meets(a.rect, view)]
+        later = [a for a in areas if not _meets(a.rect, view)]
+        budget = self.VISIBLE_BUDGET_S if self.preview is not None else math.inf
+        first = True
+        while seen and (first or time.perf_counter() - t0 <= budget):
+            first = False
+            if self._draw_area(seen[-1], paths, columns, t0 + budget):
+                seen.pop()
+        if self._drawing_view:
+            self.stats["full_ms"] += (time.perf_counter() - t0) * 1e3
+            self.stats["full_frames"] += 1
+            self._drawing_view = bool(seen)
+        if not seen:
+            self.preview = None
+            while later and time.perf_counter() - t0 <= self.BUDGET_S:
+                if self._draw_area(later[-1], paths, columns, t0 + self.BUDGET_S):
+                    later.pop()
+        self.todo = later + seen
+        self.veiled = [QRectF(*self._odom_box((a.rect[0] - self.rect[0], a.rect[1] - self.rect[0],
+                                               a.rect[2] - self.rect[2], a.rect[3] - self.rect[2]),
+                                              0.0)) for a in seen]
         self.stats["pending"] = len(self.todo)
+        self.stats["pending_in_view"] = len(seen)
 
     def finish(self, paths, columns) -> None:
         """Draw every queued area now (tests, screenshots)."""
-        for r, upto in self.todo:
-            self._draw_area(paths, columns, r, upto)
-        self.todo = []
-        self.stats["pending"] = 0
+        for a in self.todo:
+            self._draw_area(a, paths, columns, math.inf)
+        self.todo, self.veiled, self.preview = [], [], None
+        self.stats["pending"] = self.stats["pending_in_view"] = 0
 
-    def _draw_area(self, paths, columns, r: Rect, upto: dict) -> None:
-        """Draw, clipped to grid rect ``r``, the segments near it of the kept points
-        below ``upto[key]``."""
-        area = self.data_rect(r, pad_px=4.0)
-        u0, v0 = r[0] - self.rect[0], r[2] - self.rect[2]
-        clip = (u0, u0 + r[1] - r[0], v0, v0 + r[3] - r[2])
+    def _draw_area(self, a: _Area, paths, columns, deadline: float) -> bool:
+        """Draw area ``a``, clipped to its rect, in steps of ``STEP_POINTS`` until it is
+        done (True) or the clock passes ``deadline`` (s, perf_counter; one step at least)."""
+        area = self.data_rect(a.rect, pad_px=4.0)
+        u0, v0 = a.rect[0] - self.rect[0], a.rect[2] - self.rect[2]
+        clip = (u0, u0 + a.rect[1] - a.rect[0], v0, v0 + a.rect[3] - a.rect[2])
         painter = QPainter(self.image)
         painter.setClipRect(QRectF(clip[0], clip[2], clip[1] - clip[0], clip[3] - clip[2]))
-        for path in paths:
-            rows, connect = path.decimator.runs_in(self.level, area, 0, upto[path.key])
-            self._stroke(painter, path.pen, columns[path.key], rows, connect,
+        while a.k < len(paths):
+            path = paths[a.k]
+            if a.rows is None:
+                a.rows, a.connect = path.decimator.runs_in(self.level, area, 0,
+                                                           a.upto[path.key])
+            if a.s + 1 >= len(a.rows):  # this path is done here: the next
+                a.k, a.s, a.rows, a.connect = a.k + 1, 0, None, None
+                continue
+            end = min(a.s + self.STEP_POINTS, len(a.rows) - 1)
+            connect = a.connect[a.s : end + 1].copy()  # to point ``end``: the joining segment
+            connect[-1] = False
+            self._stroke(painter, path.pen, columns[path.key], a.rows[a.s : end + 1], connect,
                          (clip[0] - 4.0, clip[1] + 4.0, clip[2] - 4.0, clip[3] + 4.0))
+            a.s = end
+            if time.perf_counter() > deadline:
+                break
         painter.end()
         self.update(QRectF(*self._odom_box(clip, 0.0)))
+        if a.k < len(paths):
+            return False
         self.stats["tiles"] += 1
+        return True
 
     def _odom_box(self, px: tuple, pad: float) -> tuple[float, float, float, float]:
         """Image pixels (u0, u1, v0, v1) as (x, y, width, height) in odom (m), for update()."""
@@ -751,6 +820,16 @@ class _PathRaster(pg.GraphicsObject):
             return
         self.stats["paints"] += 1
         t = painter.transform()  # odom -> device
+        if self.preview is not None and self.veiled:
+            image, sx, sy, ox, oy = self.preview
+            veil = QPainterPath()
+            for r in self.veiled:
+                veil.addRect(r)
+            painter.save()
+            painter.setClipPath(veil, Qt.ClipOperation.IntersectClip)
+            painter.setTransform(QTransform(1 / sx, 0, 0, 1 / sy, ox, oy) * t)
+            painter.drawImage(QPointF(0, 0), image)
+            painter.restore()
         to_image = QTransform(1 / self.sx, 0, 0, 1 / self.sy, self.ox, self.oy) * t
         if (abs(to_image.m11() - 1) < 1e-6 and abs(to_image.m22() - 1) < 1e-6
                 and to_image.m12() == 0 and to_image.m21() == 0):
