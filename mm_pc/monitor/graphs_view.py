@@ -187,6 +187,8 @@ class GraphsView(QWidget):
                                       skipFiniteCheck=True)
                     self.curves[(k, key, axis)] = curve
                 plot.disableAutoRange()  # the ranges are set in refresh (rarely)
+                if row < len(PLOTS) - 1:  # one time axis per column, under its last plot:
+                    plot.hideAxis("bottom")  # the axes' labels are what a range step costs
                 self.plots[(k, key)] = plot
         self._built_for = tuple(devices)
         self._apply_interaction()
