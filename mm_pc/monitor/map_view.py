@@ -20,16 +20,19 @@ pyqtgraph as they are nor drawn again per frame:
   image in screen pixels (the view, a margin, and the paths' whole extent
   while that is under 4 Mpx). A repaint is a blit of it; new points are drawn
   onto it; a pan moves it and draws only the strips uncovered (off the
-  screen, over the following frames); a zoom draws it anew.
+  screen, over the following frames); a zoom draws it anew over a few
+  frames, the old image stretched meanwhile.
 * one light line per path joins the image's last point to the newest row.
 
 Measured with an hour of figure-eight laps at 100 Hz (360 000 rows x 3
 paths), following the robot 1 m wide, in the monitor window (software
-rendering, 2 cores): frame (refresh + repaint) p50 ~6.5 ms, p95 ~10 ms
-(before: every finished chunk of every lap was a curve drawn again with
-each repaint, p95 ~260 ms); a zoom there draws ~0.2 s; the decimators
-hold ~38 MB (int32 row numbers, were float64 points: +175 MB in all), the
-image ~12 MB.
+rendering, 2 cores, ``mm-bench gui``): Map frame p95 ~15-18 ms with a live
+node, ~9 ms without (before: every finished chunk of every lap was a curve
+drawn again with each repaint, p95 ~235-410 ms); the first show takes the
+hour in over ~40 frames (~1 s); a zoom there draws ~0.2 s over ~17 frames
+of <= ~16 ms. Memory: the decimators ~38 MB (int32 row numbers, were
+float64 points), the image <= 16 MB (two during a zoom): the Map tab's
+first show adds ~70 MB, was ~190 MB.
 """
 
 from __future__ import annotations
