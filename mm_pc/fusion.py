@@ -370,8 +370,9 @@ class PoseEKF:
         x, y, yaw = (float(v) for v in self._s)
         # Same operation order as mm_pc.odometry's arc step, so noise-free runs agree exactly.
         yaw_end = yaw + c
-        heading = yaw_end - c / 2
-        k = math.sin(c / 2) / (c / 2) if c != 0.0 else 1.0
+        h = c / 2
+        heading = yaw_end - h
+        k = math.sin(h) / h if h != 0.0 else 1.0  # h, not c: a subnormal c halves to 0
         _, dk = _sinc_half(c)
         cm, sm = math.cos(heading), math.sin(heading)
         ex, ey = a * cm - b * sm, a * sm + b * cm

@@ -147,8 +147,9 @@ def _arc_step(pose, a: float, b: float, c: float) -> tuple[float, float, float]:
     """One :func:`arc_poses` step in plain floats."""
     x, y, yaw = pose
     yaw_end = yaw + c
-    heading = yaw_end - c / 2
-    k = math.sin(c / 2) / (c / 2) if c != 0.0 else 1.0
+    h = c / 2
+    heading = yaw_end - h
+    k = math.sin(h) / h if h != 0.0 else 1.0  # h, not c: a subnormal c halves to 0
     ca, sa = math.cos(heading), math.sin(heading)
     return x + k * (a * ca - b * sa), y + k * (a * sa + b * ca), yaw_end
 

@@ -548,3 +548,10 @@ def test_gps_inflation_is_the_gauss_markov_factor():
 def test_sensor_mount_used_by_the_simulation_is_off_the_axle():
     # the exact method needs a sensor off the axle line (sy != 0)
     assert isinstance(DEFAULT_MOUNTS[0], SensorMount) and DEFAULT_MOUNTS[0].forward != 0
+
+
+def test_predict_with_a_subnormal_turn():
+    """Hypothesis found c = 5e-324, whose half is 0.0 (a division by zero before)."""
+    ekf = PoseEKF()
+    ekf.predict(0.5, 0.0, 5e-324)
+    assert ekf.pose.x == 0.5 and ekf.pose.yaw == 5e-324

@@ -357,3 +357,11 @@ def test_integrate_refuses_bad_arrays_and_changes_nothing():
         with pytest.raises(ValueError, match=match):
             odo.integrate(dt, d)
         assert odo.pose == before
+
+
+def test_a_subnormal_turn_is_a_straight_step_not_a_division_by_zero():
+    """c = 5e-324 halves to 0.0: sinc must be taken of the half angle (found by hypothesis)."""
+    from mm_pc.odometry import _arc_step
+
+    x, y, yaw = _arc_step((0.0, 0.0, 0.0), 1.0, 0.0, 5e-324)
+    assert (x, yaw) == (1.0, 5e-324)
