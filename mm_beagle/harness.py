@@ -54,6 +54,17 @@ def node_command(params: dict[str, object], namespace: str = "") -> list[str]:
     return cmd
 
 
+def _stop_with_parent() -> None:
+    """In the child before exec: SIGINT when the parent dies (PR_SET_PDEATHSIG, Linux).
+
+    A test run or demo that is killed (or aborts) then leaves no node running
+    in the background; SIGINT gives the node its clean shutdown.
+    """
+    import ctypes
+
+    ctypes.CDLL(None).prctl(1, signal.SIGINT, 0, 0, 0)  # PR_SET_PDEATHSIG
+
+
 @contextmanager
 def beagle_process(
     params: dict[str, object], env: dict[str, str] | None = None, log_path: str | None = None
@@ -61,7 +72,11 @@ def beagle_process(
     """mm-beagle in a subprocess; stopped with SIGINT (then SIGKILL) on exit."""
     out = open(log_path, "w") if log_path else subprocess.DEVNULL  # noqa: SIM115
     proc = subprocess.Popen(
-        node_command(params), env=env or isolated_ros_env(), stdout=out, stderr=subprocess.STDOUT
+        node_command(params),
+        env=env or isolated_ros_env(),
+        stdout=out,
+        stderr=subprocess.STDOUT,
+        preexec_fn=_stop_with_parent if sys.platform.startswith("linux") else None,
     )
     try:
         yield proc

@@ -338,3 +338,27 @@ def test_ctrl_c_at_any_moment_stops_the_node(delay):
     finally:
         if proc.poll() is None:
             proc.kill()
+
+
+def test_a_node_started_by_the_harness_stops_when_its_parent_dies():
+    """A killed test run or demo must not leave mm-beagle running (PR_SET_PDEATHSIG)."""
+    script = (
+        "import os, time\n"
+        "from mm_beagle.harness import beagle_process\n"
+        "with beagle_process({'backend': 'sim'}) as p:\n"
+        "    print(p.pid, flush=True)\n"
+        "    time.sleep(2)\n"
+        "    os._exit(1)\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=60
+    )
+    pid = int(out.stdout.split()[0])
+    try:
+        proc = psutil.Process(pid)
+        proc.wait(15)  # init reaps it once it has stopped
+    except psutil.NoSuchProcess:
+        pass
+    except psutil.TimeoutExpired:
+        proc.kill()
+        pytest.fail(f"mm-beagle (pid {pid}) outlived its parent")
