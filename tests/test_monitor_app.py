@@ -174,28 +174,3 @@ def test_bad_command_line_exits_2_with_a_message(args, message):
     assert out.returncode == 2
     assert message in out.stderr
 
-
-def test_stop_replay_ends_a_running_replay(qtbot, tmp_path):
-    from mm_pc.monitor.recording import McapRecorder
-    from mm_pc.monitor.replay import start_replay
-    from mm_pc.monitor.sim_feed import sim_replies
-
-    path = tmp_path / "run.mcap"
-    rec = McapRecorder(path)
-    for r in sim_replies("straight", 20, seconds=3.0):
-        rec.write_reply(r)
-    rec.close()
-    ctx = MonitorContext(MonitorSession(), None, MonitorConfig(calibration_file=tmp_path / "c"))
-    window = MainWindow(ctx)
-    qtbot.addWidget(window)
-    window.stop_replay()
-    assert "no replay is running" in window.statusBar().currentMessage()
-    replayer = start_replay(window, path, speed=1.0)
-    assert replayer is not None and not replayer.done
-    qtbot.wait(300)
-    window.stop_replay()
-    assert replayer.done
-    used = ctx.session.stats.used
-    assert 0 < used < 60  # stopped part-way through the 3 s at 20 Hz
-    qtbot.wait(300)
-    assert ctx.session.stats.used == used

@@ -76,6 +76,15 @@ def odd_reply() -> Reply:
     return Reply(readings, received_s=12345.678901234, rtt_s=0.00123)
 
 
+def write_straight_run(path, seconds: float):
+    """A recording of a straight run at 20 Hz, from the simulator."""
+    rec = McapRecorder(path)
+    for r in sim_replies("straight", 20, seconds=seconds):
+        rec.write_reply(r)
+    rec.close()
+    return path
+
+
 def make_window(qtbot, tmp_path, bridge=None) -> MainWindow:
     config = MonitorConfig(rate_hz=100.0, calibration_file=tmp_path / "cal.yaml")
     window = MainWindow(MonitorContext(MonitorSession(), bridge, config))
@@ -583,17 +592,11 @@ def test_recording_live_replies_from_the_node_and_replaying_them(qtbot, tmp_path
 
 def test_a_recording_read_in_the_background_then_replays(qtbot, tmp_path):
     """File > Replay reads on a worker thread; the window keeps running meanwhile."""
-    from mm_pc.monitor.context import MonitorConfig
     from mm_pc.monitor.replay import load_in_background
 
-    path = tmp_path / "bg.mcap"
-    rec = McapRecorder(path)
-    for r in sim_replies("straight", 20, seconds=1.0):
-        rec.write_reply(r)
-    rec.close()
-    ctx = MonitorContext(MonitorSession(), None, MonitorConfig(calibration_file=tmp_path / "c"))
-    window = MainWindow(ctx)
-    qtbot.addWidget(window)
+    path = write_straight_run(tmp_path / "bg.mcap", 1.0)
+    window = make_window(qtbot, tmp_path)
+    ctx = window.ctx
     future = load_in_background(window, path, "max")
     assert "reading bg.mcap" in window.statusBar().currentMessage()
     qtbot.waitUntil(lambda: getattr(window, "replayer", None) is not None, timeout=10_000)
@@ -604,3 +607,19 @@ def test_a_recording_read_in_the_background_then_replays(qtbot, tmp_path):
     bad.write_bytes(b"not an mcap")
     load_in_background(window, bad, 1.0)
     qtbot.waitUntil(lambda: "replay:" in window.statusBar().currentMessage(), timeout=10_000)
+
+
+def test_stop_replay_ends_a_running_replay(qtbot, tmp_path):
+    path = write_straight_run(tmp_path / "run.mcap", 3.0)
+    window = make_window(qtbot, tmp_path)
+    window.stop_replay()
+    assert "no replay is running" in window.statusBar().currentMessage()
+    replayer = start_replay(window, path, speed=1.0)
+    assert replayer is not None and not replayer.done
+    qtbot.wait(300)
+    window.stop_replay()
+    assert replayer.done
+    used = window.ctx.session.stats.used
+    assert 0 < used < 60  # stopped part-way through the 3 s at 20 Hz
+    qtbot.wait(300)
+    assert window.ctx.session.stats.used == used
