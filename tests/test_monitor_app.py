@@ -174,3 +174,50 @@ def test_bad_command_line_exits_2_with_a_message(args, message):
     assert out.returncode == 2
     assert message in out.stderr
 
+
+
+def test_a_call_without_answer_fails_once_and_its_late_reply_is_ignored(qtbot):
+    """A node that answers a settings read only after 1.5 s: the monitor reports the timeout
+    next to the request and ignores the late reply (no second, contradicting signal)."""
+    import threading
+
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+
+    from mm_interfaces.srv import GetSensorSettings
+
+    ctx = Context()
+    rclpy.init(context=ctx)
+    server = rclpy.create_node("slow_beagle", namespace="/slow", context=ctx)
+
+    def slow(req, res):
+        time.sleep(1.5)
+        res.success = True
+        res.settings.spi_device = req.id
+        return res
+
+    server.create_service(GetSensorSettings, "/slow/mm_beagle/get_sensor_settings", slow)
+    executor = SingleThreadedExecutor(context=ctx)
+    executor.add_node(server)
+    spin = threading.Thread(target=executor.spin, daemon=True)
+    spin.start()
+    bridge = RosBridge("/slow/mm_beagle", 15.0, node_name="mm_monitor_slow", timeout_s=0.2)
+    failed, received = [], []
+    bridge.settings_failed.connect(lambda dev, msg: failed.append((dev, msg)))
+    bridge.settings_received.connect(lambda dev, msg: received.append(dev))
+    bridge.start()
+    try:
+        client = bridge._clients["get_sensor_settings"]
+        qtbot.waitUntil(client.service_is_ready, timeout=20_000)
+        bridge.request_settings("/dev/spidev1.0")
+        qtbot.waitUntil(lambda: bool(failed), timeout=5_000)
+        assert failed == [("/dev/spidev1.0", "no answer within 0.5 s")]
+        qtbot.wait(2_000)  # the late reply arrives meanwhile
+        assert received == [] and len(failed) == 1
+    finally:
+        bridge.stop()
+        executor.shutdown(timeout_sec=1.0)
+        spin.join(3.0)
+        server.destroy_node()
+        ctx.try_shutdown()

@@ -104,12 +104,15 @@ class RosBridge(QObject):
         self._rate = validate_rate(rate_hz)
         self.node_name = node_name
         self.timeout_s = float(timeout_s)
+        #: settings, CPI and samples calls may take longer (the node talks to the chip)
+        self.call_timeout_s = 2.5 * self.timeout_s
         self._actions: queue.SimpleQueue[Callable[[], None]] = queue.SimpleQueue()
         self._thread: threading.Thread | None = None
         self._polling = True
         self._state = WAITING
-        self._seen = False
         self._in_flight: tuple[object, float] | None = None
+        #: other calls in flight: future -> (service, device, deadline); executor thread only
+        self._pending: dict[object, tuple[str, str, float]] = {}
         self._rtts: deque[float] = deque(maxlen=200)
         self._reply_times: deque[float] = deque(maxlen=2000)
         self.requests = self.replies = self.skipped_ticks = 0
@@ -287,17 +290,21 @@ class RosBridge(QObject):
             self._fail(service, device, f"bad request: {e}")
             return
         future = client.call_async(request)
-        timer = threading.Timer(self.timeout_s * 2.5, lambda: self._expire(service, device, future))
-        timer.daemon = True
-        timer.start()
-        future.add_done_callback(lambda f: (timer.cancel(), self._on_reply(service, device, f)))
+        deadline = time.monotonic() + self.call_timeout_s
+        self._pending[future] = (service, device, deadline)
+        future.add_done_callback(lambda f: self._on_reply(service, device, f))
 
-    def _expire(self, service: str, device: str, future) -> None:
-        if not future.done():
-            self._post(lambda: self._clients[service].remove_pending_request(future))
-            self._fail(service, device, f"no answer within {self.timeout_s * 2.5:g} s")
+    def _expire_calls(self, now: float) -> None:
+        """Abandon settings/CPI/samples calls older than ``call_timeout_s`` (watchdog)."""
+        for future, (service, device, deadline) in list(self._pending.items()):
+            if now > deadline:
+                del self._pending[future]
+                self._clients[service].remove_pending_request(future)
+                self._fail(service, device, f"no answer within {self.call_timeout_s:g} s")
 
     def _on_reply(self, service: str, device: str, future) -> None:
+        if self._pending.pop(future, None) is None:
+            return  # abandoned by the watchdog: its failure was already reported
         res = future.result()
         if res is None:
             return
@@ -317,6 +324,7 @@ class RosBridge(QObject):
             getattr(self, self._SIGNALS[service][1]).emit(device, message)
 
     def _watchdog(self) -> None:
+        self._expire_calls(time.monotonic())
         client = self._clients["get_sensor_data"]
         if self._in_flight is not None:
             future, sent = self._in_flight
@@ -332,8 +340,6 @@ class RosBridge(QObject):
             self._set_state(LOST)
 
     def _set_state(self, state: str) -> None:
-        if state == CONNECTED:
-            self._seen = True
         if state != self._state:
             self._state = state
             self.connection_changed.emit(state)
