@@ -7,7 +7,8 @@ from dataclasses import dataclass
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.node import Node
 
-from .poller import PollerConfig, SimConfig, parse_fail_windows
+from .poller import PollerConfig
+from .sim_backend import SimConfig, parse_fail_windows
 
 BACKENDS = ("spidev", "sim")
 
