@@ -455,9 +455,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         import zenoh
 
-        session = zenoh.open(
-            link.zenoh_config(listen=cfg.listen, credentials=cfg.credentials)
-        )
+        session = zenoh.open(link.zenoh_config(listen=cfg.listen, credentials=cfg.credentials))
     except ImportError:
         print(
             "mm-beagle-agent: error: the eclipse-zenoh package is missing; "

@@ -37,7 +37,14 @@ I_GEN_Y = 12
 I_REINITS = 13  # successful (re)initialisations
 I_LIFT_LOST_X = 14  # emulator ground truth: counts cleared by lifts
 I_LIFT_LOST_Y = 15
-N_INT = 16
+I_RING_FROM = 16  # oldest seq the ring holds (the remote backend starts mid-run)
+N_INT = 17
+
+# int64 fields that only grow: a restarted agent's are added to what came before
+MONOTONE_INTS = (
+    I_SEQ, I_X_TOTAL, I_Y_TOTAL, I_LIFT_TOTAL, I_SPI_ERRORS, I_OVERFLOWS,
+    I_GEN_X, I_GEN_Y, I_REINITS, I_LIFT_LOST_X, I_LIFT_LOST_Y,
+)
 
 # float64 fields per sensor
 F_X_TOTAL_M = 0
@@ -206,7 +213,7 @@ class SharedState:
                 iv = ints.tolist()
                 fv = floats.tolist()
                 if ints[I_VERSION] == v1:
-                    return Totals(*iv[1:N_INT], *fv)
+                    return Totals(*iv[1:I_RING_FROM], *fv)
             if time.monotonic() > deadline:
                 raise TimeoutError("the poller process holds the shared state (is it hung?)")
             time.sleep(0)  # let a writer in this process (tests) finish; yields the GIL
@@ -219,7 +226,7 @@ class SharedState:
 
         n = self.ring_size
         seq_now = self.snapshot(i).seq
-        first = max(since_seq, seq_now - n, 0)
+        first = max(since_seq, seq_now - n, int(self.ints[i][I_RING_FROM]))
         limit = n if max_samples <= 0 else min(max_samples, n)
         end = min(seq_now, first + limit)
         idx = np.arange(first, end, dtype=np.int64) % n
