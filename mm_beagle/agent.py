@@ -296,6 +296,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sim-speed", type=float)
     p.add_argument("--sim-noise-counts", type=float)
     p.add_argument("--sim-lift-rate", type=float)
+    p.add_argument("--sim-fail-windows", nargs="*", help="DEVICE@START-END (s) failure windows")
     p.add_argument("--self-test", type=float, metavar="SECONDS", help="run, print one JSON line")
     return p
 
@@ -318,6 +319,7 @@ DEFAULTS = {
     "sim_speed": 0.2,
     "sim_noise_counts": 0.0,
     "sim_lift_rate": 0.0,
+    "sim_fail_windows": [],
 }
 
 
@@ -394,6 +396,7 @@ def config_from_args(args: argparse.Namespace) -> AgentConfig:
         speed=values["sim_speed"],
         noise_counts=values["sim_noise_counts"],
         lift_rate=values["sim_lift_rate"],
+        fail_windows=list(values["sim_fail_windows"]),
     )
     parse_fail_windows(sim.fail_windows, devices)
     cfg = PollerConfig(

@@ -46,24 +46,6 @@ class PollerClient:
         self._ps = None
         self._cpu_last: tuple[float, float] | None = None
 
-
-@contextlib.contextmanager
-def _main_hidden():
-    """Keep ``spawn`` from re-running ``__main__`` (the node: rclpy, ~20 MB) in the child.
-
-    multiprocessing re-imports the parent's main module in a spawned child
-    when it has a ``__spec__`` or ``__file__``; the poller needs none of it.
-    """
-    main = sys.modules.get("__main__")
-    saved = {k: main.__dict__[k] for k in ("__spec__", "__file__") if k in main.__dict__}
-    try:
-        if "__spec__" in saved:
-            main.__spec__ = None  # type: ignore[assignment]
-        main.__dict__.pop("__file__", None)
-        yield
-    finally:
-        main.__dict__.update(saved)
-
     def start(self) -> None:
         """Spawn the poller; it imports only the poller modules, not the node's main."""
         with _main_hidden():
@@ -144,3 +126,21 @@ def _main_hidden():
                 self.process.join(1.0)
         self._cmd.close()
         self.events.close()
+
+
+@contextlib.contextmanager
+def _main_hidden():
+    """Keep ``spawn`` from re-running ``__main__`` (the node: rclpy, ~20 MB) in the child.
+
+    multiprocessing re-imports the parent's main module in a spawned child
+    when it has a ``__spec__`` or ``__file__``; the poller needs none of it.
+    """
+    main = sys.modules.get("__main__")
+    saved = {k: main.__dict__[k] for k in ("__spec__", "__file__") if k in main.__dict__}
+    try:
+        if "__spec__" in saved:
+            main.__spec__ = None  # type: ignore[assignment]
+        main.__dict__.pop("__file__", None)
+        yield
+    finally:
+        main.__dict__.update(saved)

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import base64
 import collections
+import contextlib
 import json
 import queue
 import threading
@@ -177,10 +178,8 @@ class RemoteAgent:
         for t in self._threads[1:]:
             t.join(timeout)
         if self.session is not None:
-            try:
+            with contextlib.suppress(Exception):  # a session whose peer is gone may complain
                 self.session.close()
-            except Exception:  # closing a session whose peer is gone may complain
-                pass
 
     # --- the threads ---
 
@@ -207,10 +206,9 @@ class RemoteAgent:
 
         def put(kind: str):
             def cb(sample) -> None:
-                try:
+                # a full queue: the feeder is behind; the seq gap is fetched from the agent's ring
+                with contextlib.suppress(queue.Full):
                     q.put_nowait((kind, sample.payload.to_bytes(), time.time_ns()))
-                except queue.Full:
-                    pass  # the feeder is behind: a seq gap, fetched from the agent's ring
 
             return cb
 

@@ -42,8 +42,17 @@ N_INT = 17
 
 # int64 fields that only grow: a restarted agent's are added to what came before
 MONOTONE_INTS = (
-    I_SEQ, I_X_TOTAL, I_Y_TOTAL, I_LIFT_TOTAL, I_SPI_ERRORS, I_OVERFLOWS,
-    I_GEN_X, I_GEN_Y, I_REINITS, I_LIFT_LOST_X, I_LIFT_LOST_Y,
+    I_SEQ,
+    I_X_TOTAL,
+    I_Y_TOTAL,
+    I_LIFT_TOTAL,
+    I_SPI_ERRORS,
+    I_OVERFLOWS,
+    I_GEN_X,
+    I_GEN_Y,
+    I_REINITS,
+    I_LIFT_LOST_X,
+    I_LIFT_LOST_Y,
 )
 
 # float64 fields per sensor
