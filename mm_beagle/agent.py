@@ -247,6 +247,29 @@ class AgentPoller(Poller):
             self.link.service()
 
 
+class StubMotionBus:
+    """Benchmarks: an emulated sensor whose motion bursts get a constant reply.
+
+    Bring-up and commands reach the emulator; the 1 kHz motion burst costs
+    nothing but the Python around it (3 and 5 counts of motion, every poll).
+    """
+
+    def __init__(self, emulator, regmap) -> None:
+        a = regmap.addresses
+        self.emulator = emulator
+        self.status_addr, self.dx_addr = a["status"], a["delta_x_disp"]
+        m = regmap.status_motion
+        self.reply = [0, m >> 8, m & 0xFF, 0, 0, 3, 0, 0, 5]
+
+    def xfer2(self, data: list[int]) -> list[int]:
+        if len(data) == 9 and data[0] == self.status_addr and data[3] == self.dx_addr:
+            return list(self.reply)
+        return self.emulator.xfer2(data)
+
+    def close(self) -> None:
+        self.emulator.close()
+
+
 def rss_mb() -> float:
     """Resident memory of this process (MB), from /proc."""
     try:
@@ -298,6 +321,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sim-lift-rate", type=float)
     p.add_argument("--sim-fail-windows", nargs="*", help="DEVICE@START-END (s) failure windows")
     p.add_argument("--self-test", type=float, metavar="SECONDS", help="run, print one JSON line")
+    # mm-bench agent: the motion burst answered by a constant stub, flat out unless paced
+    p.add_argument("--bench-stub", action="store_true", help=argparse.SUPPRESS)
+    p.add_argument("--bench-paced", action="store_true", help=argparse.SUPPRESS)
     return p
 
 
@@ -470,6 +496,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"mm-beagle-agent: error: cannot listen on {cfg.listen}: {exc}", file=sys.stderr)
         return EXIT_CONFIG
     poller.link = AgentLink(session, cfg.name, poller)
+    if args.bench_stub:
+        for dev, bus in list(poller.sim_buses.items()):
+            poller.sim_buses[dev] = StubMotionBus(bus, poller.regmap)
     stop = lambda *_: setattr(poller, "running", False)  # noqa: E731
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
@@ -486,7 +515,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.self_test:
             signal.signal(signal.SIGALRM, stop)
             signal.setitimer(signal.ITIMER_REAL, args.self_test)
-        poller.run()
+        poller.run(paced=not args.bench_stub or args.bench_paced)
     finally:
         seconds, cpu = time.monotonic() - t0, time.process_time() - c0
         poller.link.close()

@@ -84,6 +84,8 @@ class RemoteAgent:
         self.agent_status: dict = {}
         self.mismatch = ""  # the agent serves other devices than this node expects
         self.latency_ms: collections.deque = collections.deque(maxlen=4096)
+        # poll stamp -> applied here (ms; meaningful on one clock: benchmarks)
+        self.apply_latency_ms: collections.deque = collections.deque(maxlen=100_000)
         self._offset_ns: int | None = None
         self._offset_t = 0.0
         # sequence bookkeeping, per sensor
@@ -267,6 +269,7 @@ class RemoteAgent:
                 newest = max(newest, int(np.frombuffer(block.ints, np.int64)[ss.I_STAMP_NS]))
         if newest:
             self._clock(recv_ns, newest)
+            self.apply_latency_ms.append((time.time_ns() - newest) / 1e6)
 
     def _new_boot(self, boot_id: int) -> None:
         if self.boot is not None:  # a restarted agent: continue from what we had
@@ -290,11 +293,19 @@ class RemoteAgent:
         if end < expected or (end == expected and count):
             return  # already applied (a history reply overlapping the live stream)
         if first > expected:
-            if fetch_gaps:
+            for _attempt in range(3 if fetch_gaps else 0):
                 self._fetch(i, expected, first)
                 expected = self.next_agent[i]
+                if first <= expected:
+                    break
+                time.sleep(0.05)
             if first > expected:  # what the agent's ring no longer holds
                 self.polls_lost += first - expected
+                self._emit(
+                    "log",
+                    f"{first - expected} polls of {self.cfg.devices[i]} "
+                    f"({expected}..{first}) are lost: the agent no longer has them",
+                )
                 self.state.ints[i][ss.I_RING_FROM] = self.base_i[i][ss.I_SEQ] + first
                 expected = first
         skip = expected - first
@@ -331,8 +342,21 @@ class RemoteAgent:
                 return
             batch = link.decode_batch(data, self.n)
             if batch.boot_id != self.boot or not batch.blocks or not batch.blocks[0].count:
+                self._emit(
+                    "log",
+                    f"history of {self.cfg.devices[i]} {since}..{until}: the "
+                    f"agent sent {len(batch.blocks)} empty block(s) of another boot"
+                    if batch.boot_id != self.boot
+                    else f"history of {self.cfg.devices[i]} {since}..{until} came empty",
+                )
                 return
             block = batch.blocks[0]
+            if block.index != i or block.first_seq != since:
+                self._emit(
+                    "log",
+                    f"history of {self.cfg.devices[i]} {since}..{until}: got "
+                    f"sensor {block.index} from {block.first_seq}",
+                )
             self._apply(block, fetch_gaps=False)
             since = block.first_seq + block.count
 
