@@ -59,7 +59,10 @@ class AgentLink:
         self.events_pub = session.declare_publisher(self.keys["events"])
         fifo = zenoh.handlers.FifoChannel
         self.cmd_q = session.declare_queryable(self.keys["cmd"], handler=fifo(64))
-        self.history_q = session.declare_queryable(self.keys["history"], handler=fifo(64))
+        self.history_sub = session.declare_subscriber(self.keys["history_req"], handler=fifo(64))
+        self.history_pub = session.declare_publisher(
+            self.keys["history"], congestion_control=zenoh.CongestionControl.BLOCK
+        )
         n = len(poller.channels)
         self.sent = [0] * n  # next seq to publish, per sensor
         self.ring_bytes = [
@@ -84,7 +87,8 @@ class AgentLink:
                 self.sent[ch.i] = ch.seq
             self.last_pub = now
         self._answer(self.cmd_q, self.answer_command)
-        self._answer(self.history_q, self.answer_history)
+        while (sample := self.history_sub.try_recv()) is not None:
+            self.history_pub.put(self.answer_history(sample.payload.to_bytes()))
         if now >= self.next_status:
             self.next_status = now + STATUS_S
             self.publish_status(now)
@@ -159,24 +163,28 @@ class AgentLink:
         return json.dumps({"status": status, "payload": body, "seq": seqs}).encode()
 
     def answer_history(self, payload: bytes) -> bytes:
-        """Polls ``since`` onwards of one sensor (at most ``max``), as a batch frame."""
-        msg = link.parse_request(payload, "history")
-        i, since, most = msg.get("sensor"), msg.get("since"), msg.get("max", link.MAX_HISTORY)
-        n = len(self.poller.channels)
-        for name, v in (("sensor", i), ("since", since), ("max", most)):
-            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
-                raise link.LinkError(f"history '{name}' must be an integer >= 0, got {v!r}")
-        if i >= n:
-            raise link.LinkError(f"history 'sensor' {i} is not one of 0..{n - 1}")
-        ch = self.poller.channels[i]
-        if since > ch.seq:
-            raise link.LinkError(f"history since {since} is ahead of the newest poll {ch.seq}")
+        """Polls ``since`` onwards of one sensor (at most ``max``): a batch frame numbered
+        by the request's ``id``, or JSON saying why not."""
+        rid = None
+        try:
+            msg = link.parse_request(payload, "history")
+            rid, i, since = msg.get("id"), msg.get("sensor"), msg.get("since")
+            most = msg.get("max", link.MAX_HISTORY)
+            n = len(self.poller.channels)
+            for name, v in (("id", rid), ("sensor", i), ("since", since), ("max", most)):
+                if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v < 2**63:
+                    raise link.LinkError(f"history '{name}' must be an integer >= 0, got {v!r}")
+            if i >= n:
+                raise link.LinkError(f"history 'sensor' {i} is not one of 0..{n - 1}")
+            ch = self.poller.channels[i]
+            if since > ch.seq:
+                raise link.LinkError(f"history since {since} is ahead of the newest poll {ch.seq}")
+        except link.LinkError as exc:
+            rid = rid if isinstance(rid, int) and not isinstance(rid, bool) else None
+            return json.dumps({"id": rid, "status": "invalid", "payload": str(exc)}).encode()
         end = min(ch.seq, since + min(most, link.MAX_HISTORY))
         block = self._block(ch, since, end)
-        self.number += 1
-        return link.encode_batch(
-            self.boot_id, self.number, self.poller.state.glob_view.tobytes(), [block]
-        )
+        return link.encode_batch(self.boot_id, rid, self.poller.state.glob_view.tobytes(), [block])
 
     def info(self) -> dict:
         cfg = self.poller.cfg
@@ -222,7 +230,14 @@ class AgentLink:
         self.events_pub.put(json.dumps({"kind": kind, "device": device, "text": text}).encode())
 
     def close(self) -> None:
-        for entity in (self.cmd_q, self.history_q, self.pub, self.status_pub, self.events_pub):
+        for entity in (
+            self.cmd_q,
+            self.history_sub,
+            self.history_pub,
+            self.pub,
+            self.status_pub,
+            self.events_pub,
+        ):
             entity.undeclare()
 
 

@@ -10,7 +10,7 @@ Each figure comes from real processes in one run:
 - ``bandwidth_kib_s``, ``latency_p50_ms``/``p99``: an agent on emulated sensors and
   the node's :class:`~mm_beagle.remote.RemoteAgent` in this process (no ROS
   needed), latency from a poll's stamp to the node's shared state, one clock;
-- ``counts_lost`` over ``link_drops`` forced drops (a :class:`DropProxy` cut) of
+- ``counts_lost`` over ``link_drops`` forced drops (a :class:`~mm_beagle.link_proxy.ProxyProcess` cut) of
   a few seconds: node totals and every ring poll against the emulator's truth.
 """
 
@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from .harness import agent_command, agent_process, free_port
-from .link_proxy import DropProxy
+from .link_proxy import ProxyProcess
 from .poller import PollerConfig
 from .remote import RemoteAgent
 
@@ -124,7 +124,7 @@ def _truth_and_node(remote: RemoteAgent) -> tuple[int, int]:
 def link_run(seconds: float, drops: int, drop_s: float) -> dict:
     """Agent process + RemoteAgent here, through a DropProxy; ``drops`` cuts."""
     port = free_port()
-    proxy = DropProxy(port)
+    proxy = ProxyProcess(port)
     cfg = PollerConfig(devices=["/dev/spidev1.0", "/dev/spidev1.1"], ring_size=131072)
     opts = {"backend": "sim", "listen": [f"tcp/127.0.0.1:{port}"], "sim_trajectory": "meander"}
     with agent_process(opts):

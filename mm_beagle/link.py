@@ -8,7 +8,11 @@ The agent (:mod:`mm_beagle.agent`) serves under ``mm/<name>/``:
             the period histogram zlib-compressed)
   events    put: JSON {"kind", "device", "text"} when a sensor comes up or goes down
   cmd       queryable: JSON {"cmd": "settings"|"set_cpi"|"load_patch"|"info", ...}
-  history   queryable: JSON {"sensor": i, "since": seq, "max": n} -> a batch frame
+  history_req  subscribed: JSON {"id": k, "sensor": i, "since": seq, "max": n}; the
+            answer is put on ``history``: a batch frame numbered k, or JSON
+            {"id": k, "status": "invalid", "payload": why}. (Pub/sub, not a query:
+            zenoh 1.10 queries can end at once with no reply right after a
+            reconnection, eclipse-zenoh/zenoh#2767, exactly when a gap is fetched.)
 
 Batch frame, little-endian: header ``<4sBBHQQ`` (magic, version, sensor blocks,
 reserved, boot id, batch number), the poller-wide counters (N_GLOBAL int64), then
@@ -57,7 +61,8 @@ def keys(name: str) -> dict[str, str]:
     if not name or any(c in name for c in "/*$?#") or name.strip() != name:
         raise LinkError(f"agent name '{name}' must be one non-empty key chunk (no / * $ ? #)")
     base = f"mm/{name}"
-    return {k: f"{base}/{k}" for k in ("polls", "status", "events", "cmd", "history")}
+    names = ("polls", "status", "events", "cmd", "history", "history_req")
+    return {k: f"{base}/{k}" for k in names}
 
 
 # --- frames ------------------------------------------------------------------------------

@@ -39,7 +39,12 @@ class DropProxy:
             except OSError:
                 client.close()
                 continue
+            upstream.settimeout(None)
             with self._lock:
+                if not self._open:  # cut while we connected
+                    client.close()
+                    upstream.close()
+                    continue
                 self._conns += [client, upstream]
             for a, b in ((client, upstream), (upstream, client)):
                 threading.Thread(target=self._pipe, args=(a, b), daemon=True).start()
@@ -57,8 +62,8 @@ class DropProxy:
 
     def cut(self) -> None:
         """Drop every forwarded connection; refuse new ones until :meth:`restore`."""
-        self._open = False
         with self._lock:
+            self._open = False
             conns, self._conns = self._conns, []
         for s in conns:
             with contextlib.suppress(OSError):
@@ -72,3 +77,56 @@ class DropProxy:
         self._running = False
         self.cut()
         self.listener.close()
+
+
+class ProxyProcess:
+    """A :class:`DropProxy` in a process of its own (no GIL shared with the test's rclpy).
+
+    Same ``endpoint``, ``cut``, ``restore`` and ``close``; controlled over stdin.
+    """
+
+    def __init__(self, target_port: int) -> None:
+        import subprocess
+        import sys
+
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "mm_beagle.link_proxy", str(target_port)],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        self.endpoint = self.proc.stdout.readline().strip()
+
+    def _say(self, what: str) -> None:
+        self.proc.stdin.write(what + "\n")
+        self.proc.stdin.flush()
+        self.proc.stdout.readline()  # "ok": done
+
+    def cut(self) -> None:
+        self._say("cut")
+
+    def restore(self) -> None:
+        self._say("restore")
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.stdin.close()
+            self.proc.wait(5)
+
+
+def _main() -> None:
+    import sys
+
+    proxy = DropProxy(int(sys.argv[1]))
+    print(proxy.endpoint, flush=True)
+    for line in sys.stdin:
+        if line.strip() == "cut":
+            proxy.cut()
+        elif line.strip() == "restore":
+            proxy.restore()
+        print("ok", flush=True)
+    proxy.close()
+
+
+if __name__ == "__main__":
+    _main()

@@ -34,6 +34,7 @@ from .poller_client import PollerError
 LINK_TIMEOUT_S = 1.0  # no batch for this long: the link is down (the agent sends >= 10/s)
 COMMAND_TIMEOUT_S = 2.0
 HISTORY_TIMEOUT_S = 2.0
+GAP_RETRY_S = 5.0  # how long a gap is asked for before its polls count as lost
 CLOCK_LEAK = 1e-4  # the clock offset estimate may rise this much per second (100 ppm)
 RING_DTYPES = ("<i8", "<i2", "<i2", "<u2", "<u2", "u1")
 
@@ -83,6 +84,10 @@ class RemoteAgent:
         self.restarts = 0
         self.agent_status: dict = {}
         self.mismatch = ""  # the agent serves other devices than this node expects
+        self.query_error = ""
+        self._history_q: queue.Queue = queue.Queue(maxsize=64)
+        self._history_pub = None
+        self._history_id = 0
         self.latency_ms: collections.deque = collections.deque(maxlen=4096)
         # poll stamp -> applied here (ms; meaningful on one clock: benchmarks)
         self.apply_latency_ms: collections.deque = collections.deque(maxlen=100_000)
@@ -203,6 +208,7 @@ class RemoteAgent:
         if not self._running:
             session.close()
             return
+        self._block_cc = zenoh.CongestionControl.BLOCK
         self.session = session
         q = self._queue
 
@@ -217,6 +223,15 @@ class RemoteAgent:
         self._subs = [
             session.declare_subscriber(self.keys[k], put(k)) for k in ("polls", "status", "events")
         ]
+
+        def history(sample) -> None:
+            with contextlib.suppress(queue.Full):
+                self._history_q.put_nowait(sample.payload.to_bytes())
+
+        self._subs.append(session.declare_subscriber(self.keys["history"], history))
+        self._history_pub = session.declare_publisher(
+            self.keys["history_req"], congestion_control=zenoh.CongestionControl.BLOCK
+        )
 
     def _feed(self) -> None:
         while self._running:
@@ -293,18 +308,22 @@ class RemoteAgent:
         if end < expected or (end == expected and count):
             return  # already applied (a history reply overlapping the live stream)
         if first > expected:
-            for _attempt in range(3 if fetch_gaps else 0):
+            # Right after a reconnection the agent's queryable may not be routed to us
+            # yet (a query then ends at once with no reply): retry for a while.
+            deadline = time.monotonic() + GAP_RETRY_S
+            while fetch_gaps and self._running:
                 self._fetch(i, expected, first)
                 expected = self.next_agent[i]
-                if first <= expected:
+                if first <= expected or time.monotonic() > deadline:
                     break
-                time.sleep(0.05)
+                time.sleep(0.1)
             if first > expected:  # what the agent's ring no longer holds
                 self.polls_lost += first - expected
                 self._emit(
                     "log",
-                    f"{first - expected} polls of {self.cfg.devices[i]} "
-                    f"({expected}..{first}) are lost: the agent no longer has them",
+                    f"{first - expected} single polls of {self.cfg.devices[i]} "
+                    f"({expected}..{first}) are lost: the agent did not send them "
+                    f"({self.query_error}); the totals are exact",
                 )
                 self.state.ints[i][ss.I_RING_FROM] = self.base_i[i][ss.I_SEQ] + first
                 expected = first
@@ -336,41 +355,77 @@ class RemoteAgent:
     def _fetch(self, i: int, since: int, until: int) -> None:
         """Ask the agent for polls since..until of sensor i and apply them in order."""
         while since < until and self._running:
-            req = {"sensor": i, "since": since, "max": min(link.MAX_HISTORY, until - since)}
-            data = self._query(self.keys["history"], json.dumps(req).encode(), HISTORY_TIMEOUT_S)
-            if data is None or data[:4] != link.MAGIC:
+            data = self._history(i, since, min(link.MAX_HISTORY, until - since))
+            if data is None:
                 return
             batch = link.decode_batch(data, self.n)
             if batch.boot_id != self.boot or not batch.blocks or not batch.blocks[0].count:
-                self._emit(
-                    "log",
-                    f"history of {self.cfg.devices[i]} {since}..{until}: the "
-                    f"agent sent {len(batch.blocks)} empty block(s) of another boot"
-                    if batch.boot_id != self.boot
-                    else f"history of {self.cfg.devices[i]} {since}..{until} came empty",
-                )
+                self.query_error = "the agent restarted meanwhile"
                 return
             block = batch.blocks[0]
-            if block.index != i or block.first_seq != since:
-                self._emit(
-                    "log",
-                    f"history of {self.cfg.devices[i]} {since}..{until}: got "
-                    f"sensor {block.index} from {block.first_seq}",
-                )
             self._apply(block, fetch_gaps=False)
             since = block.first_seq + block.count
 
+    def _history(self, i: int, since: int, most: int) -> bytes | None:
+        """One history request and its answer (a batch frame), or None (query_error says why)."""
+        if self._history_pub is None:
+            self.query_error = "not connected"
+            return None
+        self._history_id += 1
+        rid = self._history_id
+        req = {"id": rid, "sensor": i, "since": since, "max": most}
+        self._history_pub.put(json.dumps(req).encode())
+        deadline = time.monotonic() + HISTORY_TIMEOUT_S
+        while (left := deadline - time.monotonic()) > 0:
+            try:
+                data = self._history_q.get(timeout=left)
+            except queue.Empty:
+                break
+            if data[:4] == link.MAGIC:
+                if link.HEADER.unpack_from(data, 0)[5] == rid:
+                    return data
+            else:
+                with contextlib.suppress(ValueError, TypeError, AttributeError):
+                    answer = json.loads(data)
+                    if answer.get("id") == rid:
+                        self.query_error = str(answer.get("payload"))
+                        return None
+        self.query_error = f"no answer to a history request within {HISTORY_TIMEOUT_S:g} s"
+        return None
+
     def _query(self, key: str, payload: bytes, timeout: float) -> bytes | None:
+        """The first good reply to one query, or None (``self.query_error`` says why)."""
         session = self.session
         if session is None:
+            self.query_error = "not connected"
             return None
-        try:
-            for reply in session.get(key, payload=payload, timeout=timeout):
+        t0 = time.monotonic()
+        deadline = t0 + timeout
+        while True:
+            try:
+                # BLOCK: the reply inherits it (zenoh's default drops under load).
+                replies = list(
+                    session.get(
+                        key,
+                        payload=payload,
+                        timeout=max(0.1, deadline - time.monotonic()),
+                        congestion_control=self._block_cc,
+                    )
+                )
+            except Exception as exc:  # a session closing under us
+                self.query_error = f"query failed: {exc}"
+                return None
+            for reply in replies:
                 if reply.ok is not None:
                     return reply.ok.payload.to_bytes()
-        except Exception:  # a session closing under us
-            return None
-        return None
+            errors = [str(r.err.payload.to_string()) for r in replies if r.err is not None]
+            elapsed = time.monotonic() - t0
+            self.query_error = f"{len(replies)} replies in {elapsed:.2f} s, errors: {errors}"
+            # A query that ends at once with no reply never reached the agent (zenoh
+            # 1.10 right after a reconnection, eclipse-zenoh/zenoh#2767): ask again.
+            if replies or time.monotonic() > deadline - 0.1:
+                return None
+            time.sleep(0.05)
 
     def _wait_applied(self, seqs: list, deadline: float) -> None:
         """Until the feeder has applied the agent's polls up to ``seqs`` (its reply's)."""
