@@ -10,8 +10,9 @@ Each figure comes from real processes in one run:
 - ``bandwidth_kib_s``, ``latency_p50_ms``/``p99``: an agent on emulated sensors and
   the node's :class:`~mm_beagle.remote.RemoteAgent` in this process (no ROS
   needed), latency from a poll's stamp to the node's shared state, one clock;
-- ``counts_lost`` over ``link_drops`` forced drops (a :class:`~mm_beagle.link_proxy.ProxyProcess` cut) of
-  a few seconds: node totals and every ring poll against the emulator's truth.
+- ``counts_lost`` over ``link_drops`` forced drops of a few seconds (a
+  :class:`~mm_beagle.link_proxy.ProxyProcess` cut): node totals and every ring
+  poll against the emulator's truth.
 """
 
 from __future__ import annotations
