@@ -32,7 +32,20 @@ from .link_proxy import ProxyProcess
 from .poller import PollerConfig
 from .remote import RemoteAgent
 
-ARMHF_TOOL = Path(__file__).resolve().parents[2] / "shared" / "tools" / "armhf-root"
+# The workplace's armhf-root tool: beside the project, or MM_ARMHF_ROOT_TOOL.
+ARMHF_TOOLS = (
+    Path(__file__).resolve().parents[2] / "shared" / "tools" / "armhf-root",
+    Path("/work/shared/tools/armhf-root"),
+)
+
+
+def armhf_tool() -> str | None:
+    """The armhf-root tool's path, or None."""
+    env = os.environ.get("MM_ARMHF_ROOT_TOOL")
+    for cand in ([Path(env)] if env else []) + list(ARMHF_TOOLS):
+        if cand.exists():
+            return str(cand)
+    return None
 
 
 def self_test(args: list[str], timeout: float = 120) -> dict:
@@ -47,15 +60,17 @@ def self_test(args: list[str], timeout: float = 120) -> dict:
     return json.loads(res.stdout.strip().splitlines()[-1])
 
 
-def qemu_arm_self_test(seconds: float) -> tuple[dict | None, str]:
-    """The stub self-test inside the Debian 12 armhf root, or (None, why not)."""
-    tool = os.environ.get("MM_ARMHF_ROOT_TOOL") or str(ARMHF_TOOL)
-    if not Path(tool).exists():
-        return None, f"no armhf-root tool at {tool}"
+def qemu_arm_self_test(
+    seconds: float, extra: tuple[str, ...] = ("--bench-stub",)
+) -> tuple[dict | None, str]:
+    """A self-test inside the Debian 12 armhf root (stub bus), or (None, why not)."""
+    tool = armhf_tool()
+    if tool is None:
+        return None, "no armhf-root tool (set MM_ARMHF_ROOT_TOOL)"
     if os.geteuid() != 0:
         return None, "the armhf root needs root (chroot)"
     try:
-        root = armhf_root_with_agent(tool)
+        armhf_root_with_agent(tool)
     except (subprocess.SubprocessError, OSError, RuntimeError) as exc:
         return None, f"armhf root not available: {exc}"
     cmd = [
@@ -74,12 +89,11 @@ def qemu_arm_self_test(seconds: float) -> tuple[dict | None, str]:
         f"tcp/127.0.0.1:{free_port()}",
         "--self-test",
         str(seconds),
-        "--bench-stub",
+        *extra,
     ]
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     if res.returncode != 0:
         return None, f"self-test under qemu failed: {res.stderr[-500:]}"
-    del root
     return json.loads(res.stdout.strip().splitlines()[-1]), ""
 
 
@@ -199,11 +213,25 @@ def bench_agent(seconds: float = 3.0, drops: int = 5, drop_s: float = 3.0) -> di
         ]
     )
     qemu, why = qemu_arm_self_test(seconds)
+    qemu_paced, _ = (
+        qemu_arm_self_test(seconds, ("--bench-stub", "--bench-paced"))
+        if qemu
+        else (
+            None,
+            why,
+        )
+    )
     out = {
         "cpu_us_per_poll": flat["cpu_us_per_poll"],
         "cpu_us_per_poll_qemu_arm": qemu["cpu_us_per_poll"] if qemu else None,
         "qemu_arm_note": why or "qemu-user timing, not the board's",
-        "rss_mb_qemu_arm": qemu["rss_mb"] if qemu else None,
+        "cpu_percent_paced_qemu_arm": (
+            round(qemu_paced["cpu_us_per_poll"] * qemu_paced["rate_hz"] / 1e4, 2)
+            if qemu_paced
+            else None
+        ),
+        # peak RSS of the qemu-user process (the chroot has no /proc): qemu's own memory too
+        "peak_rss_mb_qemu_arm": qemu["rss_mb"] if qemu else None,
         "cpu_percent_paced": round(paced["cpu_us_per_poll"] * paced["rate_hz"] / 1e4, 2),
         "paced_rate_hz": paced["rate_hz"],
         "rss_mb": spidev["rss_mb"],

@@ -1,0 +1,53 @@
+"""mm-beagle-agent inside a Debian 12 armhf root through qemu-user: what a
+BeagleBone Black runs, with only Debian's python3 packages and the eclipse-zenoh
+armv7l wheel. Timing under qemu is not the board's: reported by mm-bench agent,
+not checked here.
+"""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+
+from mm_beagle import bench_agent
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def armhf_root():
+    tool = bench_agent.armhf_tool()
+    if tool is None:
+        pytest.skip("no armhf-root tool here (set MM_ARMHF_ROOT_TOOL to its path)")
+    if os.geteuid() != 0:
+        pytest.skip("the armhf root needs root (debootstrap, chroot)")
+    try:
+        return bench_agent.armhf_root_with_agent(tool)
+    except Exception as exc:  # no qemu/binfmt, no network for the first build: say so
+        pytest.skip(f"armhf root with qemu-user not available here: {exc}")
+
+
+@pytest.mark.parametrize(
+    ("extra", "backend"),
+    [(("--bench-stub",), "sim"), ((), "sim")],
+    ids=["stub-bus", "emulated-sensors"],
+)
+def test_agent_self_test_runs_on_armhf_with_debian_packages_only(armhf_root, extra, backend):
+    report, why = bench_agent.qemu_arm_self_test(3.0, extra)
+    assert report is not None, why
+    assert report["machine"].startswith("arm")
+    assert report["polls"] > 100 and report["rss_mb"] > 0
+    if backend == "sim" and not extra:  # the emulators' ground truth
+        assert report["counts_generated"] > 0 and report["counts_lost"] == 0
+    else:  # the stub bus has none
+        assert report["counts_lost"] is None
+
+
+def test_the_spidev_path_imports_no_numpy_on_armhf(armhf_root):
+    report, why = bench_agent.qemu_arm_self_test(
+        1.0, ("--backend", "spidev", "--devices", "/dev/spidev9.0")
+    )
+    assert report is not None, why
+    assert report["imports_numpy"] is False
+    assert report["backend"] == "spidev"
