@@ -136,28 +136,36 @@ def _truth_and_node(remote: RemoteAgent) -> tuple[int, int]:
     return lost, remote.polls_lost
 
 
+def _connected(cfg: PollerConfig, endpoint: str) -> RemoteAgent:
+    remote = RemoteAgent(cfg, endpoint, clock_sync=False)
+    remote.start()
+    deadline = time.monotonic() + 20
+    while remote.unavailable() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    if remote.unavailable():
+        raise RuntimeError(remote.unavailable())
+    time.sleep(0.5)
+    return remote
+
+
 def link_run(seconds: float, drops: int, drop_s: float) -> dict:
-    """Agent process + RemoteAgent here, through a DropProxy; ``drops`` cuts."""
+    """An agent process and RemoteAgents here: one direct (bandwidth, latency), one
+    through a proxy process that cuts the link ``drops`` times (conservation)."""
     port = free_port()
-    proxy = ProxyProcess(port)
-    cfg = PollerConfig(devices=["/dev/spidev1.0", "/dev/spidev1.1"], ring_size=131072)
+    cfg = PollerConfig(devices=["/dev/spidev1.0", "/dev/spidev1.1"], ring_size=262144)
     opts = {"backend": "sim", "listen": [f"tcp/127.0.0.1:{port}"], "sim_trajectory": "meander"}
     with agent_process(opts):
-        remote = RemoteAgent(cfg, proxy.endpoint, clock_sync=False)
-        remote.start()
-        deadline = time.monotonic() + 20
-        while remote.unavailable() and time.monotonic() < deadline:
-            time.sleep(0.05)
-        if remote.unavailable():
-            raise RuntimeError(remote.unavailable())
-        time.sleep(0.5)
-        remote.apply_latency_ms.clear()
-        sent0 = remote.agent_status.get("bytes_sent", 0)
+        direct = _connected(cfg, f"tcp/127.0.0.1:{port}")
+        direct.apply_latency_ms.clear()
+        sent0 = direct.agent_status.get("bytes_sent", 0)
         t0 = time.monotonic()
         time.sleep(seconds)
-        sent1 = remote.agent_status.get("bytes_sent", 0)
+        sent1 = direct.agent_status.get("bytes_sent", 0)
         elapsed = time.monotonic() - t0
-        lat = np.array(remote.apply_latency_ms)
+        lat = np.array(direct.apply_latency_ms)
+        direct.stop()
+        proxy = ProxyProcess(port)
+        remote = _connected(cfg, proxy.endpoint)
         start_seq = [remote.state.snapshot(i).seq for i in range(remote.n)]
         start_tot = [remote.state.snapshot(i) for i in range(remote.n)]
         for _ in range(drops):
@@ -192,7 +200,7 @@ def link_run(seconds: float, drops: int, drop_s: float) -> dict:
             "ring_vs_totals_counts": ring_mismatch,
         }
         remote.stop()
-    proxy.close()
+        proxy.close()
     return result
 
 
