@@ -275,10 +275,14 @@ class StubMotionBus:
         self.status_addr, self.dx_addr = a["status"], a["delta_x_disp"]
         m = regmap.status_motion
         self.reply = [0, m >> 8, m & 0xFF, 0, 0, 3, 0, 0, 5]
+        self.burst: list[int] | None = None
 
     def xfer2(self, data: list[int]) -> list[int]:
+        if data is self.burst:  # the driver's own motion-burst list, once it is known
+            return self.reply[:]  # a new list each time, as spidev returns
         if len(data) == 9 and data[0] == self.status_addr and data[3] == self.dx_addr:
-            return list(self.reply)
+            self.burst = data
+            return self.reply[:]
         return self.emulator.xfer2(data)
 
     def close(self) -> None:
