@@ -288,6 +288,11 @@ def test_clean_shutdown_stops_the_poller(sig):
         assert c.wait(30)
         kids = psutil.Process(proc.pid).children()
         assert kids
+        # spawn did not re-run the node's main in the poller: no ROS in its memory
+        # (it did before: 75 librcl* mappings and 62 MB instead of 36 MB)
+        (poller,) = [k for k in kids if "spawn_main" in " ".join(k.cmdline())]
+        maps = open(f"/proc/{poller.pid}/maps").read()
+        assert "librcl" not in maps and "rclpy" not in maps
         proc.send_signal(sig)
         out, _ = proc.communicate(timeout=15)
         assert proc.returncode == 0, out
@@ -312,6 +317,10 @@ def test_clean_shutdown_stops_the_poller(sig):
         ({"poll_rate": 0.0}, "poll_rate"),
         ({"backend": "sim", "patch_file": "/nonexistent/patch.txt"}, "cannot read patch file"),
         ({"backend": "sim", "register_map": "/nonexistent/map.yaml"}, "cannot read register map"),
+        ({"backend": "remote", "agent": "garbage"}, "not PROTO/HOST:PORT"),
+        ({"backend": "remote", "agent": "tcp/127.0.0.1:0"}, "no valid port"),
+        ({"backend": "remote", "agent_name": "a/b"}, "key chunk"),
+        ({"backend": "remote", "agent_credentials": "/nonexistent"}, "cannot read credentials"),
     ],
 )
 def test_bad_parameters_exit_with_a_clear_message(params, expect):
