@@ -144,6 +144,26 @@ def agent_process(
             out.close()  # type: ignore[union-attr]
 
 
+@contextmanager
+def emulated_sensors(
+    trajectory: str, env: dict[str, str], log_path: str, through_agent: bool = False
+) -> Iterator[subprocess.Popen]:
+    """mm-beagle on emulated sensors: its own sim backend, or (``through_agent``) an
+    mm-beagle-agent on emulated sensors and the node in backend:=remote on its link,
+    the whole BBB chain on this machine. Yields the node's process."""
+    if not through_agent:
+        with beagle_process({"backend": "sim", "sim_trajectory": trajectory}, env, log_path) as p:
+            yield p
+        return
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    agent_opts = {"backend": "sim", "sim_trajectory": trajectory, "listen": [endpoint]}
+    with (
+        agent_process(agent_opts, log_path + ".agent"),
+        beagle_process({"backend": "remote", "agent": endpoint}, env, log_path) as node,
+    ):
+        yield node
+
+
 class BeagleClient:
     """A client node with its executor spun in a background thread.
 
