@@ -16,7 +16,7 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager, suppress
 
-SERVICES = ("get_sensor_data", "get_sensor_settings", "set_resolution", "get_samples")
+from .services import service_types
 
 
 def isolated_ros_env(domain_id: int | None = None) -> dict[str, str]:
@@ -180,17 +180,10 @@ class BeagleClient:
         from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.executors import SingleThreadedExecutor
 
-        from mm_interfaces.srv import GetSamples, GetSensorData, GetSensorSettings, SetResolution
-
         if not rclpy.ok():
             rclpy.init()
         self.node = rclpy.create_node(name)
-        self.types = {
-            "get_sensor_data": GetSensorData,
-            "get_sensor_settings": GetSensorSettings,
-            "set_resolution": SetResolution,
-            "get_samples": GetSamples,
-        }
+        self.types = service_types()
         self.clients = {
             n: self.node.create_client(t, f"{namespace}/{n}") for n, t in self.types.items()
         }

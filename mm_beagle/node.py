@@ -28,7 +28,6 @@ from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 
 from mm_interfaces.msg import SensorData
-from mm_interfaces.srv import GetSamples, GetSensorData, GetSensorSettings, SetResolution
 from mm_pc import ros_spin
 
 from . import messages
@@ -36,6 +35,7 @@ from . import shared_state as ss
 from .params import NodeSettings, declare
 from .poller_client import PollerClient, PollerError
 from .remote import RemoteAgent
+from .services import service_types
 
 NODE_NAME = "mm_beagle"
 
@@ -70,10 +70,14 @@ class BeagleNode(Node):
         self.poller.start()
         self._wait_for_first_bring_up(timeout=10.0)
 
-        self.create_service(GetSensorData, "~/get_sensor_data", self.on_get_sensor_data)
-        self.create_service(GetSensorSettings, "~/get_sensor_settings", self.on_get_settings)
-        self.create_service(SetResolution, "~/set_resolution", self.on_set_resolution)
-        self.create_service(GetSamples, "~/get_samples", self.on_get_samples)
+        handlers = {
+            "get_sensor_data": self.on_get_sensor_data,
+            "get_sensor_settings": self.on_get_settings,
+            "set_resolution": self.on_set_resolution,
+            "get_samples": self.on_get_samples,
+        }
+        for name, srv_type in service_types().items():
+            self.create_service(srv_type, f"~/{name}", handlers[name])
         self._data_timer = None
         self.data_pub = self.create_publisher(
             SensorData,
