@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 from . import link
 from . import shared_state as ss
-from .poller import Poller, PollerConfig, tune_process
+from .poller import Poller, PollerConfig, poller_config, tune_process
 from .sim_backend import SimConfig, parse_fail_windows
 
 EXIT_CONFIG = 2
@@ -445,19 +445,8 @@ def config_from_args(args: argparse.Namespace) -> AgentConfig:
         fail_windows=list(values["sim_fail_windows"]),
     )
     parse_fail_windows(sim.fail_windows, devices)
-    cfg = PollerConfig(
-        devices=devices,
-        backend=values["backend"],
-        cpi=values["cpi"],
-        poll_rate=values["poll_rate"],
-        spi_speed_hz=values["spi_speed_hz"],
-        register_map=values["register_map"],
-        patch_file=values["patch_file"],
-        realtime_priority=values["realtime_priority"],
-        retry_interval=values["retry_interval"],
-        ring_size=round(values["ring_seconds"] * values["poll_rate"]),
-        sim=sim,
-    )
+    ring = round(values["ring_seconds"] * values["poll_rate"])
+    cfg = poller_config(values, ring, sim)
     return AgentConfig(cfg, values["name"], values["listen"], values["credentials"])
 
 

@@ -70,10 +70,17 @@ def beagle_process(
     params: dict[str, object], env: dict[str, str] | None = None, log_path: str | None = None
 ) -> Iterator[subprocess.Popen]:
     """mm-beagle in a subprocess; stopped with SIGINT (then SIGKILL) on exit."""
+    with _child(node_command(params), env or isolated_ros_env(), log_path) as proc:
+        yield proc
+
+
+@contextmanager
+def _child(cmd: list[str], env: dict[str, str], log_path: str | None) -> Iterator[subprocess.Popen]:
+    """``cmd`` in a subprocess that stops with its parent; SIGINT (then SIGKILL) on exit."""
     out = open(log_path, "w") if log_path else subprocess.DEVNULL  # noqa: SIM115
     proc = subprocess.Popen(
-        node_command(params),
-        env=env or isolated_ros_env(),
+        cmd,
+        env=env,
         stdout=out,
         stderr=subprocess.STDOUT,
         preexec_fn=_stop_with_parent if sys.platform.startswith("linux") else None,
@@ -128,20 +135,9 @@ def agent_process(
     options: dict[str, object], log_path: str | None = None
 ) -> Iterator[subprocess.Popen]:
     """mm-beagle-agent in a subprocess (stopped with SIGINT, and with its parent)."""
-    out = open(log_path, "w") if log_path else subprocess.DEVNULL  # noqa: SIM115
-    proc = subprocess.Popen(
-        agent_command({"realtime_priority": 0, **options}),
-        env={**os.environ, "PYTHONUNBUFFERED": "1"},
-        stdout=out,
-        stderr=subprocess.STDOUT,
-        preexec_fn=_stop_with_parent if sys.platform.startswith("linux") else None,
-    )
-    try:
+    cmd = agent_command({"realtime_priority": 0, **options})
+    with _child(cmd, {**os.environ, "PYTHONUNBUFFERED": "1"}, log_path) as proc:
         yield proc
-    finally:
-        stop_process(proc)
-        if log_path:
-            out.close()  # type: ignore[union-attr]
 
 
 @contextmanager

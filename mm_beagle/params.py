@@ -8,7 +8,7 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.node import Node
 
 from . import link
-from .poller import PollerConfig
+from .poller import PollerConfig, poller_config
 from .sim_backend import SimConfig, parse_fail_windows
 
 BACKENDS = ("spidev", "sim", "remote")
@@ -187,19 +187,7 @@ def declare(node: Node) -> NodeSettings:
             raise ValueError(
                 f"'sim_trajectory' is '{sim.trajectory}'; allowed: {', '.join(TRAJECTORIES)}"
             )
-    cfg = PollerConfig(
-        devices=devices,
-        backend=p["backend"],
-        cpi=p["cpi"],
-        poll_rate=p["poll_rate"],
-        spi_speed_hz=p["spi_speed_hz"],
-        register_map=p["register_map"],
-        patch_file=p["patch_file"],
-        realtime_priority=p["realtime_priority"],
-        retry_interval=p["retry_interval"],
-        ring_size=p["ring_size"],
-        sim=sim,
-    )
+    cfg = poller_config({**p, "devices": devices}, p["ring_size"], sim)
     flat = list(p["mounts"])
     if p["odometry_rate"] > 0 and len(flat) != 3 * len(devices):
         raise ValueError(

@@ -49,6 +49,24 @@ class PollerConfig:
     sim: SimConfig = field(default_factory=SimConfig)
 
 
+COMMON_FIELDS = (
+    "devices",
+    "backend",
+    "cpi",
+    "poll_rate",
+    "spi_speed_hz",
+    "register_map",
+    "patch_file",
+    "realtime_priority",
+    "retry_interval",
+)
+
+
+def poller_config(values: dict, ring_size: int, sim: SimConfig) -> PollerConfig:
+    """A PollerConfig from checked settings named as its fields (the node's, the agent's)."""
+    return PollerConfig(**{k: values[k] for k in COMMON_FIELDS}, ring_size=ring_size, sim=sim)
+
+
 def _open_spidev(dev: str, cfg: PollerConfig) -> object:
     from pln2033.bus import SpidevBus
 
