@@ -12,6 +12,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import psutil
 import pytest
@@ -291,7 +292,7 @@ def test_clean_shutdown_stops_the_poller(sig):
         # spawn did not re-run the node's main in the poller: no ROS in its memory
         # (it did before: 75 librcl* mappings and 62 MB instead of 36 MB)
         (poller,) = [k for k in kids if "spawn_main" in " ".join(k.cmdline())]
-        maps = open(f"/proc/{poller.pid}/maps").read()
+        maps = Path(f"/proc/{poller.pid}/maps").read_text()
         assert "librcl" not in maps and "rclpy" not in maps
         proc.send_signal(sig)
         out, _ = proc.communicate(timeout=15)
