@@ -266,18 +266,18 @@ def main(argv: list[str] | None = None) -> int:
     gui.add_argument("--json", action="store_true", help="print JSON only (the default)")
     args = parser.parse_args(argv)
     if args.what == "gui":
-        from mm_pc.monitor.bench_gui import bench_gui
+        from mm_pc.bench.gui import bench_gui
 
         try:
             result = bench_gui(hours=args.hours, rate_hz=args.rate, frames=args.frames)
         except ValueError as e:
             parser.error(str(e))
     elif args.what == "maps":
-        from mm_pc.bench_maps import bench_maps
+        from mm_pc.bench.maps import bench_maps
 
         result = bench_maps()
     elif args.what == "pose":
-        from mm_pc.bench_pose import bench_pose
+        from mm_pc.bench.pose import bench_pose
 
         result = bench_pose()
     elif args.what == "poll":

@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from mm_pc.calibration import Calibration
-from mm_pc.geometry import SensorMount
-from mm_pc.odometry import Odometry, Pose2D
+from mm_pc.core.calibration import Calibration
+from mm_pc.core.geometry import SensorMount
+from mm_pc.core.odometry import Odometry, Pose2D
 from pln2033 import INCH_M
 
 from .params import OdometrySettings
