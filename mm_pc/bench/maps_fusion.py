@@ -8,9 +8,9 @@ final one ("drift") and the largest one over the run. Other input sets and
 wheel odometry as the motion model are reported under ``variants`` for
 comparison.
 
-Throughput: predicts plus update calls (applied or gated) per second of
-replay wall time, best of three replays, including the replay's conversions
-(compass convention, lat/lon to metres, wire lookup).
+Throughput: predicts plus update records (applied or gated; one per beacon range) per
+second of replay wall time, best of three replays, including building the records
+(compass convention, lat/lon to metres) and FusionCore's ordering and wire lookup.
 """
 
 from __future__ import annotations
@@ -70,7 +70,7 @@ def bench_fusion(seed: int = 1) -> dict:
             "seed": seed,
             "duration_s": float(sim.t[-1]),
             "odometry_hz": ODOM_HZ,
-            "inputs": "gps, beacons (ranges, tightly coupled), compass, perimeter",
+            "inputs": "gps, beacons (one range record per beacon), compass, perimeter",
             "counts": stats,
             "measurements": {
                 "gps": len(sim.gps),

@@ -36,7 +36,6 @@ entered the true length of the run, else 1.
 from __future__ import annotations
 
 import math
-import numbers
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from functools import cached_property
@@ -45,12 +44,14 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from mm_pc.core.angles import wrap_pi
+from mm_pc.core.checks import finite
+
 __all__ = [
     "DEFAULT_MIN_DISTANCE_M",
     "Calibration",
     "SensorCalibration",
     "calibrate_straight_run",
-    "normalize_angle",
 ]
 
 #: Shortest straight run accepted for a calibration (m). Below this the
@@ -61,20 +62,9 @@ DEFAULT_MIN_DISTANCE_M = 0.05
 YAML_VERSION = 1
 
 
-def normalize_angle(angle: float) -> float:
-    """Wrap an angle (rad) into (-pi, pi]."""
-    a = math.remainder(float(angle), 2 * math.pi)  # in [-pi, pi]
-    return math.pi if a == -math.pi else a
-
-
 def _finite_number(name: str, value) -> float:
     """``value`` as a float, or ValueError if it is not a finite real number."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise ValueError(f"{name} must be a number, got {value!r} ({type(value).__name__})")
-    v = float(value)
-    if not math.isfinite(v):
-        raise ValueError(f"{name} must be finite, got {v}")
-    return v
+    return finite(name, value, real=True)
 
 
 @dataclass(frozen=True)
@@ -212,7 +202,7 @@ def calibrate_straight_run(
             "and the run straight forward or backward"
         )
     atan_real = math.pi / 2 if y > 0 else -math.pi / 2
-    offset = normalize_angle(atan_real - math.atan2(y, x))
+    offset = wrap_pi(atan_real - math.atan2(y, x))
     scale = 1.0
     if true_distance is not None:
         td = _finite_number("true distance", true_distance)

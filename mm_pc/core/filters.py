@@ -27,6 +27,8 @@ from collections import deque
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
+from mm_pc.core.checks import finite
+
 __all__ = [
     "MAX_WINDOW",
     "MIN_WINDOW",
@@ -63,10 +65,7 @@ def validate_window(window) -> int:
 
 
 def _finite(value) -> float:
-    v = float(value)
-    if not math.isfinite(v):
-        raise ValueError(f"median filter input must be finite, got {v}")
-    return v
+    return finite("median filter input", value)
 
 
 class MedianFilter:

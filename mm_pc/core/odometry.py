@@ -50,6 +50,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mm_pc.core.angles import wrap_pi
 from mm_pc.core.geometry import SensorMount
 
 __all__ = [
@@ -74,8 +75,8 @@ class Pose2D:
 
     @property
     def yaw_wrapped(self) -> float:
-        """Yaw wrapped into [-pi, pi) (rad)."""
-        return (self.yaw + math.pi) % (2 * math.pi) - math.pi
+        """Yaw wrapped into (-pi, pi] (rad), the convention of :mod:`mm_pc.core.angles`."""
+        return wrap_pi(self.yaw)
 
     def as_array(self) -> np.ndarray:
         """``np.array([x, y, yaw])``."""

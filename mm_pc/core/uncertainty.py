@@ -14,6 +14,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import numpy as np
+
+#: Variance (m^2, rad^2) put on z, roll and pitch, which a planar robot does not observe
+#: (the usual convention for 2-D odometry).
+UNOBSERVED_VARIANCE = 1e6
+
 Q_POS = 0.015**2  # m^2 per m travelled
 Q_YAW_DIST = 0.01**2  # rad^2 per m travelled
 Q_YAW_TURN = 0.01**2  # rad^2 per rad turned
@@ -49,11 +55,7 @@ class PoseUncertainty:
         z, roll and pitch are not observed by a planar robot: a large variance
         (1e6) says so, the usual convention for 2-D odometry.
         """
-        c = [0.0] * 36
-        c[0] = c[7] = self.var_along
-        c[14] = c[21] = c[28] = 1e6
-        c[35] = self.var_yaw
-        return c
+        return planar_covariance_6x6(np.diag([self.var_along, self.var_along, self.var_yaw]))
 
 
 def twist_covariance(cpi: float, dt: float) -> list[float]:
@@ -66,8 +68,20 @@ def twist_covariance(cpi: float, dt: float) -> list[float]:
         raise ValueError(f"cpi and dt must be > 0, got cpi={cpi}, dt={dt}")
     step = 0.0254 / cpi / dt
     var_v = step * step / 12.0
-    c = [0.0] * 36
-    c[0] = c[7] = var_v
-    c[14] = c[21] = c[28] = 1e6
-    c[35] = var_v / 0.05**2  # omega from a sensor about 5 cm off the axle
-    return c
+    # omega from a sensor about 5 cm off the axle
+    return planar_covariance_6x6(np.diag([var_v, var_v, var_v / 0.05**2]))
+
+
+def planar_covariance_6x6(p3) -> list[float]:
+    """Row-major 6x6 (x, y, z, roll, pitch, yaw) of ROS messages from the 3x3 of (x, y, yaw).
+
+    The one place that knows the layout: z, roll and pitch get :data:`UNOBSERVED_VARIANCE`.
+    """
+    p = np.asarray(p3, dtype=float)
+    if p.shape != (3, 3):
+        raise ValueError(f"a planar covariance is 3x3 (x, y, yaw), got shape {p.shape}")
+    c = np.zeros((6, 6))
+    idx = [0, 1, 5]
+    c[np.ix_(idx, idx)] = p
+    c[2, 2] = c[3, 3] = c[4, 4] = UNOBSERVED_VARIANCE
+    return c.reshape(-1).tolist()

@@ -48,8 +48,10 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus, Range
 from std_msgs.msg import Float64
 
-from mm_pc.core.fixes.field_fixes import compass_to_rep103, gps_accuracy_m
-from mm_pc.core.fusion.loop import UNOBSERVED_VARIANCE, planar_quaternion, seconds_to_stamp
+from mm_pc.core.angles import compass_to_rep103, yaw_to_quaternion
+from mm_pc.core.fixes.field_fixes import gps_accuracy_m
+from mm_pc.core.fusion.inputs import seconds_to_stamp
+from mm_pc.core.uncertainty import UNOBSERVED_VARIANCE, planar_covariance_6x6
 from mm_pc.ros import spin as ros_spin
 from mm_pc.sim.field_run import FieldSim, simulate_field_run
 
@@ -204,9 +206,7 @@ class FieldSimNode(Node):
         ):
             for r in readings:
                 self.events.setdefault(r.k, []).append((kind, r))
-        cov = np.zeros(36)
-        cov[[14, 21, 28]] = UNOBSERVED_VARIANCE
-        self._planar_cov = cov
+        self._planar_cov = np.array(planar_covariance_6x6(np.zeros((3, 3))))
         ori = np.zeros(9)
         ori[0] = ori[4] = UNOBSERVED_VARIANCE
         ori[8] = sim.compass_var
@@ -222,7 +222,7 @@ class FieldSimNode(Node):
         x, y, yaw = poses[k]
         msg.pose.pose.position.x, msg.pose.pose.position.y = float(x), float(y)
         o = msg.pose.pose.orientation
-        o.x, o.y, o.z, o.w = planar_quaternion(float(yaw))
+        o.x, o.y, o.z, o.w = yaw_to_quaternion(float(yaw))
         msg.pose.covariance = self._planar_cov
         if k > 0:
             dt = float(self.sim.t[k] - self.sim.t[k - 1])
@@ -253,7 +253,7 @@ class FieldSimNode(Node):
         msg.header.stamp = stamp
         msg.header.frame_id = self.p["imu_frame"]
         o = msg.orientation
-        o.x, o.y, o.z, o.w = planar_quaternion(float(compass_to_rep103(heading)))
+        o.x, o.y, o.z, o.w = yaw_to_quaternion(float(compass_to_rep103(heading)))
         msg.orientation_covariance = self._imu_cov
         msg.angular_velocity_covariance[0] = -1.0
         msg.linear_acceleration_covariance[0] = -1.0

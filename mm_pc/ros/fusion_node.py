@@ -2,7 +2,7 @@
 
 A thin ROS node around :class:`mm_pc.core.fusion.ekf.PoseEKF`, fed in stamp order by
 :class:`mm_pc.core.fusion.loop.FusionCore` (message meanings and checks are in
-:mod:`mm_pc.core.fusion.loop`). Inputs (each topic a parameter, '' = not used):
+:mod:`mm_pc.core.fusion.inputs`). Inputs (each topic a parameter, '' = not used):
 
   mouse_odom_topic  nav_msgs/Odometry   /mm_odometry/odom   the motion model
   wheel_odom_topic  nav_msgs/Odometry   /wheel/odom         motion model only while
@@ -37,7 +37,6 @@ from __future__ import annotations
 import math
 import sys
 import time
-from dataclasses import replace
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -51,30 +50,34 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu, NavSatFix, Range
 from std_msgs.msg import Float64
 
+from mm_pc.core.angles import yaw_to_quaternion
 from mm_pc.core.fixes.field_fixes import LocalGrid, rectangle_perimeter
 from mm_pc.core.fusion.ekf import PoseEKF
-from mm_pc.core.fusion.loop import (
-    UNOBSERVED_VARIANCE,
-    FusionCore,
+from mm_pc.core.fusion.inputs import (
     InputError,
     PositionInput,
-    WarnThrottle,
+    gps_inflation,
     heading_input,
     imu_input,
-    increment_noise,
+    inflate_for_correlation,
     navsat_input,
     odometry_input,
     perimeter_input,
-    planar_quaternion,
-    pose_covariance_6x6,
     range_input,
     seconds_to_stamp,
 )
+from mm_pc.core.fusion.loop import FusionCore, increment_noise
 from mm_pc.core.maps.trilateration import Beacon
 from mm_pc.core.odometry import Pose2D
-from mm_pc.core.uncertainty import Q_POS, Q_YAW_DIST, Q_YAW_TURN
+from mm_pc.core.uncertainty import (
+    Q_POS,
+    Q_YAW_DIST,
+    Q_YAW_TURN,
+    UNOBSERVED_VARIANCE,
+    planar_covariance_6x6,
+)
 from mm_pc.ros import spin as ros_spin
-from mm_pc.sim.field_run import gps_inflation
+from mm_pc.ros.throttle import WarnThrottle
 
 COMPASS_INPUTS = ("imu", "heading", "none")
 GPS_SCALES = ("wgs84", "plot")
@@ -408,9 +411,7 @@ class FusionNode(Node):
         interval = self.core.interval(fix.source)
         if tau <= 0 or not interval:
             return fix
-        f = gps_inflation(interval, tau)
-        cov = tuple(tuple(f * v for v in row) for row in fix.cov)
-        return replace(fix, cov=cov, gate_cov=fix.cov)
+        return inflate_for_correlation(fix, gps_inflation(interval, tau))
 
     def _range_converter(self, beacon: Beacon):
         p = self.p
@@ -485,8 +486,8 @@ class FusionNode(Node):
         msg.child_frame_id = self.p["base_frame"]
         msg.pose.pose.position.x, msg.pose.pose.position.y = pose.x, pose.y
         o = msg.pose.pose.orientation
-        o.x, o.y, o.z, o.w = planar_quaternion(pose.yaw_wrapped)
-        msg.pose.covariance = pose_covariance_6x6(ekf.covariance)
+        o.x, o.y, o.z, o.w = yaw_to_quaternion(pose.yaw_wrapped)
+        msg.pose.covariance = planar_covariance_6x6(ekf.covariance)
         inc = self.core.last_increment
         if inc is not None and inc[3] > 0:
             fwd, left, turn, dt = inc
@@ -494,9 +495,9 @@ class FusionNode(Node):
             msg.twist.twist.angular.z = turn / dt
             q = self.wheel_q if self.core.motion_source == "wheel" else self.mouse_q
             m = increment_noise(fwd, left, turn, *q) / (dt * dt)
-            msg.twist.covariance = pose_covariance_6x6(m)
+            msg.twist.covariance = planar_covariance_6x6(m)
         else:  # no increment yet: the twist is unknown
-            msg.twist.covariance = pose_covariance_6x6(np.eye(3) * UNOBSERVED_VARIANCE)
+            msg.twist.covariance = planar_covariance_6x6(np.eye(3) * UNOBSERVED_VARIANCE)
         return msg
 
     def publish_odometry(self) -> None:

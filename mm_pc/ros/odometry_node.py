@@ -26,6 +26,7 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.node import Node
 
 from mm_interfaces.srv import GetSensorData
+from mm_pc.core.angles import yaw_to_quaternion
 from mm_pc.core.calibration import Calibration
 from mm_pc.core.geometry import DEFAULT_MOUNTS, SensorMount
 from mm_pc.core.odometry import METHODS, Odometry, Pose2D, Sample
@@ -75,11 +76,6 @@ PARAMETERS = {
         ),
     ),
 }
-
-
-def yaw_to_quaternion(yaw: float) -> tuple[float, float, float, float]:
-    """(x, y, z, w) of a rotation by ``yaw`` about +z."""
-    return 0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)
 
 
 def odometry_message(

@@ -58,18 +58,11 @@ measurement belongs to one request end)
 
 Replay (:func:`run_fusion`)
 ---------------------------
-Per request: predict with the request's increment, then apply that request
-end's measurements: GPS (only :func:`~mm_pc.core.fixes.field_fixes.gps_fix_usable` fixes;
-gated with the fix's own R = accuracy^2 / 2 per axis, so ghosts are caught,
-but applied with R inflated by (1 + phi) / (1 - phi), phi = exp(-0.5 s / 30 s)
-(:func:`gps_inflation`, about 120): the filter treats fixes as independent,
-and 2 Hz fixes of an error that wanders over 30 s are not, so without it the
-filter believes it averaged the GPS error away), beacon ranges (tightly coupled,
-:meth:`~mm_pc.core.fusion.ekf.PoseEKF.update_ranges`) or trilaterated fixes
-(:func:`mm_pc.core.maps.trilateration.least_squares_fix` with its covariance), compass
-(R = (2 deg)^2 + (1 deg)^2: the filter has no bias state, so the bias is
-counted as noise) and wire contacts (R = (3 cm)^2: the contact is reported at
-the next request end, up to 1.5 cm past the wire).
+The run goes through the one fusion loop, :class:`mm_pc.core.fusion.loop.FusionCore`,
+as ``mm-fusion`` gets it from ``mm-field-sim``'s topics: per request the odometry pose,
+then that request end's readings as input records (GPS fixes inflated for their
+correlation, one range record per beacon, compass headings, nearest-wire contacts).
+Weights and the reasons behind them: docs/maps-and-fixes.md.
 """
 
 from __future__ import annotations
@@ -80,20 +73,27 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mm_pc.core.angles import compass_to_rep103, rep103_to_compass
 from mm_pc.core.fixes.field_fixes import (
     GpsQuality,
     LocalGrid,
     PerimeterSegment,
-    body_increment,
-    compass_to_rep103,
     gps_accuracy_m,
     gps_fix_usable,
-    nearest_segment,
     rectangle_perimeter,
-    rep103_to_compass,
     tick_length,
 )
 from mm_pc.core.fusion.ekf import PoseEKF, increments_from_poses
+from mm_pc.core.fusion.inputs import (
+    AxisInput,
+    HeadingInput,
+    MotionInput,
+    PositionInput,
+    RangeInput,
+    gps_inflation,
+    inflate_for_correlation,
+)
+from mm_pc.core.fusion.loop import FusionCore
 from mm_pc.core.geometry import DEFAULT_MOUNTS
 from mm_pc.core.maps.trilateration import (
     Beacon,
@@ -114,7 +114,6 @@ __all__ = [
     "WireContact",
     "corner_beacons",
     "errors",
-    "gps_inflation",
     "lawn_path",
     "plot_grid",
     "run_fusion",
@@ -358,21 +357,6 @@ def _gps_readings(truth, t, grid, gen) -> list[GpsReading]:
     return out
 
 
-def gps_inflation(interval_s: float, tau_s: float) -> float:
-    """Factor on a GPS fix's variance so that a stream of them counts as what it is worth.
-
-    For a first-order Gauss-Markov error with correlation exp(-interval/tau)
-    = phi between fixes, the mean of n fixes has the variance of
-    n (1 - phi) / (1 + phi) independent ones; weighting every fix by that
-    fraction, i.e. inflating its variance by (1 + phi) / (1 - phi), keeps the
-    filter from believing it averaged the error away.
-    """
-    if not (interval_s > 0 and tau_s > 0):
-        raise ValueError(f"interval and tau must be > 0 s, got {interval_s}, {tau_s}")
-    phi = math.exp(-interval_s / tau_s)
-    return (1 + phi) / (1 - phi)
-
-
 def _random_vector(gen, lo: float, hi: float) -> np.ndarray:
     a = gen.uniform(0, 2 * math.pi)
     return gen.uniform(lo, hi) * np.array([math.cos(a), math.sin(a)])
@@ -458,55 +442,7 @@ def simulate_field_run(seed: int | np.random.Generator = 1) -> FieldSim:
     )
 
 
-# --- replay --------------------------------------------------------------------------------
-
-
-def _events_by_request(sim_run: FieldSim, use: Sequence[str]) -> dict[int, list]:
-    events: dict[int, list] = {}
-    lists = {
-        "compass": sim_run.compass,
-        "beacons": sim_run.ranges,
-        "trilateration": sim_run.ranges,
-        "gps": sim_run.gps,
-        "perimeter": sim_run.contacts,
-    }
-    for name in ("compass", "beacons", "trilateration", "gps", "perimeter"):
-        if name in use:
-            for m in lists[name]:
-                events.setdefault(m.k, []).append((name, m))
-    return events
-
-
-def _apply(ekf: PoseEKF, sim_run: FieldSim, name: str, m, ungated: bool) -> str:
-    """One reading into the filter: 'applied', 'rejected' (by the gate) or 'skipped'."""
-    g = {"gate": None} if ungated else {}
-    if name == "compass":
-        ok = ekf.update_heading(float(compass_to_rep103(m.heading)), sim_run.compass_var, **g)
-    elif name == "beacons":
-        ok = ekf.update_ranges(sim_run.beacons, m.ranges, sim_run.range_sigma, **g)
-    elif name == "trilateration":
-        try:
-            fix = least_squares_fix(
-                sim_run.beacons, m.ranges, sim_run.range_sigma, initial=tuple(ekf.state[:2])
-            )
-        except TrilaterationError:
-            return "skipped"
-        ok = ekf.update_position((fix.x, fix.y), fix.covariance, **g)
-    elif name == "gps":
-        if not gps_fix_usable(m.quality):
-            return "skipped"
-        var = gps_accuracy_m(m.quality) ** 2 / 2
-        r = np.diag([var, var])
-        xy = sim_run.grid.to_local(m.lat, m.lon)
-        ok = ekf.update_position(xy, r * sim_run.gps_inflation, **g, gate_cov=r)
-    else:  # perimeter: which wire is a guess from the estimate, as on the robot
-        s = ekf.state
-        wire = nearest_segment((s[0], s[1]), sim_run.wires, max_distance=2.0)
-        if wire is None:
-            return "skipped"
-        ok = ekf.update_axis(wire.axis, wire.value, sim_run.wire_var)
-    return "applied" if ok else "rejected"
-
+# --- replay ---------------------------------------------------------------------------------
 
 #: After this many rejections in a row of one source the filter is taken to be lost
 #: (off by more than its covariance admits, so it would reject every later reading too):
@@ -517,6 +453,64 @@ REACQUIRE_AFTER = 10
 #: a few per cent per wheel, i.e. about twice the mouse's spread along and 3x in heading.
 WHEEL_NOISE = {"q_pos": 0.03**2, "q_yaw_dist": 0.03**2, "q_yaw_turn": 0.03**2}
 
+#: The replay's frame names (the node only checks that they stay the same).
+_FRAMES = {"mouse": "odom", "wheel": "wheel_odom"}
+
+
+def _input_of(source: str) -> str:
+    """The :data:`FUSION_INPUTS` name of a FusionCore source ('beacon/SW' -> 'beacons')."""
+    return "beacons" if source.startswith("beacon/") else source
+
+
+def _readings_by_request(sim: FieldSim, use: Sequence[str]) -> dict[int, list]:
+    events: dict[int, list] = {}
+    lists = {
+        "compass": sim.compass,
+        "beacons": sim.ranges,
+        "trilateration": sim.ranges,
+        "gps": sim.gps,
+        "perimeter": sim.contacts,
+    }
+    for name in FUSION_INPUTS:
+        if name in use:
+            for m in lists[name]:
+                events.setdefault(m.k, []).append((name, m))
+    return events
+
+
+def _records(core: FusionCore, sim: FieldSim, name: str, m, stamp: float) -> list:
+    """The FusionCore records of one simulated reading, as mm-fusion would read them from
+    mm-field-sim's topics. A reading without a usable value is counted as such instead."""
+    if name == "compass":
+        yaw = float(compass_to_rep103(m.heading))
+        return [HeadingInput(stamp, "compass", yaw, sim.compass_var)]
+    if name == "beacons":
+        return [
+            RangeInput(stamp, f"beacon/{b.name}", b, float(r), sim.range_sigma)
+            for b, r in zip(sim.beacons, m.ranges, strict=True)
+        ]
+    if name == "trilateration":
+        try:
+            fix = least_squares_fix(
+                sim.beacons, m.ranges, sim.range_sigma, initial=tuple(core.ekf.state[:2])
+            )
+        except TrilaterationError as exc:
+            core.count("trilateration", "unusable", str(exc))
+            return []
+        cov = tuple(tuple(float(v) for v in row) for row in fix.covariance)
+        return [PositionInput(stamp, "trilateration", (fix.x, fix.y), cov)]
+    if name == "gps":
+        if not gps_fix_usable(m.quality):
+            core.count("gps", "unusable", "GPS quality too poor")
+            core.heard("gps", stamp)
+            return []
+        var = gps_accuracy_m(m.quality) ** 2 / 2
+        x, y = sim.grid.to_local(m.lat, m.lon)
+        fix = PositionInput(stamp, "gps", (float(x), float(y)), ((var, 0.0), (0.0, var)))
+        return [inflate_for_correlation(fix, sim.gps_inflation)]
+    # perimeter: which wire is a guess from the estimate, as on the robot
+    return [AxisInput(stamp, "perimeter", None, None)]
+
 
 def run_fusion(
     sim: FieldSim,
@@ -524,50 +518,57 @@ def run_fusion(
     motion: str = "mouse",
     stats: dict | None = None,
 ) -> np.ndarray:
-    """Replay ``sim`` through a :class:`~mm_pc.core.fusion.ekf.PoseEKF`; the (N+1, 3) fused poses.
+    """Replay ``sim`` through :class:`~mm_pc.core.fusion.loop.FusionCore`; the (N+1, 3) fused poses.
 
-    ``use``: which corrections to apply, a subset of :data:`FUSION_INPUTS`
-    ('beacons' = raw ranges, tightly coupled; 'trilateration' = the same
-    ranges as least-squares fixes). ``motion``: 'mouse' (the raw mouse
-    odometry's increments) or 'wheels' (wheel travel through
-    :func:`mm_pc.core.fixes.field_fixes.body_increment`). Row k is the estimate after
-    request k's predict and its measurements. ``stats``, if given, receives
-    counts: ``predicts``; ``applied``, ``rejected`` (failed the gate),
-    ``skipped`` (not usable: bad GPS quality, no trilateration fix, no wire
-    near) and ``reacquired`` (applied ungated after :data:`REACQUIRE_AFTER`
-    rejections in a row), in total and per input under ``by_input``.
+    The same loop as ``mm-fusion``: one :meth:`~mm_pc.core.fusion.loop.FusionCore.step` per
+    request for its odometry, one for the readings that belong to its end. ``use``: which
+    corrections to apply, a subset of :data:`FUSION_INPUTS` ('beacons' = raw ranges, one
+    record per beacon; 'trilateration' = the same ranges as least-squares fixes).
+    ``motion``: 'mouse' (the raw mouse odometry's poses) or 'wheels' (the wheel odometry's
+    poses, which FusionCore takes as the motion model when no mouse odometry comes). Row k
+    is the estimate after request k's predict and its measurements. ``stats``, if given,
+    receives counts: ``predicts``; ``applied``, ``rejected`` (failed the gate),
+    ``skipped`` (not usable: bad GPS quality, no trilateration fix, no wire near) and
+    ``reacquired`` (applied ungated after :data:`REACQUIRE_AFTER` rejections in a row),
+    in total and per input under ``by_input``.
     """
     if isinstance(use, str) or any(u not in FUSION_INPUTS for u in use):
         raise ValueError(f"use must be a collection of names from {FUSION_INPUTS}, got {use!r}")
     if motion not in MOTION_SOURCES:
         raise ValueError(f"motion must be one of {MOTION_SOURCES}, got {motion!r}")
-    if motion == "mouse":
-        ekf = PoseEKF(Pose2D(*sim.truth[0]))
-        inc = sim.mouse
-    else:
-        ekf = PoseEKF(Pose2D(*sim.truth[0]), **WHEEL_NOISE)
-        inc = np.array([body_increment(dl, dr, sim.track_width) for dl, dr in sim.wheels])
-    kinds = ("applied", "rejected", "skipped", "reacquired")
-    by_input = {name: dict.fromkeys(kinds, 0) for name in use}
-    in_a_row = dict.fromkeys(use, 0)
-    events = _events_by_request(sim, use)
-    out = np.empty((inc.shape[0] + 1, 3))
-    out[0] = ekf.state
-    for k in range(1, inc.shape[0] + 1):
-        a, b, c = inc[k - 1]
-        ekf.predict(float(a), float(b), float(c))
-        for name, m in events.get(k, ()):
-            ungated = in_a_row[name] >= REACQUIRE_AFTER
-            outcome = _apply(ekf, sim, name, m, ungated)
-            count = by_input[name]
-            count[outcome] += 1
-            count["reacquired"] += ungated and outcome == "applied"
-            if outcome != "skipped":
-                in_a_row[name] = in_a_row[name] + 1 if outcome == "rejected" else 0
-        out[k] = ekf.state
+    source, poses = ("mouse", sim.raw) if motion == "mouse" else ("wheel", sim.raw_wheels)
+    core = FusionCore(
+        PoseEKF(Pose2D(*sim.truth[0])),
+        wheel_noise=(WHEEL_NOISE["q_pos"], WHEEL_NOISE["q_yaw_dist"], WHEEL_NOISE["q_yaw_turn"]),
+        reacquire_after=REACQUIRE_AFTER,
+        wires=sim.wires,
+        wire_var=sim.wire_var,
+        wire_max_distance=2.0,
+    )
+    readings = _readings_by_request(sim, use)
+    out = np.empty((poses.shape[0], 3))
+    for k in range(poses.shape[0]):
+        stamp = float(sim.t[k])
+        core.step([MotionInput(stamp, source, _FRAMES[source], Pose2D(*poses[k]))])
+        records = []
+        for name, m in readings.get(k, ()):
+            records += _records(core, sim, name, m, stamp)
+        core.step(records)
+        out[k] = core.ekf.state
     if stats is not None:
+        kinds = ("applied", "rejected", "skipped", "reacquired")
+        by_input = {name: dict.fromkeys(kinds, 0) for name in use}
+        for src, c in core.counts.items():
+            name = _input_of(src)
+            if name not in by_input:
+                continue
+            count = by_input[name]
+            count["applied"] += c.accepted
+            count["rejected"] += c.rejected
+            count["skipped"] += c.unusable + c.invalid + c.stale
+            count["reacquired"] += c.reacquired
         stats.clear()
-        stats["predicts"] = int(inc.shape[0])
+        stats["predicts"] = int(poses.shape[0] - 1)
         for kind in kinds:
             stats[kind] = sum(c[kind] for c in by_input.values())
         stats["by_input"] = by_input

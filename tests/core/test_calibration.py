@@ -14,11 +14,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from mm_pc.core.angles import wrap_pi as normalize_angle
 from mm_pc.core.calibration import (
     Calibration,
     SensorCalibration,
     calibrate_straight_run,
-    normalize_angle,
 )
 from mm_pc.core.frames import counts_to_m, m_to_counts
 from mm_pc.core.geometry import SensorMount

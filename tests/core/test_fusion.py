@@ -16,16 +16,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mm_pc.core.fixes.field_fixes import compass_to_rep103
+from mm_pc.core.angles import compass_to_rep103, quaternion_yaw, wrap_pi
 from mm_pc.core.fusion.ekf import (
     DEFAULT_P0,
     GATE_2D,
     PoseEKF,
     increments_from_poses,
     pose_increment,
-    wrap_angle,
-    yaw_from_quaternion,
 )
+from mm_pc.core.fusion.inputs import gps_inflation
 from mm_pc.core.geometry import DEFAULT_MOUNTS, SensorMount
 from mm_pc.core.maps.trilateration import Beacon
 from mm_pc.core.odometry import Odometry, Pose2D, Sample
@@ -120,7 +119,7 @@ def test_pose_increment_inverts_predict_also_with_wrapped_yaw():
     ekf = PoseEKF(before)
     ekf.predict(0.4, 0.05, 0.3)  # crosses +pi
     after = ekf.pose
-    wrapped = Pose2D(after.x, after.y, wrap_angle(after.yaw))
+    wrapped = Pose2D(after.x, after.y, wrap_pi(after.yaw))
     assert wrapped.yaw < 0
     for target in (after, wrapped):
         inc = pose_increment(before, target)
@@ -129,12 +128,12 @@ def test_pose_increment_inverts_predict_also_with_wrapped_yaw():
     assert increments_from_poses(rows)[0] == pytest.approx([0.4, 0.05, 0.3], abs=1e-12)
 
 
-def test_yaw_from_quaternion_inverts_yaw_to_quaternion():
+def test_quaternion_yaw_inverts_a_planar_quaternion():
     for yaw in (-3.0, -1.0, 0.0, 0.5, 3.1):
-        assert yaw_from_quaternion(math.sin(yaw / 2), math.cos(yaw / 2)) == pytest.approx(yaw)
-    assert yaw_from_quaternion(math.sin(4.0), math.cos(4.0)) == pytest.approx(8.0 - 2 * math.pi)
+        assert quaternion_yaw(0, 0, math.sin(yaw / 2), math.cos(yaw / 2)) == pytest.approx(yaw)
+    assert quaternion_yaw(0, 0, math.sin(4.0), math.cos(4.0)) == pytest.approx(8.0 - 2 * math.pi)
     with pytest.raises(ValueError, match="zero length"):
-        yaw_from_quaternion(0.0, 0.0)
+        quaternion_yaw(0.0, 0.0, 0.0, 0.0)
 
 
 def _numeric_jacobians(state, u, eps=1e-6):
@@ -538,12 +537,12 @@ def test_lawn_path_rejects_a_bad_speed():
 
 
 def test_gps_inflation_is_the_gauss_markov_factor():
-    assert fs.gps_inflation(0.5, 30.0) == pytest.approx(
+    assert gps_inflation(0.5, 30.0) == pytest.approx(
         (1 + math.exp(-1 / 60)) / (1 - math.exp(-1 / 60))
     )
-    assert fs.gps_inflation(1e6, 1.0) == pytest.approx(1.0)
+    assert gps_inflation(1e6, 1.0) == pytest.approx(1.0)
     with pytest.raises(ValueError, match="must be > 0"):
-        fs.gps_inflation(0.0, 30.0)
+        gps_inflation(0.0, 30.0)
 
 
 def test_sensor_mount_used_by_the_simulation_is_off_the_axle():

@@ -214,7 +214,9 @@ def test_integrate_continues_from_the_current_pose_and_reset():
 def test_pose_yaw_is_continuous_and_wrapped_on_request():
     p = Pose2D(0, 0, 4 * math.pi + 0.1)
     assert p.yaw_wrapped == pytest.approx(0.1)
-    assert Pose2D(0, 0, math.pi).yaw_wrapped == pytest.approx(-math.pi)
+    # the one wrap convention, (-pi, pi] (mm_pc.core.angles)
+    assert Pose2D(0, 0, math.pi).yaw_wrapped == pytest.approx(math.pi)
+    assert Pose2D(0, 0, -math.pi).yaw_wrapped == pytest.approx(math.pi)
 
 
 # --- the seed's approaches ---------------------------------------------------------------

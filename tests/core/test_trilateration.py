@@ -10,19 +10,18 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mm_pc.bench.maps_trilateration import bench_trilateration
+from mm_pc.core.angles import compass_to_rep103, rep103_to_compass
 from mm_pc.core.maps.trilateration import (
     MAX_RESIDUAL_SIGMAS,
     Beacon,
     Fix,
     TrilaterationError,
     best_three,
-    compass_from_yaw,
     least_squares_fix,
     pair_candidates,
     plane_distances,
     seed_fix,
     simulate_ranges,
-    yaw_from_compass,
 )
 
 # Hand-checkable example in the spirit of the seed's (its numbers were images and are lost):
@@ -60,10 +59,10 @@ def test_range_shorter_than_height_is_an_error_naming_the_beacon():
 def test_compass_angles_map_to_rep103():
     # north, east, south, west in the seed's compass angles
     for kappa, theta in ((0, 90), (90, 0), (180, -90), (270, 180), (315, 135)):
-        assert math.degrees(yaw_from_compass(math.radians(kappa))) == pytest.approx(theta)
-        assert math.degrees(compass_from_yaw(math.radians(theta))) % 360 == pytest.approx(kappa)
+        assert math.degrees(compass_to_rep103(math.radians(kappa))) == pytest.approx(theta)
+        assert math.degrees(rep103_to_compass(math.radians(theta))) % 360 == pytest.approx(kappa)
     # the seed's x_AB < 0 case: BC = (-8, 8) has kappa_BC = 360 - 45 = 315 deg
-    assert math.degrees(compass_from_yaw(math.atan2(8, -8))) == pytest.approx(315.0)
+    assert math.degrees(rep103_to_compass(math.atan2(8, -8))) == pytest.approx(315.0)
 
 
 def test_pair_candidates_of_the_worked_example():

@@ -21,32 +21,31 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from mm_pc.core.angles import quaternion_yaw, yaw_to_quaternion
 from mm_pc.core.fixes.field_fixes import LocalGrid, PerimeterSegment, rectangle_perimeter
 from mm_pc.core.fusion.ekf import PoseEKF
-from mm_pc.core.fusion.loop import (
+from mm_pc.core.fusion.inputs import (
     AxisInput,
-    FusionCore,
     HeadingInput,
     InputError,
     MotionInput,
     PositionInput,
     RangeInput,
     UnusableInputError,
-    WarnThrottle,
     heading_input,
     imu_input,
     navsat_input,
     odometry_input,
     perimeter_input,
-    planar_quaternion,
-    pose_covariance_6x6,
-    quaternion_yaw,
     range_input,
     seconds_to_stamp,
     stamp_seconds,
 )
+from mm_pc.core.fusion.loop import FusionCore
 from mm_pc.core.maps.trilateration import Beacon
 from mm_pc.core.odometry import Pose2D
+from mm_pc.core.uncertainty import planar_covariance_6x6
+from mm_pc.ros.throttle import WarnThrottle
 
 NAN = math.nan
 Msg = SimpleNamespace  # a message stand-in: only field names matter
@@ -63,7 +62,7 @@ def header(frame: str = "", t: float = 100.0) -> SimpleNamespace:
 
 
 def quat(yaw: float) -> SimpleNamespace:
-    x, y, z, w = planar_quaternion(yaw)
+    x, y, z, w = yaw_to_quaternion(yaw)
     return Msg(x=x, y=y, z=z, w=w)
 
 
@@ -120,7 +119,7 @@ def test_stamps_round_trip_and_unset_stamps_are_invalid():
 
 def test_quaternion_yaw_is_the_heading_also_when_tilted():
     for yaw in (0.0, 0.3, -2.0, math.pi, 7.0):
-        got = quaternion_yaw(*planar_quaternion(yaw))
+        got = quaternion_yaw(*yaw_to_quaternion(yaw))
         assert -math.pi <= got <= math.pi
         assert math.remainder(got - yaw, 2 * math.pi) == pytest.approx(0.0, abs=1e-12)
     # roll 20 deg about x, then yaw 50 deg about z (q = q_yaw * q_roll), not normalised (x3)
@@ -128,9 +127,9 @@ def test_quaternion_yaw_is_the_heading_also_when_tilted():
     q = (math.cos(y) * math.sin(r), math.sin(y) * math.sin(r), math.sin(y) * math.cos(r))
     w = math.cos(y) * math.cos(r)
     assert quaternion_yaw(*(3 * c for c in (*q, w))) == pytest.approx(math.radians(50))
-    with pytest.raises(InputError, match="zero length"):
+    with pytest.raises(ValueError, match="zero length"):
         quaternion_yaw(0, 0, 0, 0)
-    with pytest.raises(InputError, match="quaternion z must be finite"):
+    with pytest.raises(ValueError, match="quaternion z must be finite"):
         quaternion_yaw(0, 0, NAN, 1)
 
 
@@ -242,7 +241,7 @@ def test_perimeter_contact_nan_marks_the_unmeasured_axis():
 
 def test_pose_covariance_goes_to_x_y_yaw_of_the_6x6():
     p = np.array([[1.0, 0.1, 0.2], [0.1, 2.0, 0.3], [0.2, 0.3, 3.0]])
-    c = np.array(pose_covariance_6x6(p)).reshape(6, 6)
+    c = np.array(planar_covariance_6x6(p)).reshape(6, 6)
     assert c[np.ix_([0, 1, 5], [0, 1, 5])] == pytest.approx(p)
     assert c[2, 2] == c[3, 3] == c[4, 4] == 1e6
     assert c[0, 2] == c[5, 3] == 0.0

@@ -18,8 +18,8 @@ is 3*pi/2). REP 103 yaw is 0 = east = +x, counter-clockwise positive. So
     yaw = pi/2 - heading        heading = pi/2 - yaw
 
 (an involution), wrapped to (-pi, pi] for yaw and [0, 2*pi) for a heading.
-:func:`compass_to_rep103` and :func:`rep103_to_compass` are the only places
-that apply it; everything else in this module is REP 103. The seed's turn
+:func:`mm_pc.core.angles.compass_to_rep103` and ``rep103_to_compass`` are the only
+places that apply it; everything else in this module is REP 103. The seed's turn
 angle "Drehwinkel" = (left - right) / track is clockwise positive; ours is
 (right - left) / track, CCW positive: the same turn.
 
@@ -100,6 +100,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from mm_pc.core.angles import compass_to_rep103, wrap_pi
+from mm_pc.core.checks import finite as _finite
+from mm_pc.core.checks import finite_array as _finite_array
 from mm_pc.core.odometry import Pose2D, arc_poses
 
 __all__ = [
@@ -112,7 +115,6 @@ __all__ = [
     "WheelOdometry",
     "blend_heading",
     "body_increment",
-    "compass_to_rep103",
     "correct_at_wire",
     "gps_accuracy_m",
     "gps_correction",
@@ -123,40 +125,16 @@ __all__ = [
     "parse_gll",
     "perimeter_correction",
     "rectangle_perimeter",
-    "rep103_to_compass",
     "seed_gentle_step",
     "seed_pivot_step",
     "sensor_position",
     "tick_length",
     "wgs84_m_per_deg",
-    "wrap_pi",
 ]
 
 _TWO_PI = 2.0 * math.pi
 
 # --- input checks ------------------------------------------------------------------------
-
-
-def _finite(name: str, value) -> float:
-    """``value`` as a finite float, else ValueError naming ``name``."""
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a finite number, got {value!r}") from None
-    if not math.isfinite(v):
-        raise ValueError(f"{name} must be a finite number, got {value!r}")
-    return v
-
-
-def _finite_array(name: str, value) -> np.ndarray:
-    """``value`` as a float array with only finite entries, else ValueError."""
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be finite numbers, got {value!r}") from None
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be finite numbers (no NaN or inf), got {value!r}")
-    return arr
 
 
 def _positive(name: str, value) -> float:
@@ -189,36 +167,6 @@ def _like_input(value, result: np.ndarray):
 
 
 # --- angles ------------------------------------------------------------------------------
-
-
-def wrap_pi(angle_rad):
-    """Angle(s) wrapped to (-pi, pi] (rad); scalars or numpy arrays."""
-    a = _finite_array("angle", angle_rad)
-    w = math.pi - np.mod(math.pi - a, _TWO_PI)
-    # np.mod can round up to exactly 2*pi for tiny negative inputs: -pi is not allowed.
-    w = np.where(w <= -math.pi, math.pi, w)
-    return _like_input(angle_rad, w)
-
-
-def _wrap_2pi(angle: np.ndarray) -> np.ndarray:
-    w = np.mod(angle, _TWO_PI)
-    return np.where(w >= _TWO_PI, 0.0, w)
-
-
-def compass_to_rep103(heading_rad):
-    """Compass heading (0 = north = +y, clockwise+) -> REP 103 yaw (0 = east = +x, CCW+).
-
-    Result in (-pi, pi] rad. North -> pi/2, east -> 0, south -> -pi/2,
-    west -> pi. Scalars or numpy arrays.
-    """
-    h = _finite_array("compass heading", heading_rad)
-    return wrap_pi(math.pi / 2 - h)
-
-
-def rep103_to_compass(yaw_rad):
-    """REP 103 yaw (0 = east, CCW+) -> compass heading (0 = north, clockwise+) in [0, 2*pi)."""
-    y = _finite_array("yaw", yaw_rad)
-    return _like_input(yaw_rad, _wrap_2pi(math.pi / 2 - y))
 
 
 def blend_heading(odom_yaw, compass_yaw, weight: float):

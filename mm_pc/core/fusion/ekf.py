@@ -64,7 +64,7 @@ carries poses, not increments. :func:`pose_increment` (one pair) and
 c = wrap(yaw1 - yaw0) and m = yaw0 + c/2, (a, b) = R(-m) (x1 - x0, y1 - y0) / k(c),
 so predicting with the result from pose 0 lands on pose 1 to rounding, in
 whatever frame the odometry uses (only differences enter). The yaw step is
-wrapped, so yaws decoded from quaternions (:func:`yaw_from_quaternion`) work
+wrapped, so yaws decoded from quaternions (:func:`mm_pc.core.angles.quaternion_yaw`) work
 as long as the robot turns less than pi between two messages.
 
 Measurement models (update)
@@ -82,7 +82,7 @@ P+ = (I - K H) P (I - K H)^T + K R K^T, which keeps P symmetric positive
   gate with the single fix's own covariance (``gate_cov``), see
   :mod:`mm_pc.sim.field_run`.
 * Heading (compass, converted to REP 103 by the caller): z = yaw,
-  H = [0, 0, 1]; the innovation is wrapped to [-pi, pi) so 179 deg vs
+  H = [0, 0, 1]; the innovation is wrapped to (-pi, pi] so 179 deg vs
   -179 deg is a 2 deg correction, not 358 deg.
 * Axis (perimeter-wire contact, seed 004): z = x or z = y alone,
   H = [1, 0, 0] or [0, 1, 0]; the other coordinate learns only through the
@@ -112,6 +112,8 @@ import math
 
 import numpy as np
 
+from mm_pc.core.angles import wrap_pi
+from mm_pc.core.checks import finite as _finite
 from mm_pc.core.odometry import Pose2D
 from mm_pc.core.uncertainty import Q_POS, Q_YAW_DIST, Q_YAW_TURN
 
@@ -122,8 +124,6 @@ __all__ = [
     "PoseEKF",
     "increments_from_poses",
     "pose_increment",
-    "wrap_angle",
-    "yaw_from_quaternion",
 ]
 
 #: chi-square 99 % quantiles for 1 and 2 degrees of freedom.
@@ -141,23 +141,6 @@ _HEADING_ROW = np.array([[0.0, 0.0, 1.0]])
 _POSITION_ROWS = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 
 
-def wrap_angle(a: float) -> float:
-    """``a`` (rad) wrapped into [-pi, pi)."""
-    return (a + math.pi) % (2 * math.pi) - math.pi
-
-
-def yaw_from_quaternion(z: float, w: float) -> float:
-    """Yaw (rad, [-pi, pi)) of a rotation about +z given as quaternion (0, 0, z, w).
-
-    The planar inverse of :func:`mm_pc.ros.odometry_node.yaw_to_quaternion`, for
-    feeding nav_msgs/Odometry poses to :func:`pose_increment`.
-    """
-    zf, wf = _finite("quaternion z", z), _finite("quaternion w", w)
-    if zf == 0.0 and wf == 0.0:
-        raise ValueError("quaternion (0, 0, 0, 0) has zero length; it must be a rotation")
-    return wrap_angle(2.0 * math.atan2(zf, wf))
-
-
 def _sinc_half(c: float) -> tuple[float, float]:
     """k(c) = sin(c/2)/(c/2) and its derivative dk/dc."""
     h = 0.5 * c
@@ -172,7 +155,7 @@ def pose_increment(before: Pose2D, after: Pose2D) -> tuple[float, float, float]:
 
     The inverse of the arc model of :meth:`PoseEKF.predict`: predicting with
     the result from ``before`` gives ``after`` (to rounding). dtheta is the
-    yaw change wrapped to [-pi, pi), so wrapped yaws (as decoded from a
+    yaw change wrapped to (-pi, pi], so wrapped yaws (as decoded from a
     nav_msgs/Odometry quaternion) work too, as long as the robot turns less
     than pi between two poses.
     """
@@ -185,7 +168,7 @@ def pose_increment(before: Pose2D, after: Pose2D) -> tuple[float, float, float]:
     if not all(math.isfinite(v) for v in vals):
         raise ValueError(f"poses must be finite, got {before} -> {after}")
     x0, y0, yaw0, x1, y1, yaw1 = vals
-    c = wrap_angle(yaw1 - yaw0)
+    c = wrap_pi(yaw1 - yaw0)
     k, _ = _sinc_half(c)
     m = yaw0 + 0.5 * c
     cm, sm = math.cos(m), math.sin(m)
@@ -205,7 +188,7 @@ def increments_from_poses(poses) -> np.ndarray:
     if not np.all(np.isfinite(p)):
         raise ValueError("poses must be finite")
     d = np.diff(p, axis=0)
-    c = (d[:, 2] + math.pi) % (2 * math.pi) - math.pi
+    c = wrap_pi(d[:, 2])
     h = 0.5 * c
     k = np.ones_like(h)
     np.divide(np.sin(h), h, out=k, where=h != 0)
@@ -214,16 +197,6 @@ def increments_from_poses(poses) -> np.ndarray:
     fwd = (cm * d[:, 0] + sm * d[:, 1]) / k
     left = (-sm * d[:, 0] + cm * d[:, 1]) / k
     return np.stack([fwd, left, c], axis=1)
-
-
-def _finite(name: str, value) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(v):
-        raise ValueError(f"{name} must be finite, got {v}")
-    return v
 
 
 def _spd(name: str, value, n: int, allow_semi: bool = False) -> np.ndarray:
@@ -453,7 +426,7 @@ class PoseEKF:
         if v <= 0:
             raise ValueError(f"heading variance must be > 0 rad^2, got {v}")
         g = _gate(gate)
-        nu = np.array([wrap_angle(z - float(self._s[2]))])
+        nu = np.array([wrap_pi(z - float(self._s[2]))])
         return self._update(nu, _HEADING_ROW, np.array([[v]]), g)
 
     def update_axis(self, axis: str, value: float, var: float, gate: float | None = None) -> bool:

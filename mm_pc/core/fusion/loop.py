@@ -1,64 +1,11 @@
-"""ROS messages <-> the fusion's math types, and the time-ordered front end of the filter.
+"""THE fusion loop: input records into a :class:`~mm_pc.core.fusion.ekf.PoseEKF` in stamp order.
 
-Pure Python and numpy: no ROS import. Messages are read duck-typed (only
-their field names are used), so the same functions take real
-``sensor_msgs``/``nav_msgs`` objects in mm-fusion and plain stand-ins in
-tests. What each message means here:
-
-``nav_msgs/Odometry`` (mouse odometry, wheel odometry)
-    The pose of ``child_frame_id`` (must be the robot's base frame) in
-    ``header.frame_id`` (any non-empty name, but constant: a change starts a
-    new baseline). Only poses are used; consecutive poses give the body
-    increment (fwd, left, dtheta) of :func:`mm_pc.core.fusion.ekf.pose_increment`.
-``sensor_msgs/NavSatFix`` (GPS)
-    ``status.status`` FIX, SBAS_FIX or GBAS_FIX is a position; NO_FIX and
-    UNKNOWN are readings without one (*unusable*); any other value is
-    *invalid*. Latitude/longitude go to plot metres by
-    :class:`mm_pc.core.fixes.field_fixes.LocalGrid`. ``position_covariance`` is ENU
-    (m^2, row-major east, north, up), so its upper-left 2x2 block is the
-    covariance of the plot's (x east, y north); with
-    ``COVARIANCE_TYPE_UNKNOWN`` a default sigma is used, with APPROXIMATED or
-    DIAGONAL_KNOWN only the diagonal. A fix whose larger standard deviation
-    exceeds ``max_sigma`` is unusable (HDOP 2 at 2.5 m UERE, the seed's
-    limit, is 3.54 m per axis). NavSatFix has no satellite count: a driver
-    that knows the fix is too weak must say NO_FIX.
-``sensor_msgs/Imu`` (compass)
-    Orientation per REP 103/145: ENU world, yaw CCW from east; an Imu never
-    needs the seed's compass conversion. ``orientation_covariance[0] == -1``
-    means no orientation (unusable); element 8 (yaw, rad^2) is the variance
-    when it is > 0, else the default.
-``std_msgs/Float64`` (compass, alternative)
-    A heading in the seed's convention (rad, 0 = north, clockwise), turned
-    into REP 103 by :func:`mm_pc.core.fixes.field_fixes.compass_to_rep103`. It has no
-    stamp: it is applied when it arrives, to the newest estimate.
-``sensor_msgs/Range`` (one topic per beacon)
-    The slant range (m) from the robot's range antenna to that beacon. REP
-    117: -inf (too close) and +inf (nothing) are readings without a range
-    (unusable); NaN or a value outside [min_range, max_range] is invalid.
-    ``radiation_type`` and ``field_of_view`` are not used.
-``geometry_msgs/PointStamped`` (perimeter-wire contact)
-    The wire sensor fired. There is no standard message for "one coordinate
-    is known", so: ``point.x`` finite and ``point.y`` NaN = a wire on the line
-    x = point.x (the x of the robot's centre is known); ``point.y`` finite and
-    ``point.x`` NaN = a wire on y = point.y; both NaN = the sensor fired but
-    which wire is not known: the nearest configured wire within a maximum
-    distance of the estimate is taken (as seed 004's robot must). Both
-    finite is invalid (a wire fixes one coordinate). ``point.z`` is ignored.
-    Finite coordinates must be in the map frame. (A
-    PoseWithCovarianceStamped with a huge variance on the unmeasured axis
-    would say the same with a variance, but a reader that ignores the
-    covariance would take the 0 placeholder as a coordinate; NaN cannot be
-    mistaken.)
-
-Every converter either returns an input record or raises
-:class:`InputError` (``kind`` "invalid": the message is malformed;
-:class:`UnusableInputError`, ``kind`` "unusable": well-formed but carries no usable
-reading). Nothing else is changed.
-
-:class:`FusionCore` then feeds the records to a :class:`mm_pc.core.fusion.ekf.PoseEKF`
-in time-stamp order (see its docstring): odometry moves the estimate, the
-other inputs correct it, wheel odometry stands in while the mouse odometry
-is silent, and every input is counted per source.
+:class:`FusionCore` gates, re-acquires, picks the motion model (mouse, wheels standing in)
+and looks up wires, and counts every input per source. ``mm-fusion`` pushes the records it
+reads from its topics; the simulated-run replay (:func:`mm_pc.sim.field_run.run_fusion`, and
+through it ``mm-bench maps`` and the monitor's Maps tab) pushes the records of a simulated
+run one request at a time (:meth:`FusionCore.step`). So every fusion figure in the docs comes
+from the loop the node runs. Records and their readers are in :mod:`.inputs`.
 """
 
 from __future__ import annotations
@@ -66,350 +13,23 @@ from __future__ import annotations
 import heapq
 import itertools
 import math
-import time
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from mm_pc.core.fixes.field_fixes import (
-    LocalGrid,
-    PerimeterSegment,
-    compass_to_rep103,
-    nearest_segment,
-)
+from mm_pc.core.fixes.field_fixes import PerimeterSegment, nearest_segment
 from mm_pc.core.fusion.ekf import GATE_1D, GATE_2D, PoseEKF, pose_increment
-from mm_pc.core.odometry import Pose2D
-
-__all__ = [
-    "NAVSAT_STATUS_FIXES",
-    "AxisInput",
-    "FusionCore",
-    "HeadingInput",
-    "InputError",
-    "MotionInput",
-    "PositionInput",
-    "RangeInput",
-    "UnusableInputError",
-    "WarnThrottle",
-    "heading_input",
-    "imu_input",
-    "increment_noise",
-    "navsat_input",
-    "odometry_input",
-    "perimeter_input",
-    "planar_quaternion",
-    "pose_covariance_6x6",
-    "quaternion_yaw",
-    "range_input",
-    "seconds_to_stamp",
-    "stamp_seconds",
-]
-
-# sensor_msgs constants, copied so that this module needs no ROS import.
-NAVSAT_STATUS_UNKNOWN, NAVSAT_STATUS_NO_FIX = -2, -1
-#: NavSatStatus values that are a position: FIX, SBAS_FIX, GBAS_FIX.
-NAVSAT_STATUS_FIXES = frozenset({0, 1, 2})
-COVARIANCE_TYPE_UNKNOWN, COVARIANCE_TYPE_APPROXIMATED = 0, 1
-COVARIANCE_TYPE_DIAGONAL_KNOWN, COVARIANCE_TYPE_KNOWN = 2, 3
-
-#: Variance (m^2, rad^2) put on z, roll and pitch, which a planar filter does not observe.
-UNOBSERVED_VARIANCE = 1e6
-
-
-class InputError(ValueError):
-    """A message that cannot be used. ``kind``: 'invalid' (malformed) or 'unusable'.
-
-    ``stamp``: the message's stamp (s) when it was readable, else None.
-    """
-
-    kind = "invalid"
-
-    def __init__(self, message: str, stamp: float | None = None) -> None:
-        super().__init__(message)
-        self.stamp = stamp
-
-
-class UnusableInputError(InputError):
-    """A well-formed message without a usable reading (no fix, accuracy too poor, ...)."""
-
-    kind = "unusable"
-
-
-# --- records -------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class MotionInput:
-    """An odometry pose: ``source`` 'mouse' or 'wheel'; stamp s; pose in ``frame_id``."""
-
-    stamp: float
-    source: str
-    frame_id: str
-    pose: Pose2D
-
-
-@dataclass(frozen=True)
-class PositionInput:
-    """A position fix (x, y) m in the map frame with its 2x2 covariance (m^2).
-
-    ``gate_cov``: the covariance to gate with when ``cov`` is inflated for
-    time-correlated errors (:meth:`mm_pc.core.fusion.ekf.PoseEKF.update_position`).
-    """
-
-    stamp: float
-    source: str
-    xy: tuple[float, float]
-    cov: tuple[tuple[float, float], tuple[float, float]]
-    gate_cov: tuple[tuple[float, float], tuple[float, float]] | None = None
-
-
-@dataclass(frozen=True)
-class HeadingInput:
-    """An absolute REP 103 yaw (rad) with variance (rad^2); stamp None = apply on arrival."""
-
-    stamp: float | None
-    source: str
-    yaw: float
-    var: float
-
-
-@dataclass(frozen=True)
-class RangeInput:
-    """A slant range (m) to one beacon (object with x, y, height in m) with sigma (m)."""
-
-    stamp: float
-    source: str
-    beacon: object
-    range: float
-    sigma: float
-
-
-@dataclass(frozen=True)
-class AxisInput:
-    """A wire contact: ``axis`` 'x'/'y' and ``value`` m, or both None = nearest wire."""
-
-    stamp: float
-    source: str
-    axis: str | None
-    value: float | None
-
-
-# --- small conversions --------------------------------------------------------------------------
-
-
-def _finite(name: str, value) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(v):
-        raise InputError(f"{name} must be finite, got {v}")
-    return v
-
-
-def stamp_seconds(stamp) -> float:
-    """builtin_interfaces/Time -> seconds. A zero (unset) or malformed stamp is invalid."""
-    try:
-        sec, nsec = int(stamp.sec), int(stamp.nanosec)
-    except (AttributeError, TypeError, ValueError):
-        raise InputError(f"stamp must have integer sec and nanosec, got {stamp!r}") from None
-    if not 0 <= nsec < 1_000_000_000:
-        raise InputError(f"stamp nanosec must be in 0..999999999, got {nsec}")
-    if sec < 0 or (sec == 0 and nsec == 0):
-        raise InputError(f"stamp must be set (> 0), got {sec}.{nsec:09d} s")
-    return sec + nsec * 1e-9
-
-
-def seconds_to_stamp(t: float) -> tuple[int, int]:
-    """Seconds (>= 0) -> (sec, nanosec) for builtin_interfaces/Time."""
-    if not (math.isfinite(t) and t >= 0):
-        raise ValueError(f"time must be finite and >= 0 s, got {t}")
-    ns = round(t * 1e9)
-    return ns // 1_000_000_000, ns % 1_000_000_000
-
-
-def quaternion_yaw(x: float, y: float, z: float, w: float) -> float:
-    """Yaw (rad, (-pi, pi]) of a quaternion (x, y, z, w), any length > 0.
-
-    The rotation's heading about +z (z-y-x Euler yaw), so a tilted compass or
-    IMU still gives its heading.
-    """
-    q = [_finite(f"quaternion {n}", v) for n, v in zip("xyzw", (x, y, z, w), strict=True)]
-    norm2 = sum(c * c for c in q)
-    if not norm2 > 1e-12:
-        raise InputError(f"quaternion {tuple(q)} has (near) zero length; it must be a rotation")
-    qx, qy, qz, qw = q
-    return math.atan2(2.0 * (qw * qz + qx * qy), norm2 - 2.0 * (qy * qy + qz * qz))
-
-
-def planar_quaternion(yaw: float) -> tuple[float, float, float, float]:
-    """(x, y, z, w) of a rotation by ``yaw`` (rad) about +z."""
-    return 0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)
-
-
-def _frame(header, expected: str, what: str) -> str:
-    frame = str(getattr(header, "frame_id", ""))
-    if expected and frame != expected:
-        raise InputError(f"{what} frame_id must be '{expected}', got '{frame}'")
-    return frame
-
-
-# --- message converters ---------------------------------------------------------------------
-
-
-def odometry_input(msg, source: str, base_frame: str) -> MotionInput:
-    """nav_msgs/Odometry -> :class:`MotionInput` (the planar pose of ``base_frame``)."""
-    stamp = stamp_seconds(msg.header.stamp)
-    if msg.child_frame_id != base_frame:
-        raise InputError(
-            f"{source} odometry child_frame_id must be '{base_frame}', got '{msg.child_frame_id}'"
-        )
-    if not msg.header.frame_id:
-        raise InputError(f"{source} odometry has an empty frame_id")
-    p, o = msg.pose.pose.position, msg.pose.pose.orientation
-    x, y = _finite("odometry x", p.x), _finite("odometry y", p.y)
-    yaw = quaternion_yaw(o.x, o.y, o.z, o.w)
-    return MotionInput(stamp, source, msg.header.frame_id, Pose2D(x, y, yaw))
-
-
-def navsat_input(
-    msg,
-    grid: LocalGrid,
-    *,
-    default_sigma: float,
-    max_sigma: float,
-    frame: str = "",
-    source: str = "gps",
-) -> PositionInput:
-    """sensor_msgs/NavSatFix -> :class:`PositionInput` in plot metres (see the module text).
-
-    ``default_sigma``: m per axis when the covariance type is UNKNOWN;
-    ``max_sigma``: m, a larger standard deviation on either axis is unusable;
-    ``frame``: the required frame_id ('' = any).
-    """
-    stamp = stamp_seconds(msg.header.stamp)
-    _frame(msg.header, frame, "NavSatFix")
-    status = int(msg.status.status)
-    if status in (NAVSAT_STATUS_NO_FIX, NAVSAT_STATUS_UNKNOWN):
-        raise UnusableInputError(f"NavSatFix status {status} is not a fix", stamp)
-    if status not in NAVSAT_STATUS_FIXES:
-        raise InputError(f"NavSatFix status must be in -2..2, got {status}")
-    lat, lon = _finite("latitude", msg.latitude), _finite("longitude", msg.longitude)
-    try:
-        x, y = grid.to_local(lat, lon)
-    except ValueError as exc:
-        raise InputError(f"NavSatFix position: {exc}") from None
-    cov = _navsat_covariance(msg, default_sigma)
-    worst = math.sqrt(float(np.linalg.eigvalsh(np.array(cov))[-1]))
-    if worst > max_sigma:
-        raise UnusableInputError(
-            f"GPS fix too inaccurate: sigma {worst:.2f} m > {max_sigma:g} m", stamp
-        )
-    return PositionInput(stamp, source, (float(x), float(y)), cov)
-
-
-def _navsat_covariance(msg, default_sigma: float):
-    kind = int(msg.position_covariance_type)
-    if kind == COVARIANCE_TYPE_UNKNOWN:
-        v = default_sigma * default_sigma
-        return ((v, 0.0), (0.0, v))
-    if kind not in (
-        COVARIANCE_TYPE_APPROXIMATED,
-        COVARIANCE_TYPE_DIAGONAL_KNOWN,
-        COVARIANCE_TYPE_KNOWN,
-    ):
-        raise InputError(f"NavSatFix position_covariance_type must be in 0..3, got {kind}")
-    c = [_finite("NavSatFix position_covariance", v) for v in msg.position_covariance]
-    if len(c) != 9:
-        raise InputError(f"NavSatFix position_covariance must have 9 values, got {len(c)}")
-    exx, enn = c[0], c[4]
-    exn = 0.5 * (c[1] + c[3]) if kind == COVARIANCE_TYPE_KNOWN else 0.0
-    if not (exx > 0 and enn > 0 and exn * exn < exx * enn):
-        raise InputError(
-            "NavSatFix east/north covariance must be positive definite, "
-            f"got [[{exx}, {exn}], [{exn}, {enn}]] m^2"
-        )
-    return ((exx, exn), (exn, enn))
-
-
-def imu_input(
-    msg, *, default_var: float, offset: float = 0.0, frame: str = "", source: str = "compass"
-) -> HeadingInput:
-    """sensor_msgs/Imu orientation -> REP 103 :class:`HeadingInput` (yaw + ``offset`` rad).
-
-    ``offset``: added to the yaw (rad; magnetic declination and mounting),
-    ``default_var``: rad^2 when the message gives no yaw variance.
-    """
-    stamp = stamp_seconds(msg.header.stamp)
-    _frame(msg.header, frame, "Imu")
-    cov = msg.orientation_covariance
-    if float(cov[0]) == -1.0:
-        raise UnusableInputError("Imu has no orientation (orientation_covariance[0] == -1)", stamp)
-    o = msg.orientation
-    yaw = quaternion_yaw(o.x, o.y, o.z, o.w) + offset
-    var = _finite("Imu yaw variance", cov[8])
-    if var < 0:
-        raise InputError(f"Imu yaw variance must be >= 0 rad^2, got {var}")
-    return HeadingInput(stamp, source, yaw, var if var > 0 else default_var)
-
-
-def heading_input(
-    value: float, *, var: float, offset: float = 0.0, source: str = "compass"
-) -> HeadingInput:
-    """A compass heading (rad, 0 = north, clockwise: the seed's) -> REP 103, unstamped."""
-    h = _finite("compass heading", value)
-    return HeadingInput(None, source, float(compass_to_rep103(h)) + offset, var)
-
-
-def range_input(
-    msg, beacon, *, sigma: float, frame: str = "", source: str = "beacon"
-) -> RangeInput:
-    """sensor_msgs/Range to ``beacon`` -> :class:`RangeInput` (see the module text)."""
-    stamp = stamp_seconds(msg.header.stamp)
-    _frame(msg.header, frame, "Range")
-    r, lo, hi = float(msg.range), float(msg.min_range), float(msg.max_range)
-    if math.isnan(lo) or math.isnan(hi) or lo < 0 or lo > hi:
-        raise InputError(
-            f"Range limits must satisfy 0 <= min_range <= max_range, got {lo:g}, {hi:g}"
-        )
-    if math.isinf(r):
-        what = "too close" if r < 0 else "nothing detected"
-        raise UnusableInputError(f"Range {r} (REP 117: {what})", stamp)
-    if not lo <= r <= hi:
-        raise InputError(f"Range {r:g} m outside [min_range, max_range] = [{lo:g}, {hi:g}] m")
-    return RangeInput(stamp, source, beacon, r, sigma)
-
-
-def perimeter_input(msg, map_frame: str, source: str = "perimeter") -> AxisInput:
-    """geometry_msgs/PointStamped wire contact -> :class:`AxisInput` (see the module text)."""
-    stamp = stamp_seconds(msg.header.stamp)
-    x, y = float(msg.point.x), float(msg.point.y)
-    if math.isinf(x) or math.isinf(y):
-        raise InputError(f"perimeter contact must be finite or NaN, got ({x}, {y})")
-    if math.isnan(x) and math.isnan(y):
-        return AxisInput(stamp, source, None, None)
-    if not (math.isnan(x) or math.isnan(y)):
-        raise InputError(
-            f"perimeter contact gives both x = {x} and y = {y}; a wire fixes one "
-            "coordinate: set the other to NaN (or both NaN: nearest wire)"
-        )
-    _frame(msg.header, map_frame, "perimeter contact")
-    return AxisInput(stamp, source, "y", y) if math.isnan(x) else AxisInput(stamp, source, "x", x)
-
-
-# --- outgoing ------------------------------------------------------------------------------------
-
-
-def pose_covariance_6x6(p3) -> list[float]:
-    """Row-major 6x6 (x, y, z, roll, pitch, yaw) from the 3x3 of (x, y, yaw)."""
-    p = np.asarray(p3, dtype=float)
-    c = np.zeros((6, 6))
-    idx = [0, 1, 5]
-    c[np.ix_(idx, idx)] = p
-    c[2, 2] = c[3, 3] = c[4, 4] = UNOBSERVED_VARIANCE
-    return c.reshape(-1).tolist()
+from mm_pc.core.fusion.inputs import (
+    AxisInput,
+    HeadingInput,
+    MotionInput,
+    PositionInput,
+    RangeInput,
+)
+
+__all__ = ["FusionCore", "SourceCounts", "increment_noise"]
 
 
 def increment_noise(
@@ -418,26 +38,6 @@ def increment_noise(
     """3x3 covariance of an increment: the distance/turn random walk of the EKF (:mod:`.ekf`)."""
     d = math.hypot(fwd, left)
     return np.diag([q_pos * d, q_pos * d, q_yaw_dist * d + q_yaw_turn * abs(dtheta)])
-
-
-class WarnThrottle:
-    """Lets one message per key through every ``period_s`` seconds; counts the rest."""
-
-    def __init__(self, period_s: float = 5.0, clock: Callable[[], float] = time.monotonic):
-        self.period_s = period_s
-        self._clock = clock
-        self._last: dict[str, float] = {}
-        self._held: dict[str, int] = {}
-
-    def __call__(self, key: str) -> int | None:
-        """None: stay quiet. Else the number of messages held back since the last one."""
-        now = self._clock()
-        last = self._last.get(key)
-        if last is not None and now - last < self.period_s:
-            self._held[key] = self._held.get(key, 0) + 1
-            return None
-        self._last[key] = now
-        return self._held.pop(key, 0)
 
 
 # --- the time-ordered front end -----------------------------------------------------------------
@@ -556,6 +156,7 @@ class FusionCore:
         self._period: dict[str, float] = {}  # average interval (s) per periodic source
         self._backwards: dict[str, int] = {}
         self._idle = False
+        self._hold = False  # inside step(): queue only
         self._mouse_prev: MotionInput | None = None
         self._mouse_seen: float | None = None  # newest processed mouse stamp
         self._wheel_hist: deque[MotionInput] = deque()
@@ -608,9 +209,26 @@ class FusionCore:
         # result must not depend on which topic came first)
         key = (record.stamp, prio, record.source, next(self._seq))
         heapq.heappush(self._queue, (*key, record))
+        if self._hold:
+            return
         self._drain()
         while len(self._queue) > self.max_queue:
             self._process(heapq.heappop(self._queue)[-1])
+
+    def step(self, records: Iterable) -> None:
+        """Push every record of one moment of a replay and process them all now.
+
+        A replay knows that nothing older can still come, so it need not wait for the
+        sources' intervals; the records go in the order :meth:`push` gives them (stamp,
+        odometry first, then the fixes by source name), as on the node.
+        """
+        self._hold = True
+        try:
+            for record in records:
+                self.push(record)
+        finally:
+            self._hold = False
+        self._drain(everything=True)
 
     def heard(self, source: str, stamp: float | None) -> None:
         """Periodic ``source`` delivered something stamped ``stamp`` s (used or not).

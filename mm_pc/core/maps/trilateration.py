@@ -45,8 +45,8 @@ Derivation
    as (l sin kappa, l cos kappa). Its kappa_AB comes from the dot product of
    AB with e_y, with the case distinction kappa_AB = 360 deg - gamma_AB when
    x_AB < 0; atan2 makes that case distinction here. The mapping is
-   ``theta = pi/2 - kappa`` (mod 2 pi), see :func:`yaw_from_compass` and
-   :func:`compass_from_yaw`; so the seed's kappa_A = kappa_AB + delta
+   ``theta = pi/2 - kappa`` (mod 2 pi), see :func:`mm_pc.core.angles.compass_to_rep103`
+   and ``rep103_to_compass``; so the seed's kappa_A = kappa_AB + delta
    (clockwise) is theta_AB - delta here, and kappa_AB - delta is
    theta_AB + delta. Both are computed, so the naming of the two candidates
    does not matter.
@@ -109,13 +109,11 @@ __all__ = [
     "Fix",
     "TrilaterationError",
     "best_three",
-    "compass_from_yaw",
     "least_squares_fix",
     "pair_candidates",
     "plane_distances",
     "seed_fix",
     "simulate_ranges",
-    "yaw_from_compass",
 ]
 
 MAX_RESIDUAL_SIGMAS = 10.0
@@ -173,24 +171,6 @@ class TrilaterationError(ValueError):
 
 
 # ---------------------------------------------------------------- angles
-
-
-def yaw_from_compass(kappa: float) -> float:
-    """Seed's compass angle (rad, from +y, clockwise) -> REP 103 angle (rad, from +x, CCW).
-
-    Result in (-pi, pi].
-    """
-    return _wrap(math.pi / 2 - kappa)
-
-
-def compass_from_yaw(theta: float) -> float:
-    """REP 103 angle (rad, from +x, CCW) -> seed's compass angle (rad, from +y, CW) in [0, 2 pi)."""
-    return (math.pi / 2 - theta) % (2 * math.pi)
-
-
-def _wrap(a: float) -> float:
-    w = math.remainder(a, 2 * math.pi)
-    return math.pi if w == -math.pi else w
 
 
 # ---------------------------------------------------------------- validation

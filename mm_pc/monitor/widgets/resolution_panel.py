@@ -1,10 +1,11 @@
 """Resolution (CPI) of each sensor: set it on the node and show what the node read back.
 
-The typed value is checked here first (100..6400 in steps of 100, the range
-the seed names); a refused value is explained next to its field and never
-sent. An accepted value goes to the node's ``set_resolution``; its answer
-(the CPI read back from the sensor, or the node's reason for refusing)
-appears next to the field when the bridge reports it. The CPI in force is
+The typed value is checked here first, by the default register map
+(:meth:`pln2033.RegisterMap.cpi_problem`: 100..6400 in steps of 100, the range the
+seed names; a node with its own map may allow less and says so); a refused value is
+explained next to its field and never sent. An accepted value goes to the node's
+``set_resolution``; its answer (the CPI read back from the sensor, or the node's reason
+for refusing) appears next to the field when the bridge reports it. The CPI in force is
 also shown from the newest reply.
 """
 
@@ -20,10 +21,13 @@ from PySide6.QtWidgets import (
 )
 
 from mm_pc.monitor.widgets.style import ERROR_STYLE
+from pln2033 import RegisterMap
 
 __all__ = ["CPI_MAX", "CPI_MIN", "CPI_STEP", "ResolutionPanel", "validate_cpi"]
 
-CPI_MIN, CPI_MAX, CPI_STEP = 100, 6400, 100
+_REGMAP = RegisterMap.default()
+_ALLOWED_CPI = _REGMAP.allowed_cpi
+CPI_MIN, CPI_MAX, CPI_STEP = _ALLOWED_CPI.start, _ALLOWED_CPI.stop - 1, _ALLOWED_CPI.step
 ALLOWED = f"allowed: {CPI_MIN}..{CPI_MAX} in steps of {CPI_STEP}"
 RED = ERROR_STYLE
 
@@ -35,10 +39,9 @@ def validate_cpi(value) -> int:
         cpi = int(text)
     except ValueError:
         raise ValueError(f"CPI must be a whole number, got {text!r} ({ALLOWED})") from None
-    if not CPI_MIN <= cpi <= CPI_MAX:
-        raise ValueError(f"CPI {cpi} is out of range ({ALLOWED})")
-    if cpi % CPI_STEP:
-        raise ValueError(f"CPI {cpi} is not a multiple of {CPI_STEP} ({ALLOWED})")
+    problem = _REGMAP.cpi_problem(cpi)
+    if problem:
+        raise ValueError(problem)
     return cpi
 
 
