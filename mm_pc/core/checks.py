@@ -12,7 +12,7 @@ import numbers
 
 import numpy as np
 
-__all__ = ["finite", "finite_array"]
+__all__ = ["finite", "finite_array", "positive", "xy_pair"]
 
 
 def finite(name: str, value, error: type[ValueError] = ValueError, *, real: bool = False) -> float:
@@ -41,3 +41,20 @@ def finite_array(name: str, value, error: type[ValueError] = ValueError) -> np.n
     if not np.all(np.isfinite(arr)):
         raise error(f"{name} must be finite numbers (no NaN or inf), got {value!r}")
     return arr
+
+
+def positive(name: str, value, error: type[ValueError] = ValueError) -> float:
+    """A finite number > 0, else ``error`` naming ``name``."""
+    v = finite(name, value, error)
+    if v <= 0:
+        raise error(f"{name} must be > 0, got {value!r}")
+    return v
+
+
+def xy_pair(name: str, value, error: type[ValueError] = ValueError) -> tuple[float, float]:
+    """A finite (x, y) pair in metres."""
+    try:
+        x, y = value
+    except (TypeError, ValueError):
+        raise error(f"{name} must be an (x, y) pair in metres, got {value!r}") from None
+    return finite(f"{name} x", x, error), finite(f"{name} y", y, error)

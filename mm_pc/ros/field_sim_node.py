@@ -49,7 +49,7 @@ from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus, Range
 from std_msgs.msg import Float64
 
 from mm_pc.core.angles import compass_to_rep103, yaw_to_quaternion
-from mm_pc.core.fixes.field_fixes import gps_accuracy_m
+from mm_pc.core.fixes.gps import gps_accuracy_m
 from mm_pc.core.fusion.inputs import seconds_to_stamp
 from mm_pc.core.uncertainty import UNOBSERVED_VARIANCE, planar_covariance_6x6
 from mm_pc.ros import spin as ros_spin

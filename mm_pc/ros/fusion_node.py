@@ -51,7 +51,8 @@ from sensor_msgs.msg import Imu, NavSatFix, Range
 from std_msgs.msg import Float64
 
 from mm_pc.core.angles import yaw_to_quaternion
-from mm_pc.core.fixes.field_fixes import LocalGrid, rectangle_perimeter
+from mm_pc.core.fixes.gps import LocalGrid
+from mm_pc.core.fixes.perimeter import rectangle_perimeter
 from mm_pc.core.fusion.ekf import PoseEKF
 from mm_pc.core.fusion.inputs import (
     InputError,

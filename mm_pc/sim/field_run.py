@@ -36,7 +36,7 @@ measurement belongs to one request end)
   12 ticks per turn give 47 mm steps, too coarse for a 20 Hz motion model),
   and slip: each wheel turns 2 % +- 2 % (per request) more than the ground
   passes, plus slip bursts (one wheel 10 % more for 0.5-2 s, about once a minute).
-* GPS, 2 Hz: local metres through :class:`mm_pc.core.fixes.field_fixes.LocalGrid` to
+* GPS, 2 Hz: local metres through :class:`mm_pc.core.fixes.gps.LocalGrid` to
   latitude/longitude (what a NavSatFix carries) and HDOP, satellites, fix
   type. The error is a first-order Gauss-Markov process per axis (time
   constant 30 s: GPS errors wander, they are not white) of standard deviation
@@ -53,7 +53,7 @@ measurement belongs to one request end)
   in the seed's examples) crosses a wire (x = 0 or W with 0 <= y <= H; y = 0
   or H with 0 <= x <= W), reported at the next request end. The replay does
   not get the wire's identity from the simulator: it takes the wire nearest
-  its own estimate (:func:`mm_pc.core.fixes.field_fixes.nearest_segment`), as a robot
+  its own estimate (:func:`mm_pc.core.fixes.perimeter.nearest_segment`), as a robot
   must.
 
 Replay (:func:`run_fusion`)
@@ -74,15 +74,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from mm_pc.core.angles import compass_to_rep103, rep103_to_compass
-from mm_pc.core.fixes.field_fixes import (
-    GpsQuality,
-    LocalGrid,
-    PerimeterSegment,
-    gps_accuracy_m,
-    gps_fix_usable,
-    rectangle_perimeter,
-    tick_length,
-)
+from mm_pc.core.fixes.gps import GpsQuality, LocalGrid, gps_accuracy_m, gps_fix_usable
+from mm_pc.core.fixes.perimeter import PerimeterSegment, rectangle_perimeter
+from mm_pc.core.fixes.wheels import tick_length
 from mm_pc.core.fusion.ekf import PoseEKF, increments_from_poses
 from mm_pc.core.fusion.inputs import (
     AxisInput,

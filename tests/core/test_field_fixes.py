@@ -1,4 +1,4 @@
-"""Wheel odometry, compass, GPS and perimeter fixes (mm_pc.core.fixes.field_fixes, seed 004).
+"""Wheel odometry, compass, GPS and perimeter fixes (mm_pc.core.fixes, seed 004).
 
 Expected values are worked out by hand from geometry (noted next to each), or
 are the seed's own numbers; the frame conversions get hypothesis round trips.
@@ -14,29 +14,24 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mm_pc.core.angles import compass_to_rep103, rep103_to_compass, wrap_pi
-from mm_pc.core.fixes.field_fixes import (
+from mm_pc.core.fixes.gps import (
     GpsQuality,
     LocalGrid,
-    PerimeterSegment,
-    WheelOdometry,
-    blend_heading,
-    body_increment,
-    correct_at_wire,
     gps_accuracy_m,
-    gps_correction,
     gps_fix_usable,
-    nearest_segment,
-    nmea_checksum,
-    parse_gga,
-    parse_gll,
-    perimeter_correction,
-    rectangle_perimeter,
-    seed_gentle_step,
-    seed_pivot_step,
-    sensor_position,
-    tick_length,
     wgs84_m_per_deg,
 )
+from mm_pc.core.fixes.nmea import nmea_checksum, parse_gga, parse_gll
+from mm_pc.core.fixes.perimeter import (
+    PerimeterSegment,
+    correct_at_wire,
+    nearest_segment,
+    perimeter_correction,
+    rectangle_perimeter,
+    sensor_position,
+)
+from mm_pc.core.fixes.seed_rules import gps_correction, seed_gentle_step, seed_pivot_step
+from mm_pc.core.fixes.wheels import WheelOdometry, blend_heading, body_increment, tick_length
 from mm_pc.core.odometry import Pose2D
 
 PI = math.pi

@@ -16,7 +16,7 @@ pytest.importorskip("pyqtgraph")
 from PySide6.QtCore import QPointF, QRectF, Qt
 from PySide6.QtWidgets import QApplication
 
-from mm_pc.core.fixes.field_fixes import gps_accuracy_m
+from mm_pc.core.fixes.gps import gps_accuracy_m
 from mm_pc.core.maps.coverage_map import COLORS_RGB8, MOWED, MOWER, UNMOWED, CoverageMap
 from mm_pc.core.maps.trilateration import plane_distances
 from mm_pc.monitor.context import MonitorContext

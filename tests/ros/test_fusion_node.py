@@ -22,7 +22,8 @@ import numpy as np
 import pytest
 
 from mm_pc.core.angles import quaternion_yaw, yaw_to_quaternion
-from mm_pc.core.fixes.field_fixes import LocalGrid, PerimeterSegment, rectangle_perimeter
+from mm_pc.core.fixes.gps import LocalGrid
+from mm_pc.core.fixes.perimeter import PerimeterSegment, rectangle_perimeter
 from mm_pc.core.fusion.ekf import PoseEKF
 from mm_pc.core.fusion.inputs import (
     AxisInput,

@@ -4,7 +4,7 @@ Pure numpy, no ROS, no Qt. The filter knows nothing about GPS, beacons or
 compasses as devices; it takes generic measurements (a position with its 2x2
 covariance, a heading, one coordinate, ranges to points of known position).
 Turning NMEA or beacon replies into these is the caller's job
-(:mod:`mm_pc.core.fixes.field_fixes`, :mod:`mm_pc.core.maps.trilateration`).
+(:mod:`mm_pc.core.fixes`, :mod:`mm_pc.core.maps.trilateration`).
 
 Frames and units
 ----------------

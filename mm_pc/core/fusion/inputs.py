@@ -14,7 +14,7 @@ tests. What each message means here:
     ``status.status`` FIX, SBAS_FIX or GBAS_FIX is a position; NO_FIX and
     UNKNOWN are readings without one (*unusable*); any other value is
     *invalid*. Latitude/longitude go to plot metres by
-    :class:`mm_pc.core.fixes.field_fixes.LocalGrid`. ``position_covariance`` is ENU
+    :class:`mm_pc.core.fixes.gps.LocalGrid`. ``position_covariance`` is ENU
     (m^2, row-major east, north, up), so its upper-left 2x2 block is the
     covariance of the plot's (x east, y north); with
     ``COVARIANCE_TYPE_UNKNOWN`` a default sigma is used, with APPROXIMATED or
@@ -29,7 +29,7 @@ tests. What each message means here:
     when it is > 0, else the default.
 ``std_msgs/Float64`` (compass, alternative)
     A heading in the seed's convention (rad, 0 = north, clockwise), turned
-    into REP 103 by :func:`mm_pc.core.fixes.field_fixes.compass_to_rep103`. It has no
+    into REP 103 by :func:`mm_pc.core.angles.compass_to_rep103`. It has no
     stamp: it is applied when it arrives, to the newest estimate.
 ``sensor_msgs/Range`` (one topic per beacon)
     The slant range (m) from the robot's range antenna to that beacon. REP
@@ -68,7 +68,7 @@ import numpy as np
 
 from mm_pc.core.angles import compass_to_rep103, quaternion_yaw
 from mm_pc.core.checks import finite
-from mm_pc.core.fixes.field_fixes import LocalGrid
+from mm_pc.core.fixes.gps import LocalGrid
 from mm_pc.core.odometry import Pose2D
 
 __all__ = [

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mm_pc.core.fixes.field_fixes import PerimeterSegment, nearest_segment
+from mm_pc.core.fixes.perimeter import PerimeterSegment, nearest_segment
 from mm_pc.core.fusion.ekf import GATE_1D, GATE_2D, PoseEKF, pose_increment
 from mm_pc.core.fusion.inputs import (
     AxisInput,
@@ -99,7 +99,7 @@ class FusionCore:
 
     Corrections: GPS and trilateration-like positions (gate :data:`GATE_2D`),
     headings and single ranges (:data:`GATE_1D`), wire contacts (ungated, the
-    wire found with :func:`mm_pc.core.fixes.field_fixes.nearest_segment` when the
+    wire found with :func:`mm_pc.core.fixes.perimeter.nearest_segment` when the
     contact does not name it). After ``reacquire_after`` gate rejections in
     a row from one source, its next reading is applied ungated (the filter
     is taken to be lost, as in :func:`mm_pc.sim.field_run.run_fusion`; 0 = never).

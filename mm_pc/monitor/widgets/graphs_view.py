@@ -34,7 +34,7 @@ from PySide6.QtWidgets import (
 
 from mm_pc.monitor.model.session import sensor_columns
 
-__all__ = ["DEFAULT_WINDOW_S", "GraphsView", "PeakCache", "bucket_size", "window_slice"]
+__all__ = ["DEFAULT_WINDOW_S", "GraphsView", "PeakCache", "bucket_size"]
 
 DEFAULT_WINDOW_S = 10
 MAX_WINDOW_S = 3600
@@ -108,13 +108,6 @@ class PeakCache:
         head, tail = slice(i0, b0 * size), slice(b1 * size, n)
         out_t = np.concatenate((t[head], np.repeat(t[b0 * size : b1 * size : size], 2), t[tail]))
         return out_t, np.concatenate((col[head], peaks, col[tail]))
-
-
-def window_slice(t: np.ndarray, seconds: float) -> slice:
-    """The rows of ``t`` (ascending, s) within ``seconds`` of its newest value."""
-    if len(t) == 0:
-        return slice(0, 0)
-    return slice(int(np.searchsorted(t, t[-1] - seconds, side="left")), len(t))
 
 
 class GraphsView(QWidget):

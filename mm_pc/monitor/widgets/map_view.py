@@ -152,11 +152,6 @@ class PathDecimator:
         self._boxes = [_Grow(4) for _ in range(self.LEVELS)]  # per completed box
 
     @property
-    def last_point(self) -> tuple[float, float] | None:
-        """The newest finite point of the path (m), kept or not."""
-        return self._last_point
-
-    @property
     def bounds(self) -> tuple[float, float, float, float] | None:
         """(xmin, xmax, ymin, ymax) of every finite point seen (m); None when empty."""
         return tuple(map(float, self._bounds)) if self._last_point is not None else None
@@ -301,15 +296,6 @@ class PathDecimator:
         if last is None or (len(x) and x[-1] == last[0] and y[-1] == last[1]):
             return x, y
         return np.append(x, last[0]), np.append(y, last[1])
-
-
-def _rotate(points: np.ndarray, yaw: float, x: float, y: float) -> np.ndarray:
-    """base_link points (N, 2) -> odom, for a robot at (x, y, yaw)."""
-    c, s = math.cos(yaw), math.sin(yaw)
-    out = np.empty_like(points)
-    out[:, 0] = x + c * points[:, 0] - s * points[:, 1]
-    out[:, 1] = y + s * points[:, 0] + c * points[:, 1]
-    return out
 
 
 def _arrow_segments(tail, direction, length: float, head: float) -> list:

@@ -19,8 +19,8 @@ Two sources, chosen in the "Source" box:
   it with a timer at 1x..100x or all at once: the coverage grid from the TRUE
   path, the four beacons (names) and the range circles of the newest range
   set (in the robot's plane, ``sqrt(r^2 - h^2)``), the GPS fixes of the last
-  minute (filled if :func:`~mm_pc.core.fixes.field_fixes.gps_fix_usable`) with circles of
-  :func:`~mm_pc.core.fixes.field_fixes.gps_accuracy_m` for the newest few, and truth, raw
+  minute (filled if :func:`~mm_pc.core.fixes.gps.gps_fix_usable`) with circles of
+  :func:`~mm_pc.core.fixes.gps.gps_accuracy_m` for the newest few, and truth, raw
   mouse odometry and fused (EKF) paths with the current errors.
 
 Drawing the grid costs O(changed cells), not O(map)
@@ -318,7 +318,7 @@ class SimRun:
 def build_sim_run(seed: int = 1) -> SimRun:
     """Simulate the mowing run for ``seed`` and fuse it (about 2.5 s; cached per seed,
     the run is deterministic)."""
-    from mm_pc.core.fixes.field_fixes import gps_accuracy_m, gps_fix_usable
+    from mm_pc.core.fixes.gps import gps_accuracy_m, gps_fix_usable
     from mm_pc.sim.field_run import run_fusion, simulate_field_run
 
     sim = simulate_field_run(int(seed))
