@@ -20,6 +20,7 @@ from PySide6.QtGui import QColor, QImage
 from mm_pc.core.geometry import SensorMount
 from mm_pc.core.odometry import Pose2D
 from mm_pc.monitor.context import MonitorContext
+from mm_pc.monitor.model.path_decimator import PathDecimator
 from mm_pc.monitor.model.session import MonitorSession
 from mm_pc.monitor.model.sim_feed import DEFAULT_DEVICES, sim_replies
 from mm_pc.monitor.widgets.direction_widget import (
@@ -27,14 +28,13 @@ from mm_pc.monitor.widgets.direction_widget import (
     DirectionPanel,
     auto_gain,
 )
-from mm_pc.monitor.widgets.map_view import (
+from mm_pc.monitor.widgets.map_view.raster import PathRaster
+from mm_pc.monitor.widgets.map_view.view import (
     FOLLOW_SLACK_PX,
     MAX_ROWS_PER_REFRESH,
     MAX_WIDTH_M,
     MIN_WIDTH_M,
     MapView,
-    PathDecimator,
-    _PathRaster,
 )
 from mm_pc.monitor.widgets.style import ROBOT_COLOUR, sensor_colour
 
@@ -524,7 +524,7 @@ def near_points(shape, u, v, radius: int) -> np.ndarray:
 def drawn_anew(view: MapView) -> np.ndarray:
     """The raster as drawn at once from the decimators, on the same grid and area."""
     r, hist = view.raster, view.ctx.session.history
-    fresh = _PathRaster()
+    fresh = PathRaster()
     for name in ("sx", "sy", "gx", "gy", "dx0", "dy0", "level", "keys", "dpr", "view_size"):
         setattr(fresh, name, getattr(r, name))
     fresh.done, fresh.stale = dict(r.done), False
@@ -638,7 +638,7 @@ def test_following_moves_the_raster_and_it_equals_one_drawn_anew(view, ctx):
     view.set_visible_width(0.3)  # following; zoomed in so far that the image is the view
     view.refresh()  # and a margin only (the paths' extent would be too many pixels)
     raster = view.raster
-    margin = 2 * _PathRaster.MARGIN_PX
+    margin = 2 * PathRaster.MARGIN_PX
     assert raster.img_w == pytest.approx(view.vb.width() + margin, abs=6)
     assert raster.img_h == pytest.approx(view.vb.height() + margin, abs=6)
     full = raster.stats["full"]
@@ -897,6 +897,6 @@ def test_an_hour_of_100hz_data_refreshes_cheaply(qtbot, qapp, capsys):
     # row numbers, 4 bytes, of ~4 x 360 000 kept points a path (2 mm a row: levels 0-2 keep
     # all, then half, a quarter, ...), up to twice that while the arrays grow, and boxes
     assert memory["decimators"] < 3 * 2 * 4 * 360_000 * (4 + 32 / PathDecimator.BOX) / 1e6
-    assert memory["raster"] <= _PathRaster.MAX_PIXELS * 4 / 1e6
+    assert memory["raster"] <= PathRaster.MAX_PIXELS * 4 / 1e6
     with capsys.disabled():
         print("\n" + "\n".join(report))

@@ -20,9 +20,11 @@ from mm_pc.core.fixes.gps import gps_accuracy_m
 from mm_pc.core.maps.coverage_map import COLORS_RGB8, MOWED, MOWER, UNMOWED, CoverageMap
 from mm_pc.core.maps.trilateration import plane_distances
 from mm_pc.monitor.context import MonitorContext
+from mm_pc.monitor.model import maps as mm
 from mm_pc.monitor.model.session import MonitorSession
 from mm_pc.monitor.model.sim_feed import sim_replies
-from mm_pc.monitor.widgets import maps_view as mv
+from mm_pc.monitor.widgets.maps_view import grid_item
+from mm_pc.monitor.widgets.maps_view import view as mv
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -45,9 +47,9 @@ def feed(view: mv.MapsView, replies) -> int:
     return n
 
 
-def reference_map(settings: mv.MapSettings, x, y) -> CoverageMap:
+def reference_map(settings: mm.MapSettings, x, y) -> CoverageMap:
     """The map the live view must hold: every row fed to CoverageMap.update."""
-    ref = mv.make_map(settings)
+    ref = mm.make_map(settings)
     for xi, yi in zip(x, y, strict=True):
         ref.update(float(xi), float(yi))
     return ref
@@ -58,8 +60,8 @@ def assert_image_shows(view: mv.MapsView, cmap: CoverageMap) -> None:
 
 
 @pytest.fixture(scope="module")
-def run() -> mv.SimRun:
-    return mv.build_sim_run(1)
+def run() -> mm.SimRun:
+    return mm.build_sim_run(1)
 
 
 # --- live ------------------------------------------------------------------------------------
@@ -120,7 +122,7 @@ def test_only_changed_cells_are_written(qtbot):
 
 
 def test_write_cells_touches_only_the_given_pixels():
-    item = mv.GridImageItem()
+    item = grid_item.GridImageItem()
     cmap = CoverageMap.from_array(np.full((50, 60), UNMOWED), 0.3)
     item.set_map(cmap)
     before = item.rgb()
@@ -137,7 +139,7 @@ def test_cell_iy_ix_covers_its_square_in_metres_with_row_0_at_the_bottom(qtbot):
     view = make_view(qtbot)
     s, x0, y0 = 0.5, -2.0, 3.0
     cmap = CoverageMap.from_array([[1, 2, 2], [3, 5, 2]], s, (x0, y0))  # row 0 = south
-    view.set_live_map(cmap, mv.MapSettings(s, (2, 3), (x0, y0), "unknown"))
+    view.set_live_map(cmap, mm.MapSettings(s, (2, 3), (x0, y0), "unknown"))
     r = view.grid.mapRectToParent(view.grid.boundingRect())
     assert (r.left(), r.top(), r.width(), r.height()) == pytest.approx((x0, y0, 1.5, 1.0))
     for iy, ix in ((0, 0), (1, 2), (1, 1)):
@@ -257,7 +259,7 @@ def test_new_map_refuses_too_many_cells_and_a_rectangle_that_does_not_fit(qtbot)
     assert not dialog.apply()
     assert "polygon needs at least" in dialog.fill_error.text()
     assert view.live_map is old_map
-    assert view.live_settings == mv.default_settings()
+    assert view.live_settings == mm.default_settings()
 
 
 def test_new_map_from_a_perimeter_rectangle(qtbot):
@@ -272,7 +274,7 @@ def test_new_map_from_a_perimeter_rectangle(qtbot):
     expected = CoverageMap.from_polygon(
         ((-4, -3), (8, -3), (8, 3), (-4, 3)), 0.5, (-5.0, -4.0), shape=(20, 30)
     )
-    assert view.live_settings == mv.MapSettings(
+    assert view.live_settings == mm.MapSettings(
         0.5, (20, 30), (-5.0, -4.0), "rectangle", (-4.0, -3.0, 12.0, 6.0)
     )
     assert view.live_map.shape == (20, 30) and view.live_map.cell_size == 0.5
@@ -336,7 +338,7 @@ def test_simulate_button_draws_beacons_circles_gps_and_paths(qtbot, run):
     shown = re.search(r"raw odometry ([\d.]+) m, fused ([\d.]+) m", view.status.text())
     assert float(shown[2]) < float(shown[1])
     # the grid comes from the TRUE path
-    ref = mv.sim_map(view.run)
+    ref = mm.sim_map(view.run)
     for x, y in sim.truth[:, :2]:
         ref.update(float(x), float(y))
     np.testing.assert_array_equal(view.sim_map.codes, ref.codes)
@@ -402,7 +404,7 @@ def test_one_changed_cell_costs_the_same_on_a_large_map(qtbot, shape):
     view.show()
     qtbot.waitExposed(view)
     cmap = CoverageMap.from_array(np.full(shape, UNMOWED), 0.3)
-    view.set_live_map(cmap, mv.MapSettings(0.3, shape, (0.0, 0.0), "lawn"))
+    view.set_live_map(cmap, mm.MapSettings(0.3, shape, (0.0, 0.0), "lawn"))
     QApplication.processEvents()
     times = []
     for i in range(30):

@@ -23,49 +23,22 @@ Two sources, chosen in the "Source" box:
   :func:`~mm_pc.core.fixes.gps.gps_accuracy_m` for the newest few, and truth, raw
   mouse odometry and fused (EKF) paths with the current errors.
 
-Drawing the grid costs O(changed cells), not O(map)
----------------------------------------------------
-:class:`GridImageItem` holds the map as a ``QImage`` (Format_RGB32, the raster
-engine's native format, so painting converts nothing) and a numpy view on
-its pixel memory. A map update writes only the pixels of
-``UpdateResult.changed`` (one uint32 each) and marks only their rectangles
-dirty (``QGraphicsItem.update(rect)``); ``paint`` draws only the exposed
-source rectangle. Nothing is copied or converted per update: on a
-1000 x 1000 map one changed cell costs the same as on the seed's 81 x 71
-(measured, offscreen, write + repaint of the dirty cell: 0.07 ms median on
-both; pyqtgraph's ``ImageItem.updateImage``, which rebuilds its QImage from
-the whole array, took 1.1 ms on 81 x 71 and 6 ms on 1000 x 1000). Only a new
-map (or switching the source) writes the whole image once. The plot has no
-``showGrid``: its lines cost ~15 ms per full repaint in software rendering.
-
-Image placement: cell ``(iy, ix)`` is pixel (row iy, column ix), and the item
-maps pixel (ix, iy) to ``(x0 + ix*s, y0 + iy*s)``, so it covers
-``[x0 + ix*s, x0 + (ix+1)*s] x [y0 + iy*s, y0 + (iy+1)*s]``; the y axis
-points up, so row 0 (south) is at the bottom.
+The grid image is :class:`~.grid_item.GridImageItem`; the model, :mod:`mm_pc.monitor.model.maps`.
 """
 
 from __future__ import annotations
 
 import concurrent.futures
-import functools
 import math
 import time
-from collections.abc import Iterable
-from dataclasses import dataclass
 
 import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import QRectF, Qt, QTimer
-from PySide6.QtGui import QImage, QPainter, QTransform
 from PySide6.QtWidgets import (
     QComboBox,
-    QDialog,
-    QDialogButtonBox,
-    QFormLayout,
-    QGraphicsItem,
     QHBoxLayout,
     QLabel,
-    QLineEdit,
     QPushButton,
     QSpinBox,
     QVBoxLayout,
@@ -75,35 +48,25 @@ from PySide6.QtWidgets import (
 from mm_pc.core.maps.coverage_map import (
     CODE_NAMES,
     COLORS_RGB8,
-    DEFAULT_CELL_SIZE,
-    SEED_SHAPE,
-    UNMOWED,
     CoverageMap,
     UpdateResult,
 )
-from mm_pc.monitor.widgets.style import ERROR_STYLE, parse_number
+from mm_pc.monitor.model.maps import (
+    MapSettings,
+    SimRun,
+    build_sim_run,
+    circles,
+    default_settings,
+    feed_positions,
+    make_map,
+    sim_map,
+)
+from mm_pc.monitor.widgets.maps_view.dialog import NewMapDialog
+from mm_pc.monitor.widgets.maps_view.grid_item import GridImageItem
+from mm_pc.monitor.widgets.style import ERROR_STYLE
 
-__all__ = [
-    "FILLS",
-    "MAX_CELLS",
-    "MAX_SIDE_CELLS",
-    "SPEEDS",
-    "GridImageItem",
-    "MapSettings",
-    "MapsView",
-    "NewMapDialog",
-    "SimRun",
-    "build_sim_run",
-    "default_settings",
-    "feed_positions",
-    "make_map",
-]
+__all__ = ["SPEEDS", "MapsView"]
 
-#: Contents of a new live map: every cell lawn (unmowed), every cell unknown, or a
-#: perimeter rectangle rasterised by CoverageMap.from_polygon.
-FILLS = {"lawn": "all lawn (unmowed)", "unknown": "all unknown", "rectangle": "perimeter rectangle"}
-MAX_SIDE_CELLS = 4000
-MAX_CELLS = 4_000_000  # 16 MB of image, 8 MB of codes
 #: Playback speeds: label -> factor (None = all at once).
 SPEEDS = {
     "1x": 1.0,
@@ -120,242 +83,10 @@ PLAY_INTERVAL_MS = 33
 GPS_CIRCLES = 5  # accuracy circles for the newest this many GPS fixes
 GPS_TRAIL = 120  # GPS fixes shown (60 s at 2 Hz); all 1374 of a run hide the map
 LEGEND_WIDTH = 190  # px
-SIM_MARGIN_M = 1.5  # the simulated run's map reaches this far beyond the plot
-
-#: uint32 0xFFRRGGBB per code: a pixel of a Format_RGB32 QImage.
-CODE_PIXELS = (
-    np.uint32(0xFF000000)
-    | (COLORS_RGB8[:, 0].astype(np.uint32) << 16)
-    | (COLORS_RGB8[:, 1].astype(np.uint32) << 8)
-    | COLORS_RGB8[:, 2].astype(np.uint32)
-)
-CODE_PIXELS.flags.writeable = False
 
 PATH_COLOURS = {"truth": "#000000", "raw": "#ff7f0e", "fused": "#0050c8"}
 BEACON_COLOUR = "#7b2fbe"
 GPS_COLOUR = "#e6a800"
-_CIRCLE = np.linspace(0.0, 2.0 * math.pi, 73)
-
-
-# --- map settings and the live map -------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class MapSettings:
-    """What "New map…" makes: ``cell_size`` m, ``shape`` (ny, nx) cells, ``origin`` (x0, y0)
-    m = the south-west corner of cell (0, 0), ``fill`` one of :data:`FILLS`, and for
-    ``fill == "rectangle"`` the perimeter ``rect`` = (x, y, width, height) m, (x, y) its
-    south-west corner."""
-
-    cell_size: float
-    shape: tuple[int, int]
-    origin: tuple[float, float]
-    fill: str = "lawn"
-    rect: tuple[float, float, float, float] | None = None
-
-
-def default_settings() -> MapSettings:
-    """The seed's 81 x 71 cells of 0.3 m, all lawn, centred on the odom origin (the start)."""
-    ny, nx = SEED_SHAPE
-    s = DEFAULT_CELL_SIZE
-    return MapSettings(s, (ny, nx), (-nx * s / 2, -ny * s / 2), "lawn")
-
-
-def make_map(settings: MapSettings) -> CoverageMap:
-    """A new CoverageMap for ``settings``; ValueError (from CoverageMap) if they do not fit."""
-    if settings.fill not in FILLS:
-        raise ValueError(f"fill must be one of {sorted(FILLS)}, got {settings.fill!r}")
-    if settings.fill == "rectangle":
-        if settings.rect is None:
-            raise ValueError("a perimeter rectangle needs rect = (x, y, width, height) m")
-        x, y, w, h = settings.rect
-        polygon = ((x, y), (x + w, y), (x + w, y + h), (x, y + h))
-        return CoverageMap.from_polygon(
-            polygon, settings.cell_size, settings.origin, shape=settings.shape
-        )
-    if settings.fill == "lawn":
-        codes = np.full(settings.shape, UNMOWED, dtype=np.uint8)
-        return CoverageMap.from_array(codes, settings.cell_size, settings.origin)
-    return CoverageMap(settings.shape, settings.cell_size, settings.origin)
-
-
-def feed_positions(
-    cmap: CoverageMap, x: np.ndarray, y: np.ndarray
-) -> tuple[list[tuple[int, int, int]], UpdateResult | None]:
-    """Feed a path (x, y m, map frame) to ``cmap``; (changed cells in order, last result).
-
-    Non-finite rows are skipped. Only the rows whose cell differs from the row
-    before (and the last row) are passed to :meth:`CoverageMap.update`: a row in
-    the same cell changes nothing there. The cell index uses the map's own
-    arithmetic, ``floor((x - x0) / s)``. The result is None when no row was finite.
-    """
-    x = np.asarray(x, dtype=float)
-    y = np.asarray(y, dtype=float)
-    ok = np.isfinite(x) & np.isfinite(y)
-    if not ok.all():
-        x, y = x[ok], y[ok]
-    if x.size == 0:
-        return [], None
-    x0, y0 = cmap.origin
-    s = cmap.cell_size
-    ix = np.floor((x - x0) / s)
-    iy = np.floor((y - y0) / s)
-    step = np.empty(x.size, dtype=bool)
-    step[0] = True
-    step[1:] = (ix[1:] != ix[:-1]) | (iy[1:] != iy[:-1])
-    step[-1] = True
-    changed: list[tuple[int, int, int]] = []
-    result = None
-    for i in np.flatnonzero(step).tolist():
-        result = cmap.update(float(x[i]), float(y[i]))
-        changed.extend(result.changed)
-    return changed, result
-
-
-# --- the grid image ------------------------------------------------------------------------
-
-
-class GridImageItem(pg.GraphicsObject):
-    """A coverage map as a QImage whose pixels are written only where cells changed.
-
-    :meth:`set_map` draws a whole map (O(map), once); :meth:`write_cells` writes
-    the given cells and repaints only their rectangles (O(cells)).
-    ``pixels_written`` counts the pixels written by :meth:`write_cells`.
-    """
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.setFlag(QGraphicsItem.GraphicsItemFlag.ItemUsesExtendedStyleOption, True)
-        self._image = QImage()
-        self._pixels = np.zeros((0, 0), dtype=np.uint32)
-        self._bits = None
-        self.pixels_written = 0
-
-    @property
-    def shape(self) -> tuple[int, int]:
-        """(ny, nx) pixels = cells."""
-        return self._pixels.shape
-
-    def set_map(self, cmap: CoverageMap) -> None:
-        """Show ``cmap`` (all cells) and place it: pixel (ix, iy) -> (x0 + ix*s, y0 + iy*s) m."""
-        ny, nx = cmap.shape
-        self.prepareGeometryChange()
-        if self._pixels.shape != (ny, nx):
-            self._image = QImage(nx, ny, QImage.Format.Format_RGB32)
-            self._bits = self._image.bits()  # writable view of the image's own memory
-            rows = np.frombuffer(self._bits, dtype=np.uint32).reshape(ny, -1)
-            self._pixels = rows[:, :nx]
-        self._pixels[:] = CODE_PIXELS[cmap.codes]
-        s = cmap.cell_size
-        x0, y0 = cmap.origin
-        self.setTransform(QTransform(s, 0.0, 0.0, s, x0, y0))
-        self.update()
-
-    def write_cells(self, changed: Iterable[tuple[int, int, int]]) -> int:
-        """Write the pixels of ``changed`` cells ((iy, ix, code); the last code of a cell
-        wins) and mark their rectangles dirty; returns the number of pixels written."""
-        last = {(iy, ix): code for iy, ix, code in changed}
-        if not last:
-            return 0
-        pixels = self._pixels
-        for (iy, ix), code in last.items():
-            pixels[iy, ix] = CODE_PIXELS[code]
-        if len(last) <= 32:
-            for iy, ix in last:
-                self.update(QRectF(ix, iy, 1.0, 1.0))
-        else:
-            cells = np.array(list(last), dtype=np.int64)
-            lo, hi = cells.min(axis=0), cells.max(axis=0) + 1
-            self.update(QRectF(lo[1], lo[0], hi[1] - lo[1], hi[0] - lo[0]))
-        self.pixels_written += len(last)
-        return len(last)
-
-    def rgb(self) -> np.ndarray:
-        """What the image shows as a (ny, nx, 3) uint8 RGB copy, row 0 = south."""
-        p = self._pixels
-        return np.stack([(p >> 16) & 255, (p >> 8) & 255, p & 255], axis=-1).astype(np.uint8)
-
-    def boundingRect(self) -> QRectF:  # noqa: N802 - Qt API
-        ny, nx = self._pixels.shape
-        return QRectF(0.0, 0.0, float(nx), float(ny))
-
-    def paint(self, painter: QPainter, option, widget=None) -> None:
-        ny, nx = self._pixels.shape
-        if nx == 0 or ny == 0:
-            return
-        r = option.exposedRect
-        left = max(0, math.floor(r.left()))
-        top = max(0, math.floor(r.top()))
-        right = min(nx, math.ceil(r.right()))
-        bottom = min(ny, math.ceil(r.bottom()))
-        if right <= left or bottom <= top:
-            return
-        part = QRectF(left, top, right - left, bottom - top)
-        painter.setRenderHint(QPainter.RenderHint.SmoothPixmapTransform, False)
-        painter.drawImage(part, self._image, part)
-
-
-# --- the simulated run ---------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class SimRun:
-    """A simulated field run ready to draw: ``sim`` (:class:`mm_pc.sim.field_run.FieldSim`),
-    ``fused`` (N+1, 3) EKF poses, GPS fixes in plot metres ``gps_xy`` (M, 2) with
-    ``gps_k`` (request index), ``gps_accuracy`` (m) and ``gps_usable``; ``range_k``
-    the request index of every range set."""
-
-    sim: object
-    fused: np.ndarray
-    gps_xy: np.ndarray
-    gps_k: np.ndarray
-    gps_accuracy: np.ndarray
-    gps_usable: np.ndarray
-    range_k: np.ndarray
-
-
-@functools.lru_cache(maxsize=4)
-def build_sim_run(seed: int = 1) -> SimRun:
-    """Simulate the mowing run for ``seed`` and fuse it (about 2.5 s; cached per seed,
-    the run is deterministic)."""
-    from mm_pc.core.fixes.gps import gps_accuracy_m, gps_fix_usable
-    from mm_pc.sim.field_run import run_fusion, simulate_field_run
-
-    sim = simulate_field_run(int(seed))
-    fused = run_fusion(sim)
-    gps = sim.gps
-    lat = np.array([g.lat for g in gps])
-    lon = np.array([g.lon for g in gps])
-    gx, gy = sim.grid.to_local(lat, lon)
-    return SimRun(
-        sim=sim,
-        fused=fused,
-        gps_xy=np.column_stack([gx, gy]),
-        gps_k=np.array([g.k for g in gps], dtype=np.int64),
-        gps_accuracy=np.array([gps_accuracy_m(g.quality) for g in gps]),
-        gps_usable=np.array([gps_fix_usable(g.quality) for g in gps], dtype=bool),
-        range_k=np.array([r.k for r in sim.ranges], dtype=np.int64),
-    )
-
-
-def sim_map(run: SimRun) -> CoverageMap:
-    """The plot's perimeter rectangle as a map reaching SIM_MARGIN_M beyond it."""
-    w, h = run.sim.plot
-    s = DEFAULT_CELL_SIZE
-    origin = (-SIM_MARGIN_M, -SIM_MARGIN_M)
-    shape = (math.ceil((h + 2 * SIM_MARGIN_M) / s), math.ceil((w + 2 * SIM_MARGIN_M) / s))
-    return CoverageMap.from_polygon(((0, 0), (w, 0), (w, h), (0, h)), s, origin, shape=shape)
-
-
-def _circles(centres: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Outline points of several circles, NaN between them (for connect='finite')."""
-    if len(radii) == 0:
-        return np.empty(0), np.empty(0)
-    c, s = np.cos(_CIRCLE), np.sin(_CIRCLE)
-    xs = centres[:, :1] + radii[:, None] * c
-    ys = centres[:, 1:2] + radii[:, None] * s
-    gap = np.full((len(radii), 1), np.nan)
-    return np.hstack([xs, gap]).ravel(), np.hstack([ys, gap]).ravel()
 
 
 _executor: concurrent.futures.ThreadPoolExecutor | None = None
@@ -366,175 +97,6 @@ def _worker() -> concurrent.futures.ThreadPoolExecutor:
     if _executor is None:
         _executor = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="maps-sim")
     return _executor
-
-
-# --- "New map…" ------------------------------------------------------------------------------
-
-
-
-def _parse_positive(text: str, what: str) -> float:
-    v = parse_number(text, what)
-    if v <= 0:
-        raise ValueError(f"{what} must be > 0, got {text.strip()}")
-    return v
-
-
-def _parse_cells(text: str, what: str) -> int:
-    try:
-        n = int(text.strip())
-    except ValueError:
-        raise ValueError(f"{what} must be a whole number of cells, got {text!r}") from None
-    if not 1 <= n <= MAX_SIDE_CELLS:
-        raise ValueError(f"{what} must be 1..{MAX_SIDE_CELLS} cells, got {n}")
-    return n
-
-
-class _Field(QWidget):
-    """A line edit with a red error label beside it."""
-
-    def __init__(self, text: str, tip: str) -> None:
-        super().__init__()
-        self.edit = QLineEdit(text)
-        self.edit.setToolTip(tip)
-        self.edit.setMaximumWidth(90)
-        self.error = QLabel("")
-        self.error.setStyleSheet(ERROR_STYLE)
-        self.error.setWordWrap(True)
-        self.error.hide()
-        lay = QHBoxLayout(self)
-        lay.setContentsMargins(0, 0, 0, 0)
-        lay.addWidget(self.edit)
-        lay.addWidget(self.error, 1)
-
-    def set_error(self, message: str) -> None:
-        self.error.setText(message)
-        self.error.setVisible(bool(message))
-
-
-class NewMapDialog(QDialog):
-    """Settings of a new live coverage map; "Create" validates them.
-
-    Bad input leaves the dialog open with a red message beside the field and
-    does not touch the view's map. On success :attr:`map` and :attr:`settings`
-    hold the new map and the view adopts it (:meth:`MapsView.set_live_map`).
-    """
-
-    def __init__(self, view: MapsView, parent: QWidget | None = None) -> None:
-        super().__init__(parent or view)
-        self.view = view
-        self.setWindowTitle("New coverage map")
-        self.map: CoverageMap | None = None
-        self.settings: MapSettings | None = None
-        cur = view.live_settings
-        ny, nx = cur.shape
-        rect = cur.rect or (-7.5, -5.0, 15.0, 10.0)
-        self.fields = {
-            "cell": _Field(f"{cur.cell_size:g}", "edge of a square cell, m (> 0; seed: 0.3)"),
-            "ny": _Field(str(ny), f"rows along y (north), 1..{MAX_SIDE_CELLS}"),
-            "nx": _Field(str(nx), f"columns along x (east), 1..{MAX_SIDE_CELLS}"),
-            "x0": _Field(f"{cur.origin[0]:g}", "x of the map's south-west corner, m (odom frame)"),
-            "y0": _Field(f"{cur.origin[1]:g}", "y of the map's south-west corner, m (odom frame)"),
-            "rx": _Field(f"{rect[0]:g}", "x of the rectangle's south-west corner, m"),
-            "ry": _Field(f"{rect[1]:g}", "y of the rectangle's south-west corner, m"),
-            "rw": _Field(f"{rect[2]:g}", "rectangle width along x, m (> 0)"),
-            "rh": _Field(f"{rect[3]:g}", "rectangle height along y, m (> 0)"),
-        }
-        self.fill_box = QComboBox()
-        for key, text in FILLS.items():
-            self.fill_box.addItem(text, key)
-        self.fill_box.setCurrentIndex(list(FILLS).index(cur.fill))
-        self.fill_box.currentIndexChanged.connect(self._fill_changed)
-        self.fill_error = QLabel("")
-        self.fill_error.setStyleSheet(ERROR_STYLE)
-        self.fill_error.setWordWrap(True)
-        self.fill_error.hide()
-
-        form = QFormLayout(self)
-        f = self.fields
-        form.addRow("Cell size (m)", f["cell"])
-        form.addRow("Rows ny (along y)", f["ny"])
-        form.addRow("Columns nx (along x)", f["nx"])
-        form.addRow("Origin x0 (m)", f["x0"])
-        form.addRow("Origin y0 (m)", f["y0"])
-        form.addRow("Contents", self.fill_box)
-        form.addRow("Perimeter corner x (m)", f["rx"])
-        form.addRow("Perimeter corner y (m)", f["ry"])
-        form.addRow("Perimeter width (m)", f["rw"])
-        form.addRow("Perimeter height (m)", f["rh"])
-        form.addRow(self.fill_error)
-        buttons = QDialogButtonBox(QDialogButtonBox.StandardButton.Cancel)
-        self.create_button = buttons.addButton("Create", QDialogButtonBox.ButtonRole.AcceptRole)
-        self.create_button.setDefault(True)
-        buttons.accepted.connect(self.apply)
-        buttons.rejected.connect(self.reject)
-        form.addRow(buttons)
-        self._fill_changed()
-
-    @property
-    def fill(self) -> str:
-        return self.fill_box.currentData()
-
-    def set_fill(self, fill: str) -> None:
-        self.fill_box.setCurrentIndex(list(FILLS).index(fill))
-
-    def _fill_changed(self, *_args) -> None:
-        for key in ("rx", "ry", "rw", "rh"):
-            self.fields[key].setEnabled(self.fill == "rectangle")
-
-    def _read(self) -> MapSettings | None:
-        """The typed settings, or None with every field's message shown."""
-        parsers = {
-            "cell": (_parse_positive, "cell size (m)"),
-            "ny": (_parse_cells, "rows ny"),
-            "nx": (_parse_cells, "columns nx"),
-            "x0": (parse_number, "origin x0 (m)"),
-            "y0": (parse_number, "origin y0 (m)"),
-        }
-        if self.fill == "rectangle":
-            parsers |= {
-                "rx": (parse_number, "corner x (m)"),
-                "ry": (parse_number, "corner y (m)"),
-                "rw": (_parse_positive, "width (m)"),
-                "rh": (_parse_positive, "height (m)"),
-            }
-        values: dict[str, float] = {}
-        for key, field in self.fields.items():
-            field.set_error("")
-            if key in parsers:
-                parse, what = parsers[key]
-                try:
-                    values[key] = parse(field.edit.text(), what)
-                except ValueError as e:
-                    field.set_error(str(e))
-        if len(values) < len(parsers):
-            return None
-        ny, nx = int(values["ny"]), int(values["nx"])
-        if ny * nx > MAX_CELLS:
-            self.fields["nx"].set_error(
-                f"ny x nx = {ny * nx} cells; at most {MAX_CELLS} (use larger cells)"
-            )
-            return None
-        rect = None
-        if self.fill == "rectangle":
-            rect = (values["rx"], values["ry"], values["rw"], values["rh"])
-        return MapSettings(values["cell"], (ny, nx), (values["x0"], values["y0"]), self.fill, rect)
-
-    def apply(self) -> bool:
-        """Validate and create the map; False (messages shown, view unchanged) on bad input."""
-        self.fill_error.hide()
-        settings = self._read()
-        if settings is None:
-            return False
-        try:
-            cmap = make_map(settings)
-        except ValueError as e:
-            self.fill_error.setText(f"map not created: {e}")
-            self.fill_error.show()
-            return False
-        self.map, self.settings = cmap, settings
-        self.view.set_live_map(cmap, settings)
-        self.accept()
-        return True
 
 
 # --- the view ----------------------------------------------------------------------------------
@@ -964,7 +526,7 @@ class MapsView(QWidget):
             self.range_circles.setData([], [])
             return
         centres = np.array([[b.x, b.y] for b in beacons])
-        self.range_circles.setData(*_circles(centres, radii))
+        self.range_circles.setData(*circles(centres, radii))
 
     def _draw_gps(self, k: int) -> None:
         run = self.run
@@ -974,4 +536,4 @@ class MapsView(QWidget):
         self.gps_good.setData(xy[usable, 0], xy[usable, 1])
         self.gps_bad.setData(xy[~usable, 0], xy[~usable, 1])
         first = max(0, n - GPS_CIRCLES)
-        self.gps_circles.setData(*_circles(run.gps_xy[first:n], run.gps_accuracy[first:n]))
+        self.gps_circles.setData(*circles(run.gps_xy[first:n], run.gps_accuracy[first:n]))
