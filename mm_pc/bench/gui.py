@@ -2,37 +2,8 @@
 
 What :func:`bench_gui` does, in order:
 
-1. Builds the real :class:`~.main_window.MainWindow` offscreen
-   (``QT_QPA_PLATFORM=offscreen``) with a fresh :class:`~.session.MonitorSession`;
-   its own 30 Hz frame timer is stopped so that only measured frames run.
-2. Fast-forwards ``hours`` of ``rate_hz`` replies into the session: the
-   replies of :func:`~.sim_feed.sim_replies` (figure eight; stamps ending
-   now, so live data continues in time) go through
-   :meth:`MonitorSession.process` one by one -- the very processing of live
-   replies (deltas, filters, calibration, pose, history row, log), just
-   without a Qt signal per reply. The first reply goes through
-   ``ctx.on_reply`` (views learn the sensors) and the last one is announced
-   with ``reply_processed``. An hour at 100 Hz (360 000 rows) takes ~35 s.
-3. With ``node=True``: starts a real mm-beagle on emulated sensors
-   (:func:`mm_beagle.harness.beagle_process`, private ROS domain) and a
-   :class:`~.ros_bridge.RosBridge` polling it at ``rate_hz``, so live
-   replies keep arriving (the first one is a new baseline: the node's
-   counters are not the fast-forwarded ones).
-4. On every tab in turn: first unmeasured catch-up frames until three in a
-   row are within 16 ms (at most ``max_catch_up``; reported per tab as
-   ``tab_catch_up_frames``/``tab_catch_up_s``: what a user waits on the
-   first visit of a tab after the hour), then ``frames`` measured frames at
-   ~30 Hz. Events are processed between frames (live replies are taken
-   there, as in the real window); a frame is ``window.frame()`` (the views'
-   ``refresh``) plus the ``processEvents`` right after it, which paints.
-   Frame time = both, measured with ``perf_counter``; ``refresh_ms_*`` =
-   ``window.frame()`` alone.
-5. Memory: resident set size (psutil) before the fast-forward, after it,
-   after each tab's frames (``memory_after_tab_mb``) and at the end.
-
-``frame_ms_p50``/``frame_ms_p95`` are over all tabs' frames; ``tab_p95_ms``
-per tab. A view whose ``refresh`` raises is reported in ``errors`` and its
-tab skipped, so the bench runs whatever the views contain.
+Derivations and measurements: docs/benchmarks.md,
+section "mm_pc.bench.gui in detail".
 """
 
 from __future__ import annotations

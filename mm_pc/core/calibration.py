@@ -2,35 +2,8 @@
 
 Pure math: numpy and PyYAML, no Qt, no ROS.
 
-Frames and units
-----------------
-Everything here is in the **sensor frame** of the seed (+X to the robot's
-right, +Y forward), in metres. Convert counts with
-:func:`mm_pc.core.frames.counts_to_m` first; the calibration is applied *before*
-the sensor-to-base_link conversion.
-
-Sign convention (agrees with :class:`pln2033.motion.Rotated` and
-:attr:`mm_pc.core.geometry.SensorMount.yaw`): a sensor whose axes are turned by
-``psi`` (CCW seen from above) reports the ideal vector turned by ``-psi``::
-
-    reported = R(-psi) @ ideal,   R(a) = [[cos a, -sin a], [sin a, cos a]]
-
-On a straight forward run the ideal vector is (0, d), so the summed raw
-vector is (d sin psi, d cos psi) and the seed's formula::
-
-    atan_real = +pi/2 if Y > 0 else -pi/2      (Y == 0: undefined -> error)
-    offset    = atan_real - atan2(Y, X)        (normalised to (-pi, pi])
-
-gives ``offset = psi`` (also for a backward run, where both signs flip).
-Every later sample is then corrected with ``R(+offset)`` -- both
-components computed from the *unrotated* vector (the original computed y'
-from the already-rotated x') -- and multiplied by the scale factor::
-
-    x' = scale * ( cos(offset) * x - sin(offset) * y)
-    y' = scale * ( sin(offset) * x + cos(offset) * y)
-
-The scale factor is ``true_distance / measured_distance`` when the user
-entered the true length of the run, else 1.
+Derivations and measurements: docs/pose-math.md,
+section "mm_pc.core.calibration in detail".
 """
 
 from __future__ import annotations

@@ -1,45 +1,11 @@
-"""Robot pose from mouse-sensor displacements: four methods, one interface.
+"""Robot pose from mouse-sensor displacements: four methods, one interface (:data:`METHODS`).
 
-Frames and units (see ``docs/pose-math.md`` for the derivations):
+Poses are odom -> base_link (REP 103/105), yaw kept continuous; each sample is the
+displacement every sensor counted in its own frame (X right, Y forward), in metres, as
+reported. ``exact`` is the default; the seed's two approaches are kept to compare.
 
-* Pose: ``odom`` -> ``base_link`` per REP 103/105, x and y in metres, yaw in
-  radians, CCW positive. Yaw is kept *continuous* (not wrapped to (-pi, pi]):
-  two left circles end at yaw = 4*pi, so turns can be counted; use
-  :attr:`Pose2D.yaw_wrapped` for display.
-* Sensor input: per request interval, the displacement each sensor counted in
-  its *own* frame, in metres: (dX, dY) with X to the robot's right and Y
-  forward (the seed's axes), *as reported*, i.e. still turned by the mount's
-  yaw error. Every method first undoes ``mount.yaw`` (calibrated input usually
-  has yaw 0, so this is then the identity).
-* Body increment of one interval: (a, b, c) = (forward m, left m, dtheta rad)
-  in the base_link frame at the *start* of the interval, for a twist held
-  constant over the interval (a = vx*dt, b = vy*dt, c = omega*dt).
-
-A mouse sensor integrates the floor's velocity in its own body-fixed frame, so
-for a constant twist the counts of one interval are exactly
-``dX = -(b + c*px)``, ``dY = a - c*py`` for a sensor at base_link (px, py).
-The methods differ only in how they get (a, b, c) from the counts and how they
-advance the pose:
-
-``exact`` (default)
-    One sensor, no lateral slip (b = 0): c = -dX/sy, a = dY + (sx/sy)*dX with
-    the seed's (sx, sy) = (right, forward) = (-py, px). Pose advanced on the
-    arc (chord a*sinc(c/2) at heading yaw + c/2): exact for a constant twist
-    at any request rate.
-``seed-approach1``
-    The original ``move()``: |c| from the arc length, the turn's sign from
-    the sign of dX (mirrored for the right-front sensor), forward =
-    sign(dY)*(|Vs| - |Vr|) (subtracts lengths); rotate, then forward. Kept
-    only to compare.
-``seed-approach2``
-    The seed's v/omega formulation with time stamps: v = a/dt, omega = c/dt
-    (exact split), pose advanced by one Euler step (x += v*dt*cos(yaw),
-    yaw += omega*dt). dt cancels; the only difference to ``exact`` is the
-    Euler step, whose heading lags by c/2 per interval.
-``two-sensor``
-    Least squares for (a, b, c) from all sensors (2 equations each), no
-    no-slip assumption; lateral slip b is estimated and the residual norm
-    (metres) is reported per sample. Pose advanced on the arc.
+Derivations and measurements: docs/pose-math.md,
+section "mm_pc.core.odometry in detail".
 """
 
 from __future__ import annotations

@@ -364,6 +364,7 @@ def _run(node: FieldSimNode, stop) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Entry point of mm-field-sim; the exit status (2 for bad parameters)."""
     return ros_spin.run("mm-field-sim", FieldSimNode, _run, argv)
 
 

@@ -502,6 +502,7 @@ class FusionNode(Node):
         return msg
 
     def publish_odometry(self) -> None:
+        """Publish the fused estimate (nav_msgs/Odometry) when it moved on, else once a second."""
         now = time.monotonic()
         stamp = self.core.stamp
         if stamp == self._published_stamp and now - self._published_wall < 1.0:
@@ -526,11 +527,13 @@ class FusionNode(Node):
         del poses[: -self.p["path_length"]]
 
     def publish_path(self) -> None:
+        """Publish the fused path (timer callback)."""
         if self.path.poses:
             self.path.header.stamp = self.path.poses[-1].header.stamp
             self.path_pub.publish(self.path)
 
     def publish_diagnostics(self) -> None:
+        """Publish the per-source counts and the estimate on /diagnostics (timer callback)."""
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
         arr.status.append(self._estimate_status())
@@ -604,6 +607,7 @@ def _run(node: FusionNode, stop) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Entry point of mm-fusion; the exit status (2 for bad parameters)."""
     return ros_spin.run("mm-fusion", FusionNode, _run, argv)
 
 

@@ -149,6 +149,7 @@ class OdometryNode(Node):
         )
 
     def request(self) -> None:
+        """Ask mm-beagle for new sensor data (timer callback); one call in flight at a time."""
         if self._in_flight or not self.client.service_is_ready():
             return  # a slow reply is never doubled up: the totals cover any gap
         self._in_flight = True
@@ -169,6 +170,7 @@ class OdometryNode(Node):
         return x - prev[0], y - prev[1], stamp - prev[2]
 
     def on_reply(self, future) -> None:
+        """Turn a get_sensor_data reply into a pose step and publish it; a failed call is logged."""
         self._in_flight = False
         res = future.result()
         if res is None or not res.success:
@@ -192,6 +194,7 @@ class OdometryNode(Node):
         self.publish_odometry(before, after, dt, by_id[self.devices[self.p["sensor"]]])
 
     def publish_odometry(self, before: Pose2D, after: Pose2D, dt: float, data) -> None:
+        """Publish nav_msgs/Odometry for the step ``before`` -> ``after`` over ``dt`` s."""
         msg = odometry_message(
             before,
             after,
@@ -210,12 +213,14 @@ class OdometryNode(Node):
         del self.path.poses[: -self.p["path_length"]]
 
     def publish_path(self) -> None:
+        """Publish the path of the poses so far (timer callback)."""
         if self.path.poses:
             self.path.header.stamp = self.path.poses[-1].header.stamp
             self.path_pub.publish(self.path)
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Entry point of mm-odometry; the exit status (2 for bad parameters)."""
     return ros_spin.run("mm-odometry", OdometryNode, ros_spin.spin_until, argv)
 
 

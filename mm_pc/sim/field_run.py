@@ -6,63 +6,8 @@ y north: the plot grid of seed 004, REP 103) and records, from one seeded
 ``numpy.random.Generator``, what its sensors would report;
 :func:`run_fusion` replays that through :class:`mm_pc.core.fusion.ekf.PoseEKF`.
 
-The path (about 205 m at 0.3 m/s, 11 minutes)
----------------------------------------------
-The mower leaves its dock south of the plot heading north, crosses the south
-wire (y = 0), turns right onto the first lane and mows ten west-east lanes
-1 m apart (boustrophedon; lanes overshoot the east/west wire by 0.3 m and are
-joined by half circles of radius 0.5 m outside the plot, so each turn crosses
-the wire twice), then turns north and leaves across the north wire (y = H).
-Twists are held per 1 ms step; the truth pose is :func:`mm_pc.sim.robot.integrate_pose`
-(closed form per step), moved to the dock pose.
-
-Sensors (rates are whole divisors of the odometry request rate, so every
-measurement belongs to one request end)
-----------------------------------------------------------------------
-* Mouse odometry, 20 Hz requests: :func:`mm_pc.sim.robot.request_samples`
-  for the two default sensors (1600 CPI quantisation, 0.2 counts/ms noise),
-  each sensor mounted ``MOUSE_MOUNT_YAW`` off and reading ``MOUSE_SCALE``
-  times the true distance (the floor is further from a sensor over grass
-  than on the calibration surface). The odometry is then integrated by
-  :class:`mm_pc.core.odometry.Odometry` with the nominal mounts *as calibrated*:
-  the calibration found the mount angle only to ``MOUSE_CAL_RESIDUAL``
-  (``mm_pc.core.calibration`` is good to about 0.05 deg) and knows nothing of the
-  grass scale. With the default one-sensor ``exact`` method a residual mount
-  angle e makes every metre driven forward look like a turn of e / 0.049 m:
-  the raw heading creeps by about 0.2 deg per metre and the raw path bends
-  away by metres over the run. This is the "raw" path.
-* Wheel odometry, 20 Hz: wheel travel of a differential drive with track
-  ``TRACK_WIDTH``, encoder ticks of ``tick_length(0.18 m, 360)`` (the seed's
-  12 ticks per turn give 47 mm steps, too coarse for a 20 Hz motion model),
-  and slip: each wheel turns 2 % +- 2 % (per request) more than the ground
-  passes, plus slip bursts (one wheel 10 % more for 0.5-2 s, about once a minute).
-* GPS, 2 Hz: local metres through :class:`mm_pc.core.fixes.gps.LocalGrid` to
-  latitude/longitude (what a NavSatFix carries) and HDOP, satellites, fix
-  type. The error is a first-order Gauss-Markov process per axis (time
-  constant 30 s: GPS errors wander, they are not white) of standard deviation
-  HDOP * 2.5 m / sqrt(2) (the seed's +-2.5 m read as 2-D RMS). About 8 % of
-  epochs are bad (HDOP 3-8 or 3-4 satellites) with 4-12 m of multipath error;
-  and about 1 % look good but are 6-10 m off (the seed's reflections next to
-  a house wall), which only the filter's gate can catch.
-* Beacons, 5 Hz: slant ranges to four beacons at the plot corners, 1 m above
-  the range antenna, noise 5 cm; 2 % of ranges are non-line-of-sight, 0.3-1.5
-  m too long.
-* Compass, 10 Hz: the seed's convention (rad, 0 = north, clockwise), noise
-  2 deg, bias 1 deg (a 2-axis compass on a slightly tilted mower).
-* Perimeter wire: a contact whenever the robot's centre (the wire sensor, as
-  in the seed's examples) crosses a wire (x = 0 or W with 0 <= y <= H; y = 0
-  or H with 0 <= x <= W), reported at the next request end. The replay does
-  not get the wire's identity from the simulator: it takes the wire nearest
-  its own estimate (:func:`mm_pc.core.fixes.perimeter.nearest_segment`), as a robot
-  must.
-
-Replay (:func:`run_fusion`)
----------------------------
-The run goes through the one fusion loop, :class:`mm_pc.core.fusion.loop.FusionCore`,
-as ``mm-fusion`` gets it from ``mm-field-sim``'s topics: per request the odometry pose,
-then that request end's readings as input records (GPS fixes inflated for their
-correlation, one range record per beacon, compass headings, nearest-wire contacts).
-Weights and the reasons behind them: docs/maps-and-fixes.md.
+Derivations and measurements: docs/maps-and-fixes.md,
+section "mm_pc.sim.field_run in detail".
 """
 
 from __future__ import annotations

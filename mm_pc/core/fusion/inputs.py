@@ -5,58 +5,8 @@ their field names are used), so the same functions take real
 ``sensor_msgs``/``nav_msgs`` objects in mm-fusion and plain stand-ins in
 tests. What each message means here:
 
-``nav_msgs/Odometry`` (mouse odometry, wheel odometry)
-    The pose of ``child_frame_id`` (must be the robot's base frame) in
-    ``header.frame_id`` (any non-empty name, but constant: a change starts a
-    new baseline). Only poses are used; consecutive poses give the body
-    increment (fwd, left, dtheta) of :func:`mm_pc.core.fusion.ekf.pose_increment`.
-``sensor_msgs/NavSatFix`` (GPS)
-    ``status.status`` FIX, SBAS_FIX or GBAS_FIX is a position; NO_FIX and
-    UNKNOWN are readings without one (*unusable*); any other value is
-    *invalid*. Latitude/longitude go to plot metres by
-    :class:`mm_pc.core.fixes.gps.LocalGrid`. ``position_covariance`` is ENU
-    (m^2, row-major east, north, up), so its upper-left 2x2 block is the
-    covariance of the plot's (x east, y north); with
-    ``COVARIANCE_TYPE_UNKNOWN`` a default sigma is used, with APPROXIMATED or
-    DIAGONAL_KNOWN only the diagonal. A fix whose larger standard deviation
-    exceeds ``max_sigma`` is unusable (HDOP 2 at 2.5 m UERE, the seed's
-    limit, is 3.54 m per axis). NavSatFix has no satellite count: a driver
-    that knows the fix is too weak must say NO_FIX.
-``sensor_msgs/Imu`` (compass)
-    Orientation per REP 103/145: ENU world, yaw CCW from east; an Imu never
-    needs the seed's compass conversion. ``orientation_covariance[0] == -1``
-    means no orientation (unusable); element 8 (yaw, rad^2) is the variance
-    when it is > 0, else the default.
-``std_msgs/Float64`` (compass, alternative)
-    A heading in the seed's convention (rad, 0 = north, clockwise), turned
-    into REP 103 by :func:`mm_pc.core.angles.compass_to_rep103`. It has no
-    stamp: it is applied when it arrives, to the newest estimate.
-``sensor_msgs/Range`` (one topic per beacon)
-    The slant range (m) from the robot's range antenna to that beacon. REP
-    117: -inf (too close) and +inf (nothing) are readings without a range
-    (unusable); NaN or a value outside [min_range, max_range] is invalid.
-    ``radiation_type`` and ``field_of_view`` are not used.
-``geometry_msgs/PointStamped`` (perimeter-wire contact)
-    The wire sensor fired. There is no standard message for "one coordinate
-    is known", so: ``point.x`` finite and ``point.y`` NaN = a wire on the line
-    x = point.x (the x of the robot's centre is known); ``point.y`` finite and
-    ``point.x`` NaN = a wire on y = point.y; both NaN = the sensor fired but
-    which wire is not known: the nearest configured wire within a maximum
-    distance of the estimate is taken (as seed 004's robot must). Both
-    finite is invalid (a wire fixes one coordinate). ``point.z`` is ignored.
-    Finite coordinates must be in the map frame. (A
-    PoseWithCovarianceStamped with a huge variance on the unmeasured axis
-    would say the same with a variance, but a reader that ignores the
-    covariance would take the 0 placeholder as a coordinate; NaN cannot be
-    mistaken.)
-
-Every converter either returns an input record or raises
-:class:`InputError` (``kind`` "invalid": the message is malformed;
-:class:`UnusableInputError`, ``kind`` "unusable": well-formed but carries no usable
-reading). Nothing else is changed.
-
-:class:`mm_pc.core.fusion.loop.FusionCore` takes the records; the simulated-run replay
-(:func:`mm_pc.sim.field_run.run_fusion`) builds the same records from its readings.
+Derivations and measurements: docs/maps-and-fixes.md,
+section "mm_pc.core.fusion.inputs in detail".
 """
 
 from __future__ import annotations
