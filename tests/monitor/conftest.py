@@ -40,3 +40,43 @@ def screenshot(screenshot_dir):
         return img
 
     return save
+
+
+@pytest.fixture(scope="module")
+def beagle_node(request, tmp_path_factory):
+    """One mm-beagle per test module, on emulated sensors, stopped after the module.
+
+    The module's ``BEAGLE_PARAMS`` say how it runs: a dict of node parameters, or a
+    function of a temporary folder that returns one (to write a register map there).
+    """
+    pytest.importorskip("rclpy")
+    pytest.importorskip("mm_interfaces")
+    from mm_beagle.harness import beagle_process
+
+    tmp = tmp_path_factory.mktemp("beagle")
+    params = getattr(request.module, "BEAGLE_PARAMS", {"backend": "sim"})
+    if callable(params):
+        params = params(tmp)
+    with beagle_process(params, env=dict(os.environ), log_path=str(tmp / "beagle.log")) as proc:
+        yield proc
+
+
+def _feed(ctx, replies=None, *, name="figure_eight", rate_hz=100.0, seconds=None, start_ns=None):
+    """Hand ``replies`` to ``ctx.on_reply`` (by default the simulated replies of
+    ``sim_replies(name, rate_hz, seconds)``), as the bridge would; how many."""
+    if replies is None:
+        from mm_pc.monitor.model.sim_feed import sim_replies
+
+        kw = {} if start_ns is None else {"start_ns": start_ns}
+        replies = sim_replies(name, rate_hz, seconds, **kw)
+    n = 0
+    for reply in replies:
+        ctx.on_reply(reply)
+        n += 1
+    return n
+
+
+@pytest.fixture
+def feed():
+    """``feed(ctx, replies=None, *, name, rate_hz, seconds, start_ns)``: see :func:`_feed`."""
+    return _feed

@@ -10,7 +10,6 @@ node.
 from __future__ import annotations
 
 import math
-import os
 import time
 from dataclasses import replace
 
@@ -51,11 +50,6 @@ WINDOW_MSG = r"median window must be an integer number of samples in 1\.\.999"
 def ctx(tmp_path):
     config = MonitorConfig(calibration_file=tmp_path / "cfg" / "calibration.yaml")
     return MonitorContext(MonitorSession(), None, config)
-
-
-def feed(ctx, replies) -> None:
-    for r in replies:
-        ctx.on_reply(r)
 
 
 def assert_shows_content(img: QImage, name: str, min_colours: int = 12) -> None:
@@ -101,7 +95,7 @@ def next_enabled(wiz) -> bool:
 
 
 @pytest.mark.screenshot
-def test_wizard_computes_saves_and_applies_a_calibration(qtbot, ctx, screenshot):
+def test_wizard_computes_saves_and_applies_a_calibration(qtbot, ctx, screenshot, feed):
     replies = straight_with_5deg()
     ctx.on_reply(replies[0])  # baseline: the sensors are known
     wiz = open_wizard(qtbot, ctx)
@@ -167,7 +161,7 @@ def test_wizard_computes_saves_and_applies_a_calibration(qtbot, ctx, screenshot)
     assert ctx2.session.calibration == cal
 
 
-def test_wizard_too_short_run_keeps_next_disabled(qtbot, ctx):
+def test_wizard_too_short_run_keeps_next_disabled(qtbot, ctx, feed):
     replies = straight_with_5deg()
     ctx.on_reply(replies[0])
     wiz = open_wizard(qtbot, ctx)
@@ -189,7 +183,7 @@ def test_wizard_too_short_run_keeps_next_disabled(qtbot, ctx):
     assert not next_enabled(wiz)
 
 
-def test_wizard_cancel_keeps_the_old_calibration_and_the_robot_moves_again(qtbot, ctx):
+def test_wizard_cancel_keeps_the_old_calibration_and_the_robot_moves_again(qtbot, ctx, feed):
     old = Calibration({D0: SensorCalibration(0.01, 0.5, 1.0)})
     ctx.set_calibration(old)
     replies = straight_with_5deg()
@@ -210,7 +204,7 @@ def test_wizard_cancel_keeps_the_old_calibration_and_the_robot_moves_again(qtbot
     assert ctx.receivers(SIGNAL("reply_processed(PyObject)")) == 0  # closed: not listening
 
 
-def test_wizard_refuses_a_bad_true_distance(qtbot, ctx):
+def test_wizard_refuses_a_bad_true_distance(qtbot, ctx, feed):
     replies = straight_with_5deg()
     ctx.on_reply(replies[0])
     wiz = open_wizard(qtbot, ctx)
@@ -298,7 +292,7 @@ def test_filter_dialog_refuses_bad_windows(qtbot, ctx):
 
 
 @pytest.mark.screenshot
-def test_filter_dialog_applies_x_and_y_to_the_right_axes(qtbot, ctx, screenshot):
+def test_filter_dialog_applies_x_and_y_to_the_right_axes(qtbot, ctx, screenshot, feed):
     replies = list(sim_replies("figure_eight", 50, seconds=6))
     dlg = FilterDialog(ctx)  # opened before any data: rows come with the sensors
     qtbot.addWidget(dlg)
@@ -400,7 +394,7 @@ def diag(level: int, late: int, state: str = "up") -> dict:
 
 
 @pytest.mark.screenshot
-def test_health_view_shows_diagnostics_residual_and_counters(qtbot, ctx, screenshot):
+def test_health_view_shows_diagnostics_residual_and_counters(qtbot, ctx, screenshot, feed):
     bridge = RosBridge()  # constructed, never started: its real signals, no ROS
     ctx.bridge = bridge
     # the monitor believes sensor 1 sits 1 cm further forward than it does: a residual
@@ -485,7 +479,7 @@ def test_bucket_max_reads_only_new_rows_and_keeps_every_peak():
     assert len(t) == 100 and np.nanmax(y) == 7.0
 
 
-def test_health_view_thins_a_long_history(qtbot, ctx):
+def test_health_view_thins_a_long_history(qtbot, ctx, feed):
     ctx.session.configure_odometry(method="two-sensor")
     feed(ctx, sim_replies("figure_eight", 100, seconds=1))
     h = ctx.session.history
@@ -599,15 +593,8 @@ def test_debug_view_lists_manual_replies_and_single_polls(qtbot, ctx, screenshot
 # -- against the real node -------------------------------------------------------------------------
 
 
-@pytest.fixture(scope="module")
-def beagle_node(tmp_path_factory):
-    pytest.importorskip("rclpy")
-    from mm_beagle.harness import beagle_process
-
-    params = {"backend": "sim", "sim_trajectory": "straight", "diagnostics_period": 0.2}
-    log = tmp_path_factory.mktemp("beagle") / "beagle.log"
-    with beagle_process(params, env=dict(os.environ), log_path=str(log)) as proc:
-        yield proc
+#: the module-wide mm-beagle of tests/monitor/conftest.py
+BEAGLE_PARAMS = {"backend": "sim", "sim_trajectory": "straight", "diagnostics_period": 0.2}
 
 
 @pytest.mark.ros

@@ -41,11 +41,6 @@ from mm_pc.monitor.widgets.style import ROBOT_COLOUR, sensor_colour
 # -- helpers ---------------------------------------------------------------------------------
 
 
-def feed(ctx: MonitorContext, name: str = "figure_eight", rate: float = 50, seconds=None) -> None:
-    for r in sim_replies(name, rate, seconds):
-        ctx.on_reply(r)
-
-
 @pytest.fixture
 def ctx() -> MonitorContext:
     return MonitorContext(MonitorSession())
@@ -255,8 +250,8 @@ def test_decimator_memory_is_four_bytes_a_kept_point_and_a_box():
 # -- the map ---------------------------------------------------------------------------------------
 
 
-def test_paths_equal_history_and_markers_sit_at_the_pose(view, ctx):
-    feed(ctx, seconds=30)
+def test_paths_equal_history_and_markers_sit_at_the_pose(view, ctx, feed):
+    feed(ctx, rate_hz=50, seconds=30)
     view.refresh()
     view.fit_paths()
     view.refresh()
@@ -281,8 +276,8 @@ def test_paths_equal_history_and_markers_sit_at_the_pose(view, ctx):
     assert f"{pose.x:+.3f} m" in view.pose_label.text()
 
 
-def test_zoomed_out_path_is_decimated_but_still_from_the_history(view, ctx):
-    feed(ctx, seconds=30)
+def test_zoomed_out_path_is_decimated_but_still_from_the_history(view, ctx, feed):
+    feed(ctx, rate_hz=50, seconds=30)
     view.set_visible_width(MAX_WIDTH_M, (0.0, 0.0))
     view.refresh()
     hist = ctx.session.history
@@ -291,8 +286,8 @@ def test_zoomed_out_path_is_decimated_but_still_from_the_history(view, ctx):
     assert view.render_stats()["levels"]["robot"] > 0
 
 
-def test_refresh_does_nothing_when_the_history_did_not_change(view, ctx):
-    feed(ctx, seconds=2)
+def test_refresh_does_nothing_when_the_history_did_not_change(view, ctx, feed):
+    feed(ctx, rate_hz=50, seconds=2)
     view.refresh()
     view.finish_drawing()  # nothing queued off the screen either
     view.refresh()
@@ -410,11 +405,11 @@ def test_history_dropping_old_rows_rebuilds_the_paths(qtbot):
     assert_path_from_history(v, "robot", hist, "x", "y")
 
 
-def test_sensors_appear_when_the_devices_are_known(view, ctx):
+def test_sensors_appear_when_the_devices_are_known(view, ctx, feed):
     assert view.sensor_items == []
     assert list(view.path_checks) == ["robot"]
     view.refresh()  # no history yet: draws the robot at the origin
-    feed(ctx, seconds=3)
+    feed(ctx, rate_hz=50, seconds=3)
     assert len(view.sensor_items) == 2
     assert list(view.path_checks) == ["robot", 0, 1]
     assert view.path_checks[1].text() == "sensor 2"
@@ -423,8 +418,8 @@ def test_sensors_appear_when_the_devices_are_known(view, ctx):
     assert_path_from_history(view, 1, ctx.session.history, "s1_wx", "s1_wy")
 
 
-def test_view_built_after_the_devices_has_its_sensors(qtbot, ctx):
-    feed(ctx, seconds=2)
+def test_view_built_after_the_devices_has_its_sensors(qtbot, ctx, feed):
+    feed(ctx, rate_hz=50, seconds=2)
     v = MapView(ctx)
     qtbot.addWidget(v)
     assert len(v.sensor_items) == 2
@@ -432,8 +427,8 @@ def test_view_built_after_the_devices_has_its_sensors(qtbot, ctx):
     assert_path_from_history(v, 0, ctx.session.history, "s0_wx", "s0_wy")
 
 
-def test_far_out_the_robot_is_an_arrow_pointing_along_its_heading(view, ctx):
-    feed(ctx, seconds=14)
+def test_far_out_the_robot_is_an_arrow_pointing_along_its_heading(view, ctx, feed):
+    feed(ctx, rate_hz=50, seconds=14)
     view.set_visible_width(100.0)
     view.refresh()
     marker = view.robot_marker
@@ -449,8 +444,8 @@ def test_far_out_the_robot_is_an_arrow_pointing_along_its_heading(view, ctx):
     assert not marker.isVisible()  # near, the outline is big enough
 
 
-def test_sensor_axes_point_right_and_forward(view, ctx):
-    feed(ctx, seconds=4)
+def test_sensor_axes_point_right_and_forward(view, ctx, feed):
+    feed(ctx, rate_hz=50, seconds=4)
     view.set_visible_width(MIN_WIDTH_M, (0.0, 0.0))
     view.refresh()
     pose, m = ctx.session.pose, ctx.session.mounts[0]
@@ -466,8 +461,8 @@ def test_sensor_axes_point_right_and_forward(view, ctx):
     assert view.sensor_items[0]["axes"].isVisible()
 
 
-def test_a_new_geometry_moves_the_sensor_markers(view, ctx):
-    feed(ctx, seconds=3)
+def test_a_new_geometry_moves_the_sensor_markers(view, ctx, feed):
+    feed(ctx, rate_hz=50, seconds=3)
     view.refresh()
     mounts = (SensorMount(0.08, -0.05, 0.1), SensorMount(0.02, 0.06))
     ctx.session.configure_odometry(mounts=mounts)
@@ -482,8 +477,8 @@ def test_a_new_geometry_moves_the_sensor_markers(view, ctx):
 
 
 @pytest.mark.screenshot
-def test_map_screenshot(view, ctx, screenshot):
-    feed(ctx, "figure_eight", 50, 30)
+def test_map_screenshot(view, ctx, screenshot, feed):
+    feed(ctx, rate_hz=50, seconds=30)
     view.refresh()
     view.fit_paths()
     view.refresh()
@@ -536,8 +531,8 @@ def drawn_anew(view: MapView) -> np.ndarray:
     return np.frombuffer(img.constBits(), np.uint32).reshape(img.height(), -1).copy()
 
 
-def test_raster_pixels_lie_on_the_history_and_cover_it(view, ctx):
-    feed(ctx, seconds=30)
+def test_raster_pixels_lie_on_the_history_and_cover_it(view, ctx, feed):
+    feed(ctx, rate_hz=50, seconds=30)
     view.refresh()
     view.fit_paths()
     view.refresh()
@@ -561,8 +556,8 @@ def test_raster_pixels_lie_on_the_history_and_cover_it(view, ctx):
     assert not (drawn & ~near).any()  # nothing drawn away from the history's points
 
 
-def test_the_raster_is_shown_where_the_paths_are(view, ctx):
-    feed(ctx, seconds=30)
+def test_the_raster_is_shown_where_the_paths_are(view, ctx, feed):
+    feed(ctx, rate_hz=50, seconds=30)
     view.follow_check.setChecked(False)
     view.set_visible_width(0.8, (0.1, 0.3))
     view.refresh()
@@ -663,8 +658,8 @@ def robot_pixels(view: MapView) -> int:
                  + abs((a & 255) - want.blue())) < 40).sum())
 
 
-def test_a_zoom_draws_the_raster_anew_over_frames_the_old_stretched_meanwhile(view, ctx):
-    feed(ctx, seconds=20)
+def test_a_zoom_draws_the_raster_anew_over_frames_the_old_stretched_meanwhile(view, ctx, feed):
+    feed(ctx, rate_hz=50, seconds=20)
     view.follow_check.setChecked(False)
     view.set_visible_width(1.0, (0.35, 0.4))
     view.refresh()
@@ -697,8 +692,8 @@ def test_a_zoom_draws_the_raster_anew_over_frames_the_old_stretched_meanwhile(vi
     assert robot_pixels(view) == done  # what is seen was complete
 
 
-def test_off_screen_parts_are_drawn_over_the_next_frames(view, ctx):
-    feed(ctx, seconds=40)
+def test_off_screen_parts_are_drawn_over_the_next_frames(view, ctx, feed):
+    feed(ctx, rate_hz=50, seconds=40)
     view.follow_check.setChecked(False)
     view.set_visible_width(0.6, (0.0, 0.5))
     view.raster.BUDGET_S = 0.0  # nothing off the screen in this frame
@@ -724,8 +719,8 @@ def test_off_screen_parts_are_drawn_over_the_next_frames(view, ctx):
     assert view.render_stats()["refreshes"] == n  # all done: nothing brings it back
 
 
-def test_hiding_a_path_draws_the_raster_without_it(view, ctx):
-    feed(ctx, seconds=10)
+def test_hiding_a_path_draws_the_raster_without_it(view, ctx, feed):
+    feed(ctx, rate_hz=50, seconds=10)
     view.fit_paths()
     view.refresh()
     view.finish_drawing()
@@ -756,9 +751,9 @@ def panel(qtbot, ctx) -> DirectionPanel:
     return p
 
 
-def test_direction_vector_is_the_newest_displacement_times_the_gain(panel, ctx):
+def test_direction_vector_is_the_newest_displacement_times_the_gain(panel, ctx, feed):
     assert panel.widgets == [] and not panel.waiting.isHidden()
-    feed(ctx, seconds=5)
+    feed(ctx, rate_hz=50, seconds=5)
     assert len(panel.widgets) == 2 and panel.waiting.isHidden()
     panel.refresh()
     hist = ctx.session.history
@@ -780,8 +775,8 @@ def test_direction_vector_is_the_newest_displacement_times_the_gain(panel, ctx):
             (hist.last(f"s{k}_dx") * 1e4, hist.last(f"s{k}_dy") * 1e4))
 
 
-def test_direction_refresh_skips_unchanged_history(panel, ctx, monkeypatch):
-    feed(ctx, seconds=2)
+def test_direction_refresh_skips_unchanged_history(panel, ctx, monkeypatch, feed):
+    feed(ctx, rate_hz=50, seconds=2)
     panel.refresh()
     calls = []
     for w in panel.widgets:
@@ -800,8 +795,8 @@ def test_auto_gain_steps():
 
 
 @pytest.mark.screenshot
-def test_direction_screenshot(panel, ctx, screenshot):
-    feed(ctx, "figure_eight", 50, 30)
+def test_direction_screenshot(panel, ctx, screenshot, feed):
+    feed(ctx, rate_hz=50, seconds=30)
     panel.refresh()
     img = screenshot(panel, "direction.png")
     assert len(distinct_colours(img, 2)) > 10

@@ -39,14 +39,6 @@ def make_view(qtbot) -> mv.MapsView:
     return view
 
 
-def feed(view: mv.MapsView, replies) -> int:
-    n = 0
-    for reply in replies:
-        view.ctx.on_reply(reply)
-        n += 1
-    return n
-
-
 def reference_map(settings: mm.MapSettings, x, y) -> CoverageMap:
     """The map the live view must hold: every row fed to CoverageMap.update."""
     ref = mm.make_map(settings)
@@ -67,12 +59,12 @@ def run() -> mm.SimRun:
 # --- live ------------------------------------------------------------------------------------
 
 
-def test_live_grid_pixels_equal_codes_after_sim_replies(qtbot):
+def test_live_grid_pixels_equal_codes_after_sim_replies(qtbot, feed):
     view = make_view(qtbot)
     replies = list(sim_replies("figure_eight", rate_hz=20.0, seconds=24.0))
     # in batches, as replies arrive between frames
     for start in range(0, len(replies), 37):
-        feed(view, replies[start : start + 37])
+        feed(view.ctx, replies[start : start + 37])
         view.refresh()
         assert_image_shows(view, view.live_map)
     hist = view.ctx.session.history
@@ -87,10 +79,10 @@ def test_live_grid_pixels_equal_codes_after_sim_replies(qtbot):
     assert "71 (x) x 81 (y) cells of 0.3 m" in view.status.text()
 
 
-def test_only_changed_cells_are_written(qtbot):
+def test_only_changed_cells_are_written(qtbot, feed):
     view = make_view(qtbot)
     replies = sim_replies("figure_eight", rate_hz=20.0, seconds=20.0)
-    feed(view, (next(replies) for _ in range(150)))
+    feed(view.ctx, (next(replies) for _ in range(150)))
     view.refresh()
     written: list[tuple[int, int, int]] = []
     original = view.grid.write_cells
@@ -104,7 +96,7 @@ def test_only_changed_cells_are_written(qtbot):
     before_rgb = view.grid.rgb()
     before_count = view.grid.pixels_written
     before_codes = view.live_map.codes.copy()
-    feed(view, (next(replies) for _ in range(40)))
+    feed(view.ctx, (next(replies) for _ in range(40)))
     view.refresh()
     cells = {(iy, ix) for iy, ix, _ in written}
     assert 0 < len(cells) < 40
@@ -167,13 +159,13 @@ def test_cell_iy_ix_covers_its_square_in_metres_with_row_0_at_the_bottom(qtbot):
     assert p_low.y() > p_high.y()  # north is up
 
 
-def test_robot_outside_the_map_is_a_status_line(qtbot):
+def test_robot_outside_the_map_is_a_status_line(qtbot, feed):
     view = make_view(qtbot)
     dialog = view.open_new_map_dialog()
     for key, text in (("cell", "0.1"), ("ny", "4"), ("nx", "4"), ("x0", "-0.2"), ("y0", "-0.2")):
         dialog.fields[key].edit.setText(text)
     assert dialog.apply()
-    feed(view, sim_replies("straight", rate_hz=20.0, seconds=3.0))  # 0.6 m east
+    feed(view.ctx, sim_replies("straight", rate_hz=20.0, seconds=3.0))  # 0.6 m east
     view.refresh()
     x = view.ctx.session.history.column("x")[-1]
     y = view.ctx.session.history.column("y")[-1]
@@ -184,9 +176,9 @@ def test_robot_outside_the_map_is_a_status_line(qtbot):
     assert np.count_nonzero(view.live_map.codes == MOWED) >= 1  # the cells it crossed
 
 
-def test_session_reset_starts_the_same_map_afresh(qtbot):
+def test_session_reset_starts_the_same_map_afresh(qtbot, feed):
     view = make_view(qtbot)
-    feed(view, sim_replies("figure_eight", rate_hz=20.0, seconds=10.0))
+    feed(view.ctx, sim_replies("figure_eight", rate_hz=20.0, seconds=10.0))
     view.refresh()
     assert np.count_nonzero(view.live_map.codes == MOWED) > 0
     settings = view.live_settings
@@ -195,7 +187,7 @@ def test_session_reset_starts_the_same_map_afresh(qtbot):
     assert np.all(view.live_map.codes == UNMOWED)
     assert_image_shows(view, view.live_map)
     assert "reset" in view.status.text()
-    feed(view, sim_replies("figure_eight", rate_hz=20.0, seconds=3.0))
+    feed(view.ctx, sim_replies("figure_eight", rate_hz=20.0, seconds=3.0))
     view.refresh()
     assert np.count_nonzero(view.live_map.codes == MOWER) == 1
     assert_image_shows(view, view.live_map)
@@ -217,9 +209,9 @@ BAD_FIELDS = [
 
 
 @pytest.mark.parametrize(("key", "text", "message"), BAD_FIELDS)
-def test_new_map_refuses_bad_fields_and_keeps_the_map(qtbot, key, text, message):
+def test_new_map_refuses_bad_fields_and_keeps_the_map(qtbot, key, text, message, feed):
     view = make_view(qtbot)
-    feed(view, sim_replies("figure_eight", rate_hz=20.0, seconds=4.0))
+    feed(view.ctx, sim_replies("figure_eight", rate_hz=20.0, seconds=4.0))
     view.refresh()
     old_map, old_settings, old_codes = view.live_map, view.live_settings, view.live_map.codes.copy()
     dialog = view.open_new_map_dialog()
@@ -262,7 +254,7 @@ def test_new_map_refuses_too_many_cells_and_a_rectangle_that_does_not_fit(qtbot)
     assert view.live_settings == mm.default_settings()
 
 
-def test_new_map_from_a_perimeter_rectangle(qtbot):
+def test_new_map_from_a_perimeter_rectangle(qtbot, feed):
     view = make_view(qtbot)
     dialog = view.open_new_map_dialog()
     values = {"cell": "0.5", "ny": "20", "nx": "30", "x0": "-5", "y0": "-4"}
@@ -281,7 +273,7 @@ def test_new_map_from_a_perimeter_rectangle(qtbot):
     np.testing.assert_array_equal(view.live_map.codes, expected.codes)
     assert_image_shows(view, view.live_map)
     # the robot now mows inside the perimeter
-    feed(view, sim_replies("figure_eight", rate_hz=20.0, seconds=8.0))
+    feed(view.ctx, sim_replies("figure_eight", rate_hz=20.0, seconds=8.0))
     view.refresh()
     assert np.count_nonzero(view.live_map.codes == MOWED) > 0
     assert_image_shows(view, view.live_map)
@@ -346,9 +338,9 @@ def test_simulate_button_draws_beacons_circles_gps_and_paths(qtbot, run):
     assert np.count_nonzero(ref.codes == MOWED) > 500
 
 
-def test_playback_is_progressive_and_switching_source_keeps_both_maps(qtbot, run):
+def test_playback_is_progressive_and_switching_source_keeps_both_maps(qtbot, run, feed):
     view = make_view(qtbot)
-    feed(view, sim_replies("figure_eight", rate_hz=20.0, seconds=5.0))
+    feed(view.ctx, sim_replies("figure_eight", rate_hz=20.0, seconds=5.0))
     view.refresh()
     view.speed_box.setCurrentText("100x")
     view.load_simulation(run)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import os
 import time
 from dataclasses import fields
 
@@ -553,18 +552,12 @@ def test_stop_ends_the_replay_early(qtbot, tmp_path, recording):
 # -- against the real node -----------------------------------------------------------------------
 
 
-@pytest.fixture(scope="module")
-def beagle(tmp_path_factory):
-    from mm_beagle.harness import beagle_process
-
-    log = str(tmp_path_factory.mktemp("beagle") / "beagle.log")
-    params = {"backend": "sim", "sim_trajectory": "figure_eight"}
-    with beagle_process(params, env=dict(os.environ), log_path=log) as proc:
-        yield proc
+#: the module-wide mm-beagle of tests/monitor/conftest.py
+BEAGLE_PARAMS = {"backend": "sim", "sim_trajectory": "figure_eight"}
 
 
 @pytest.mark.ros
-def test_recording_live_replies_from_the_node_and_replaying_them(qtbot, tmp_path, beagle):
+def test_recording_live_replies_from_the_node_and_replaying_them(qtbot, tmp_path, beagle_node):
     bridge = RosBridge("/mm_beagle", 100.0, node_name="mm_monitor_rec_test")
     bridge.set_polling(False)
     window = make_window(qtbot, tmp_path, bridge)

@@ -8,7 +8,6 @@ sizeable part of the picture that is not background.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import pytest
@@ -18,7 +17,6 @@ pytest.importorskip("PySide6")
 
 from PySide6.QtGui import QImage
 
-from mm_beagle.harness import beagle_process
 from mm_pc.monitor.context import MonitorConfig, MonitorContext
 from mm_pc.monitor.export import grab_png
 from mm_pc.monitor.main_window import MainWindow
@@ -44,23 +42,25 @@ def content_stats(path: Path) -> tuple[int, float]:
     return len(counts), 1.0 - background / n
 
 
+#: the module-wide mm-beagle of tests/monitor/conftest.py
+BEAGLE_PARAMS = {"backend": "sim", "sim_trajectory": "figure_eight", "sim_lift_rate": 0.5}
+
+
 @pytest.fixture(scope="module")
-def live_window(qapp, tmp_path_factory):
+def live_window(qapp, beagle_node, tmp_path_factory):
     tmp = tmp_path_factory.mktemp("shots")
-    params = {"backend": "sim", "sim_trajectory": "figure_eight", "sim_lift_rate": 0.5}
-    with beagle_process(params, env=dict(os.environ), log_path=str(tmp / "beagle.log")):
-        config = MonitorConfig(rate_hz=50.0, calibration_file=tmp / "cal.yaml")
-        bridge = RosBridge("/mm_beagle", 50.0, node_name="mm_monitor_shots")
-        ctx = MonitorContext(MonitorSession(), bridge, config)
-        window = MainWindow(ctx)
-        window.resize(1280, 800)
-        window.show()
-        bridge.start()
-        try:
-            yield window
-        finally:
-            bridge.stop()
-            window.close()
+    config = MonitorConfig(rate_hz=50.0, calibration_file=tmp / "cal.yaml")
+    bridge = RosBridge("/mm_beagle", 50.0, node_name="mm_monitor_shots")
+    ctx = MonitorContext(MonitorSession(), bridge, config)
+    window = MainWindow(ctx)
+    window.resize(1280, 800)
+    window.show()
+    bridge.start()
+    try:
+        yield window
+    finally:
+        bridge.stop()
+        window.close()
 
 
 def wait(qapp, predicate, seconds: float) -> None:

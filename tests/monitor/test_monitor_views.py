@@ -8,7 +8,6 @@ the register and resolution tests marked ``ros`` talk to one real mm-beagle
 from __future__ import annotations
 
 import csv
-import os
 import re
 import time
 from types import SimpleNamespace
@@ -21,7 +20,7 @@ from PySide6.QtGui import QGuiApplication, QImage
 from mm_pc.monitor.context import MonitorContext
 from mm_pc.monitor.model.readings import Reading, Reply
 from mm_pc.monitor.model.session import MonitorSession, sensor_columns
-from mm_pc.monitor.model.sim_feed import DEFAULT_DEVICES, sim_replies
+from mm_pc.monitor.model.sim_feed import DEFAULT_DEVICES
 from mm_pc.monitor.widgets.data_list import (
     COLUMNS,
     CSV_HEADER,
@@ -35,22 +34,17 @@ from mm_pc.monitor.widgets.registers_view import FIELDS, RegistersView, decode_s
 from mm_pc.monitor.widgets.resolution_panel import ResolutionPanel, validate_cpi
 
 
-def make_ctx(seconds: float = 30.0, rate_hz: float = 100.0, name="figure_eight", bridge=None):
-    ctx = MonitorContext(MonitorSession(), bridge=bridge)
-    feed(ctx, seconds, rate_hz, name)
-    return ctx
+@pytest.fixture
+def make_ctx(feed):
+    """``make_ctx(seconds=30, rate_hz=100, name="figure_eight", bridge=None)``: a context
+    that has taken in that much of a simulated run."""
 
+    def make(seconds: float = 30.0, rate_hz: float = 100.0, name="figure_eight", bridge=None):
+        ctx = MonitorContext(MonitorSession(), bridge=bridge)
+        feed(ctx, name=name, rate_hz=rate_hz, seconds=seconds)
+        return ctx
 
-def feed(ctx, seconds, rate_hz=100.0, name="figure_eight", start_ns=None) -> int:
-    """Feed replies; a later feed continues the node's totals from where they are."""
-    kw = {}
-    if start_ns is not None:
-        kw["start_ns"] = start_ns
-    n = 0
-    for r in sim_replies(name, rate_hz, seconds, **kw):
-        ctx.on_reply(r)
-        n += 1
-    return n
+    return make
 
 
 def more_replies(ctx, count: int) -> None:
@@ -99,7 +93,7 @@ class FakeBridge(QObject):
 # -- graphs ------------------------------------------------------------------------------
 
 
-def test_graph_curves_equal_the_history_window_in_mm(qtbot):
+def test_graph_curves_equal_the_history_window_in_mm(qtbot, make_ctx):
     ctx = make_ctx(30.0)
     view = GraphsView(ctx)
     qtbot.addWidget(view)
@@ -122,7 +116,7 @@ def test_graph_curves_equal_the_history_window_in_mm(qtbot):
     assert (lo, hi) == pytest.approx((t[-1] - 10.0, t[-1] + 1.0))  # X_LEAD of the window ahead
 
 
-def test_graph_axes_move_only_when_the_data_reach_their_ends(qtbot):
+def test_graph_axes_move_only_when_the_data_reach_their_ends(qtbot, make_ctx):
     ctx = make_ctx(30.0)
     view = GraphsView(ctx)
     qtbot.addWidget(view)
@@ -149,7 +143,7 @@ def test_graph_axes_move_only_when_the_data_reach_their_ends(qtbot):
     assert len(set(y_ranges)) <= 3
 
 
-def test_graph_window_length_is_respected(qtbot):
+def test_graph_window_length_is_respected(qtbot, make_ctx):
     ctx = make_ctx(30.0)
     view = GraphsView(ctx)
     qtbot.addWidget(view)
@@ -165,7 +159,7 @@ def test_graph_window_length_is_respected(qtbot):
     assert view.window_s == 1
 
 
-def test_graph_refresh_skips_when_nothing_changed_and_pause_freezes(qtbot):
+def test_graph_refresh_skips_when_nothing_changed_and_pause_freezes(qtbot, make_ctx):
     ctx = make_ctx(5.0)
     view = GraphsView(ctx)
     qtbot.addWidget(view)
@@ -219,7 +213,7 @@ def reference_peaks(t, y, i0, size):
     return ts, ys
 
 
-def test_graph_cost_does_not_grow_with_history_or_window(qtbot):
+def test_graph_cost_does_not_grow_with_history_or_window(qtbot, make_ctx):
     ctx = make_ctx(1.0)
     hist = hour_of_history(ctx)
     view = GraphsView(ctx)
@@ -267,7 +261,7 @@ def test_peak_cache_incremental_equals_fresh():
 
 
 @pytest.mark.screenshot
-def test_graphs_screenshot(qtbot, screenshot):
+def test_graphs_screenshot(qtbot, screenshot, make_ctx):
     ctx = make_ctx(30.0)
     view = GraphsView(ctx)
     qtbot.addWidget(view)
@@ -278,13 +272,13 @@ def test_graphs_screenshot(qtbot, screenshot):
     assert distinct_colours(img) > 20
 
 
-def test_graphs_built_when_devices_come_late_and_cleared_on_reset(qtbot):
+def test_graphs_built_when_devices_come_late_and_cleared_on_reset(qtbot, feed):
     ctx = MonitorContext(MonitorSession())
     view = GraphsView(ctx)
     qtbot.addWidget(view)
     view.refresh()  # no history yet: nothing to do
     assert view.curves == {}
-    feed(ctx, 2.0)
+    feed(ctx, seconds=2.0)
     assert len(view.curves) == 8
     view.refresh()
     ctx.reset()
@@ -294,7 +288,7 @@ def test_graphs_built_when_devices_come_late_and_cleared_on_reset(qtbot):
 # -- data list ---------------------------------------------------------------------------
 
 
-def test_data_list_rows_newest_first_equal_the_history(qtbot):
+def test_data_list_rows_newest_first_equal_the_history(qtbot, make_ctx):
     ctx = make_ctx(10.0)
     view = DataListView(ctx)
     qtbot.addWidget(view)
@@ -316,7 +310,7 @@ def test_data_list_rows_newest_first_equal_the_history(qtbot):
     assert view.tables[1].model.value(0, 1) == hist.last("s1_dx") * 1e3
 
 
-def test_data_list_appends_as_inserted_rows_and_keeps_the_selection(qtbot):
+def test_data_list_appends_as_inserted_rows_and_keeps_the_selection(qtbot, make_ctx):
     ctx = make_ctx(5.0)
     view = DataListView(ctx)
     qtbot.addWidget(view)
@@ -337,7 +331,7 @@ def test_data_list_appends_as_inserted_rows_and_keeps_the_selection(qtbot):
     assert model.rowCount() == 0
 
 
-def test_data_list_caps_rows_and_drops_the_oldest(qtbot):
+def test_data_list_caps_rows_and_drops_the_oldest(qtbot, make_ctx):
     ctx = make_ctx(2.0)
     model = HistoryTableModel(ctx.session, 0, max_rows=50)
     model.sync()
@@ -350,7 +344,7 @@ def test_data_list_caps_rows_and_drops_the_oldest(qtbot):
     assert model.value(49, 0) == hist.column("t")[len(hist) - 50]
 
 
-def test_data_list_ctrl_c_copies_the_selected_rows(qtbot):
+def test_data_list_ctrl_c_copies_the_selected_rows(qtbot, make_ctx):
     ctx = make_ctx(3.0)
     view = DataListView(ctx)
     qtbot.addWidget(view)
@@ -373,7 +367,7 @@ def test_data_list_ctrl_c_copies_the_selected_rows(qtbot):
         assert float(cells[0]) == pytest.approx(model.value(r, 0), abs=5e-4)
 
 
-def test_export_csv_round_trip(tmp_path):
+def test_export_csv_round_trip(tmp_path, make_ctx):
     ctx = make_ctx(5.0)
     hist = ctx.session.history
     path = tmp_path / "s1.csv"
@@ -389,7 +383,7 @@ def test_export_csv_round_trip(tmp_path):
     np.testing.assert_array_equal(data[:, 8], hist.column("s1_cpi"))
 
 
-def test_export_csv_refuses_bad_input_and_shows_write_errors(qtbot, tmp_path):
+def test_export_csv_refuses_bad_input_and_shows_write_errors(qtbot, tmp_path, make_ctx):
     ctx = make_ctx(1.0)
     with pytest.raises(ValueError, match=r"no sensor 2 in the history; sensors: 0\.\.1"):
         export_csv(ctx.session.history, 2, tmp_path / "x.csv")
@@ -409,7 +403,7 @@ def test_export_csv_refuses_bad_input_and_shows_write_errors(qtbot, tmp_path):
 
 
 @pytest.mark.screenshot
-def test_data_list_screenshot(qtbot, screenshot):
+def test_data_list_screenshot(qtbot, screenshot, make_ctx):
     ctx = make_ctx(10.0)
     view = DataListView(ctx)
     qtbot.addWidget(view)
@@ -459,7 +453,7 @@ def test_registers_view_fills_from_the_bridge_signals(qtbot):
     assert view.error.text() == f"{DEFAULT_DEVICES[0]}: sensor down: no answer"
 
 
-def test_registers_and_resolution_disabled_offline(qtbot):
+def test_registers_and_resolution_disabled_offline(qtbot, make_ctx):
     ctx = make_ctx(1.0)
     view = RegistersView(ctx)
     panel = ResolutionPanel(ctx)
@@ -490,12 +484,12 @@ def test_registers_and_resolution_disabled_offline(qtbot):
         ("1e3", r"CPI must be a whole number, got '1e3'"),
     ],
 )
-def test_resolution_refuses_bad_input_without_asking_the_node(qtbot, text, message):
+def test_resolution_refuses_bad_input_without_asking_the_node(qtbot, text, message, feed):
     bridge = FakeBridge()
     ctx = MonitorContext(MonitorSession(), bridge=bridge)
     panel = ResolutionPanel(ctx)
     qtbot.addWidget(panel)
-    feed(ctx, 1.0)
+    feed(ctx, seconds=1.0)
     row = panel.rows[DEFAULT_DEVICES[1]]
     row.edit.setText(text)
     qtbot.mouseClick(row.set_button, Qt.LeftButton)
@@ -525,7 +519,7 @@ def test_resolution_shows_the_answer_of_the_node(qtbot):
 # -- log dialog --------------------------------------------------------------------------
 
 
-def test_log_dialog_shows_the_entries_newest_at_the_bottom(qtbot):
+def test_log_dialog_shows_the_entries_newest_at_the_bottom(qtbot, make_ctx):
     ctx = make_ctx(2.0)
     dlg = LogDialog(ctx)
     qtbot.addWidget(dlg)
@@ -559,7 +553,7 @@ def test_log_dialog_shows_the_entries_newest_at_the_bottom(qtbot):
     assert dlg.lines() == []
 
 
-def test_log_dialog_updates_on_its_timer_not_per_reply(qtbot):
+def test_log_dialog_updates_on_its_timer_not_per_reply(qtbot, make_ctx):
     ctx = make_ctx(1.0)
     dlg = LogDialog(ctx)
     qtbot.addWidget(dlg)
@@ -574,33 +568,32 @@ def test_log_dialog_updates_on_its_timer_not_per_reply(qtbot):
 # -- registers and resolution with a real node ---------------------------------------------
 
 
-@pytest.fixture(scope="module")
-def beagle(qapp, tmp_path_factory):
-    """One mm-beagle (emulated sensors, CPI limited to 3200 by a register map) and a RosBridge."""
-    pytest.importorskip("rclpy")
-    pytest.importorskip("mm_interfaces")
-    from mm_beagle.harness import beagle_process
-    from mm_pc.monitor.ros_bridge import RosBridge
-
-    tmp = tmp_path_factory.mktemp("views_beagle")
+def BEAGLE_PARAMS(tmp):  # noqa: N802 - the name tests/monitor/conftest.py looks for
+    """The module-wide mm-beagle: emulated sensors, CPI limited to 3200 by a register map."""
     regmap = tmp / "regmap.yaml"
     regmap.write_text("cpi:\n  max: 3200\n")
-    params = {"backend": "sim", "sim_trajectory": "straight", "register_map": str(regmap)}
-    with beagle_process(params, env=dict(os.environ), log_path=str(tmp / "beagle.log")):
-        bridge = RosBridge(rate_hz=20.0, node_name="views_test_monitor")
-        bridge.start()
-        try:
-            deadline = time.monotonic() + 30
-            # service readiness is not part of the bridge's API; the test waits on it directly
-            while not (
-                bridge.state == "connected"
-                and all(c.service_is_ready() for c in bridge._clients.values())
-            ):
-                assert time.monotonic() < deadline, "mm-beagle did not come up within 30 s"
-                time.sleep(0.05)
-            yield bridge
-        finally:
-            bridge.stop()
+    return {"backend": "sim", "sim_trajectory": "straight", "register_map": str(regmap)}
+
+
+@pytest.fixture(scope="module")
+def beagle(qapp, beagle_node):
+    """A RosBridge on the module's mm-beagle, its services ready."""
+    from mm_pc.monitor.ros_bridge import RosBridge
+
+    bridge = RosBridge(rate_hz=20.0, node_name="views_test_monitor")
+    bridge.start()
+    try:
+        deadline = time.monotonic() + 30
+        # service readiness is not part of the bridge's API; the test waits on it directly
+        while not (
+            bridge.state == "connected"
+            and all(c.service_is_ready() for c in bridge._clients.values())
+        ):
+            assert time.monotonic() < deadline, "mm-beagle did not come up within 30 s"
+            time.sleep(0.05)
+        yield bridge
+    finally:
+        bridge.stop()
 
 
 def read_settings(qtbot, bridge, device):

@@ -12,7 +12,6 @@ import math
 import os
 import re
 import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
@@ -485,17 +484,6 @@ def ros_env() -> dict[str, str]:
     return isolated_ros_env(int(os.environ["ROS_DOMAIN_ID"]))
 
 
-def command(module: str, params: dict, namespace: str = "", params_file: bool = False) -> list[str]:
-    cmd = [sys.executable, "-m", module, "--ros-args"]
-    if params_file:
-        cmd += ["--params-file", str(PARAMS_FILE)]
-    if namespace:
-        cmd += ["-r", f"__ns:={namespace}"]
-    for k, v in params.items():
-        cmd += ["-p", f"{k}:={v}"]
-    return cmd
-
-
 class Listener:
     """A node spun in a background thread that keeps what the tests subscribe to."""
 
@@ -555,7 +543,7 @@ def planar(m) -> tuple[float, float, float]:
 
 @pytest.mark.ros
 @pytest.mark.slow
-def test_fused_run_stays_within_decimetres_while_the_mouse_odometry_drifts_metres():
+def test_fused_run_stays_within_decimetres_while_the_mouse_odometry_drifts_metres(ros_command):
     """The whole 206 m run at 30x, with the mouse lifted 30 s: fused error cm, raw error m."""
     pytest.importorskip("rclpy")
     from nav_msgs.msg import Odometry
@@ -569,10 +557,10 @@ def test_fused_run_stays_within_decimetres_while_the_mouse_odometry_drifts_metre
     fusion = subprocess.Popen(
         # max_delay 20 s of stamps = 0.7 s of wall time at 30x: on a busy machine one topic
         # was seen to fall 125 ms (4-5 s of stamps) behind another; the node waits that long
-        command(
+        ros_command(
             "mm_pc.ros.fusion_node",
             {"publish_rate": 50.0, "gps_frame": "gps", "max_delay": 20.0},
-            params_file=True,
+            params_file=PARAMS_FILE,
         ),
         env=env,
         stdout=subprocess.PIPE,
@@ -587,7 +575,7 @@ def test_fused_run_stays_within_decimetres_while_the_mouse_odometry_drifts_metre
     }
     try:
         sim = subprocess.run(
-            command("mm_pc.ros.field_sim_node", sim_params, params_file=True),
+            ros_command("mm_pc.ros.field_sim_node", sim_params, params_file=PARAMS_FILE),
             env=env,
             capture_output=True,
             text=True,
@@ -645,7 +633,7 @@ def diagnostics_of(listen: Listener, store: list, node: str) -> dict[str, dict[s
 
 
 @pytest.mark.ros
-def test_garbage_messages_are_counted_and_ignored_and_the_node_keeps_working():
+def test_garbage_messages_are_counted_and_ignored_and_the_node_keeps_working(ros_command):
     pytest.importorskip("rclpy")
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import PointStamped
@@ -667,7 +655,7 @@ def test_garbage_messages_are_counted_and_ignored_and_the_node_keeps_working():
         "publish_rate": 10.0,
     }
     proc = subprocess.Popen(
-        command("mm_pc.ros.fusion_node", params, ns),
+        ros_command("mm_pc.ros.fusion_node", params, ns),
         env=env,
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
@@ -759,7 +747,7 @@ def test_garbage_messages_are_counted_and_ignored_and_the_node_keeps_working():
 
 
 @pytest.mark.ros
-def test_bad_parameters_exit_2_with_a_message():
+def test_bad_parameters_exit_2_with_a_message(ros_command):
     pytest.importorskip("rclpy")
     cases = [
         ("mm_pc.ros.fusion_node", {"compass_input": "magnetic"}, "'compass_input' must be one of"),
@@ -780,7 +768,7 @@ def test_bad_parameters_exit_2_with_a_message():
     env = ros_env()
     procs = [
         subprocess.Popen(
-            command(module, params, f"/bad{i}"),
+            ros_command(module, params, f"/bad{i}"),
             env=env,
             stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT,

@@ -6,7 +6,6 @@ import math
 import os
 import signal
 import subprocess
-import sys
 import threading
 import time
 
@@ -21,16 +20,8 @@ from mm_pc.core.uncertainty import PoseUncertainty, twist_covariance
 pytestmark = pytest.mark.ros
 
 
-def odometry_command(params: dict, namespace: str) -> list[str]:
-    cmd = [sys.executable, "-m", "mm_pc.ros.odometry_node"]
-    cmd += ["--ros-args", "-r", f"__ns:={namespace}"]
-    for k, v in params.items():
-        cmd += ["-p", f"{k}:={v}"]
-    return cmd
-
-
 @pytest.mark.parametrize("method", ["exact", "two-sensor"])
-def test_straight_run_ends_where_the_robot_stopped(method, tmp_path):
+def test_straight_run_ends_where_the_robot_stopped(method, tmp_path, ros_command):
     """Robot stands 4 s, drives 2 s straight at 0.2 m/s, stands: odom ends at x = 0.4 m."""
     ns = f"/odo_{method.replace('-', '_')}"
     beagle = {
@@ -43,7 +34,7 @@ def test_straight_run_ends_where_the_robot_stopped(method, tmp_path):
     # reply, long before the robot starts (a late start under load missed part of the run)
     params = {"beagle": "/mm_beagle", "rate": 50.0, "method": method, "path_rate": 5.0}
     odo = subprocess.Popen(
-        odometry_command(params, ns),
+        ros_command("mm_pc.ros.odometry_node", params, ns),
         env=dict(os.environ),
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
@@ -95,9 +86,9 @@ def test_straight_run_ends_where_the_robot_stopped(method, tmp_path):
     assert odo.returncode == 0, out
 
 
-def test_bad_method_exits_with_a_message():
+def test_bad_method_exits_with_a_message(ros_command):
     out = subprocess.run(
-        odometry_command({"method": "guess"}, "/odo_bad"),
+        ros_command("mm_pc.ros.odometry_node", {"method": "guess"}, "/odo_bad"),
         capture_output=True,
         text=True,
         timeout=60,
