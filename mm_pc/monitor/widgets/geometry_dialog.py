@@ -27,7 +27,6 @@ from contextlib import suppress
 from dataclasses import dataclass
 from pathlib import Path
 
-import yaml
 from PySide6.QtWidgets import (
     QComboBox,
     QDialog,
@@ -45,61 +44,10 @@ from PySide6.QtWidgets import (
 
 from mm_pc.core.geometry import DEFAULT_GEOMETRY, RobotGeometry, SensorMount
 from mm_pc.monitor.context import MonitorContext
+from mm_pc.monitor.model.geometry_file import geometry_from_yaml, geometry_to_yaml
 from mm_pc.monitor.widgets.style import ERROR_STYLE, parse_number
 
-__all__ = ["GeometryDialog", "geometry_from_yaml", "geometry_to_yaml", "parse_number"]
-
-YAML_VERSION = 1
-
-
-
-def geometry_to_yaml(geometry: RobotGeometry, sensor: int) -> str:
-    """YAML text of a geometry (SI units, unit-suffixed keys)."""
-    data = {
-        "version": YAML_VERSION,
-        "axis_length_m": float(geometry.axis_length),
-        "sensor": int(sensor),
-        "mounts": [
-            {"x_m": float(m.x), "y_m": float(m.y), "yaw_rad": float(m.yaw)}
-            for m in geometry.mounts
-        ],
-    }
-    return yaml.safe_dump(data, sort_keys=False)
-
-
-def geometry_from_yaml(text: str) -> tuple[RobotGeometry, int]:
-    """Inverse of :func:`geometry_to_yaml`; ValueError saying what is wrong."""
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as e:
-        raise ValueError(f"geometry: not valid YAML: {e}") from None
-    if not isinstance(data, dict):
-        raise ValueError("geometry: expected a mapping with version, axis_length_m, sensor, mounts")
-    if data.get("version") != YAML_VERSION:
-        raise ValueError(
-            f"geometry: unsupported version {data.get('version')!r}, expected {YAML_VERSION}"
-        )
-    mounts_data = data.get("mounts")
-    if not isinstance(mounts_data, list) or not mounts_data:
-        raise ValueError("geometry: 'mounts' must be a non-empty list of {x_m, y_m, yaw_rad}")
-    mounts = []
-    for i, m in enumerate(mounts_data):
-        if not isinstance(m, dict) or set(m) != {"x_m", "y_m", "yaw_rad"}:
-            raise ValueError(f"geometry: mount {i} must have exactly x_m, y_m, yaw_rad, got {m!r}")
-        vals = [_yaml_number(m[k], f"mount {i} {k}") for k in ("x_m", "y_m", "yaw_rad")]
-        mounts.append(SensorMount(*vals))
-    axis = _yaml_number(data.get("axis_length_m"), "axis_length_m")
-    sensor = data.get("sensor", 0)
-    if isinstance(sensor, bool) or not isinstance(sensor, int):
-        raise ValueError(f"geometry: sensor must be an integer index, got {sensor!r}")
-    return RobotGeometry(tuple(mounts), axis), sensor
-
-
-def _yaml_number(value, what: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ValueError(f"geometry: {what} must be a finite number, got {value!r}")
-    return float(value)
-
+__all__ = ["GeometryDialog", "parse_number"]
 
 @dataclass
 class _MountRow:
