@@ -16,6 +16,12 @@ mm-bench gui [--hours H] [--rate HZ] [--frames N] --json
     HZ, polling a real mm-beagle sim node at HZ: frame time p50/p95 (all
     tabs and per tab), memory, dropped requests. See mm_pc.monitor.bench_gui.
 
+mm-bench agent [--seconds S] [--drops N] [--drop-seconds D] --json
+    The board agent (mm-beagle-agent): CPU per poll with a stub bus (x86, and
+    under qemu-arm in the armhf root where it can be had), CPU % at 1 kHz, RSS,
+    link bandwidth and latency, counts lost over N forced link drops.
+    See mm_beagle.bench_agent.
+
 mm-bench poll --seconds S --json
     mm-beagle on emulated sensors (separate process) while two client
     processes call get_sensor_data at 100 Hz each. Reports the poll rate and
@@ -264,8 +270,19 @@ def main(argv: list[str] | None = None) -> int:
     gui.add_argument("--rate", type=float, default=100.0, help="sample rate (Hz)")
     gui.add_argument("--frames", type=int, default=300, help="frames measured per tab")
     gui.add_argument("--json", action="store_true", help="print JSON only (the default)")
+    agent = sub.add_parser("agent", help="the board agent: CPU per poll, RSS, link, drops")
+    agent.add_argument("--seconds", type=float, default=3.0, help="per measurement")
+    agent.add_argument("--drops", type=int, default=5, help="forced link drops")
+    agent.add_argument("--drop-seconds", type=float, default=3.0, help="length of each drop")
+    agent.add_argument("--json", action="store_true", help="print JSON only (the default)")
     args = parser.parse_args(argv)
-    if args.what == "gui":
+    if args.what == "agent":
+        from .bench_agent import bench_agent
+
+        if not args.seconds >= 1 or args.drops < 0 or not args.drop_seconds > 0:
+            parser.error("need --seconds >= 1, --drops >= 0, --drop-seconds > 0")
+        result = bench_agent(args.seconds, args.drops, args.drop_seconds)
+    elif args.what == "gui":
         from mm_pc.bench.gui import bench_gui
 
         try:

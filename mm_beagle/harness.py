@@ -98,6 +98,52 @@ def stop_process(proc: subprocess.Popen, timeout: float = 10.0) -> int:
     return proc.returncode
 
 
+def free_port() -> int:
+    """A TCP port on loopback that nothing listens on now (for a test's agent)."""
+    import socket
+
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+def agent_command(options: dict[str, object]) -> list[str]:
+    """The command line of mm-beagle-agent with ``--name value`` for each option."""
+    cmd = [sys.executable, "-m", "mm_beagle.agent"]
+    for name, value in options.items():
+        flag = "--" + name.replace("_", "-")
+        if isinstance(value, (list, tuple)):
+            if name == "listen":
+                for v in value:
+                    cmd += [flag, str(v)]
+            else:
+                cmd += [flag, *map(str, value)]
+        else:
+            cmd += [flag, str(value)]
+    return cmd
+
+
+@contextmanager
+def agent_process(
+    options: dict[str, object], log_path: str | None = None
+) -> Iterator[subprocess.Popen]:
+    """mm-beagle-agent in a subprocess (stopped with SIGINT, and with its parent)."""
+    out = open(log_path, "w") if log_path else subprocess.DEVNULL  # noqa: SIM115
+    proc = subprocess.Popen(
+        agent_command({"realtime_priority": 0, **options}),
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+        stdout=out,
+        stderr=subprocess.STDOUT,
+        preexec_fn=_stop_with_parent if sys.platform.startswith("linux") else None,
+    )
+    try:
+        yield proc
+    finally:
+        stop_process(proc)
+        if log_path:
+            out.close()  # type: ignore[union-attr]
+
+
 class BeagleClient:
     """A client node with its executor spun in a background thread.
 

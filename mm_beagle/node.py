@@ -1,4 +1,8 @@
-"""mm-beagle: the sensor node. Thin: the poller process does the sensor work.
+"""mm-beagle: the sensor node. Thin: the poller process (or the board's agent) does the work.
+
+``backend`` spidev|sim spawns the 1 kHz poller here; ``remote`` reads the same
+shared state from an mm-beagle-agent over zenoh (:mod:`mm_beagle.remote`), so
+everything below is one implementation for both.
 
 Services (private namespace, so /mm_beagle/... by default):
   ~/get_sensor_data      read-and-clear sums (empty id = every sensor that is up)
@@ -15,9 +19,9 @@ import sys
 import threading
 import time
 
-import psutil
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
@@ -31,6 +35,7 @@ from . import messages
 from . import shared_state as ss
 from .params import NodeSettings, declare
 from .poller_client import PollerClient, PollerError
+from .remote import RemoteAgent
 
 NODE_NAME = "mm_beagle"
 
@@ -45,14 +50,18 @@ class BeagleNode(Node):
         self.settings: NodeSettings = declare(self)
         cfg = self.settings.poller
         self.devices = cfg.devices
-        self.poller = PollerClient(cfg)
+        if cfg.backend == "remote":
+            r = self.settings.remote
+            self.poller: PollerClient | RemoteAgent = RemoteAgent(
+                cfg, r.agent, r.name, r.credentials, r.clock_sync
+            )
+        else:
+            self.poller = PollerClient(cfg)
         start = ss.Totals.zero(time.time_ns())
         # Read-and-clear cursors: one for the services, one for the topic.
         self._served = [start] * len(self.devices)
         self._published = [start] * len(self.devices)
         self._lock = threading.Lock()
-        self._poller_ps: psutil.Process | None = None
-        self._cpu_last: tuple[float, float] | None = None
         self._diag_last: tuple[float, list[int], int] | None = None
         self._states = [ss.STATE_STARTING] * len(self.devices)
         self._last_errors = [""] * len(self.devices)
@@ -65,31 +74,54 @@ class BeagleNode(Node):
         self.create_service(GetSensorSettings, "~/get_sensor_settings", self.on_get_settings)
         self.create_service(SetResolution, "~/set_resolution", self.on_set_resolution)
         self.create_service(GetSamples, "~/get_samples", self.on_get_samples)
-        self.data_pub = self.create_publisher(SensorData, "~/sensor_data", qos_profile_sensor_data)
+        self._data_timer = None
+        self.data_pub = self.create_publisher(
+            SensorData,
+            "~/sensor_data",
+            qos_profile_sensor_data,
+            event_callbacks=PublisherEventCallbacks(matched=self._on_matched),
+        )
         self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        if self.settings.publish_rate > 0:
-            self.create_timer(1.0 / self.settings.publish_rate, self.publish_data)
         self.create_timer(self.settings.diagnostics_period, self.publish_diagnostics)
         self.onboard = None
         if self.settings.odometry.rate > 0:
             self._start_onboard_odometry()
         self.create_timer(0.2, self.relay_poller_events)
+        where = (
+            f"read from the agent at {self.settings.remote.agent}"
+            if cfg.backend == "remote"
+            else f"polled at {cfg.poll_rate:g} Hz (backend {cfg.backend}, {cfg.cpi} CPI)"
+        )
         self.get_logger().info(
-            f"polling {', '.join(self.devices)} at {cfg.poll_rate:g} Hz "
-            f"(backend {cfg.backend}, {cfg.cpi} CPI); "
+            f"sensors {', '.join(self.devices)} {where}; "
             f"services under {self.get_fully_qualified_name()}/"
         )
 
     # --- helpers -------------------------------------------------------------------------
 
+    def _on_matched(self, info) -> None:
+        """Run the sensor_data timer only while someone subscribes."""
+        rate = self.settings.publish_rate
+        if info.current_count > 0 and self._data_timer is None and rate > 0:
+            self._data_timer = self.create_timer(1.0 / rate, self.publish_data)
+        elif info.current_count == 0 and self._data_timer is not None:
+            self.destroy_timer(self._data_timer)
+            self._data_timer = None
+
     def _wait_for_first_bring_up(self, timeout: float) -> None:
-        """Advertise the services only once every sensor is up or has failed once."""
+        """Advertise the services only once every sensor is up or has failed once.
+
+        With the remote backend an unreachable agent does not stop the node:
+        the services say so until the link comes up.
+        """
         ints = self.poller.state.ints
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline and self.poller.alive:
             if all(int(ints[i][ss.I_STATE]) != ss.STATE_STARTING for i in range(len(self.devices))):
                 break
             time.sleep(0.02)
+        if isinstance(self.poller, RemoteAgent) and self.poller.unavailable():
+            self.get_logger().warning(f"{self.poller.unavailable()}; serving that until it is")
         for event in self.poller.drain_events():
             if event[0] == "fatal":  # e.g. an unreadable patch file or register map
                 self.poller.stop()
@@ -107,6 +139,13 @@ class BeagleNode(Node):
     def _is_up(self, i: int) -> bool:
         return int(self.poller.state.ints[i][ss.I_STATE]) == ss.STATE_UP
 
+    def _unavailable(self, res) -> bool:
+        """True (and ``res`` says why) while the remote agent cannot be reached."""
+        problem = self.poller.unavailable()
+        if problem:
+            res.success, res.message = False, problem
+        return bool(problem)
+
     def _down_message(self, i: int) -> str:
         why = self._last_errors[i] or "starting up"
         return f"sensor {self.devices[i]} is down ({why})"
@@ -114,6 +153,9 @@ class BeagleNode(Node):
     # --- services ------------------------------------------------------------------------
 
     def on_get_sensor_data(self, req, res):
+        """Read-and-clear sums since this service's previous call, per sensor."""
+        if self._unavailable(res):
+            return res
         if req.id:
             i = self.poller.index(req.id)
             if i is None:
@@ -164,6 +206,7 @@ class BeagleNode(Node):
         return i, payload
 
     def on_get_settings(self, req, res):
+        """All registers of one sensor; the displacement that read cleared is kept."""
         i, payload = self._poller_command(res, req.id, "settings")
         if i >= 0:
             res.settings = messages.sensor_settings(self.devices[i], payload)  # type: ignore[arg-type]
@@ -171,6 +214,7 @@ class BeagleNode(Node):
         return res
 
     def on_set_resolution(self, req, res):
+        """Set one sensor's CPI (X and Y); ``res.cpi`` is the CPI in force afterwards."""
         i, _ = self._poller_command(res, req.id, "set_cpi", int(req.cpi))
         known = self.poller.index(req.id)
         if known is not None:  # the CPI in force, whether or not the request succeeded
@@ -182,6 +226,9 @@ class BeagleNode(Node):
         return res
 
     def on_get_samples(self, req, res):
+        """Single polls from the ring, since ``since_seq`` (chained by ``next_seq``)."""
+        if self._unavailable(res):
+            return res
         i = self.poller.index(req.id)
         if i is None:
             res.success, res.message = False, self._unknown_id(req.id)
@@ -209,8 +256,9 @@ class BeagleNode(Node):
     # --- periodic work -----------------------------------------------------------------------
 
     def publish_data(self) -> None:
-        if self.data_pub.get_subscription_count() == 0:
-            return  # nobody listens: build nothing; the cursor keeps the interval exact
+        """One SensorData per sensor that is up, since the previous publication."""
+        if self.data_pub.get_subscription_count() == 0 or self.poller.unavailable():
+            return  # nobody listens or nothing to say: the cursor keeps the interval exact
         with self._lock:
             for i, dev in enumerate(self.devices):
                 if not self._is_up(i):
@@ -254,6 +302,7 @@ class BeagleNode(Node):
         self.create_timer(1.0 / o.rate, tick)
 
     def relay_poller_events(self) -> None:
+        """Log what the poller reported; stop the node if the poller is gone."""
         for event in self.poller.drain_events():
             self._relay(event)
         if not self.poller.alive:
@@ -282,21 +331,8 @@ class BeagleNode(Node):
         else:
             log.info(str(event[1]))
 
-    def poller_cpu_percent(self) -> float:
-        """CPU use of the poller process since the previous call (% of one core)."""
-        try:
-            if self._poller_ps is None:
-                self._poller_ps = psutil.Process(self.poller.process.pid)
-            t = self._poller_ps.cpu_times()
-        except (psutil.Error, ValueError):
-            return float("nan")
-        busy, wall = t.user + t.system, time.monotonic()
-        last, self._cpu_last = self._cpu_last, (busy, wall)
-        if last is None or wall <= last[1]:
-            return float("nan")
-        return 100.0 * (busy - last[0]) / (wall - last[1])
-
     def publish_diagnostics(self) -> None:
+        """One DiagnosticStatus per sensor: state, rates, errors, totals (and the link)."""
         state = self.poller.state
         glob = state.glob
         wall = time.monotonic()
@@ -304,7 +340,9 @@ class BeagleNode(Node):
         polls = int(glob[ss.G_POLLS])
         last, self._diag_last = self._diag_last, (wall, seqs, polls)
         p50, p99 = state.period_percentiles(0.5, 0.99)
-        cpu = self.poller_cpu_percent()
+        cpu = self.poller.cpu_percent()
+        link = self.poller.link_values()
+        unavailable = self.poller.unavailable()
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
         for i, dev in enumerate(self.devices):
@@ -332,12 +370,15 @@ class BeagleNode(Node):
                 "poller_cpu_percent": f"{cpu:.1f}",
                 "last_error": self._last_errors[i],
             }
-            if self.settings.poller.backend == "sim":
+            values.update(link)
+            if self.settings.poller.backend == "sim" or t.gen_x or t.gen_y:
                 values["sim_generated_x_counts"] = t.gen_x
                 values["sim_generated_y_counts"] = t.gen_y
                 values["sim_lift_lost_x_counts"] = t.lift_lost_x
                 values["sim_lift_lost_y_counts"] = t.lift_lost_y
-            if t.state != ss.STATE_UP:
+            if unavailable:
+                level, text = DiagnosticStatus.ERROR, unavailable
+            elif t.state != ss.STATE_UP:
                 level, text = DiagnosticStatus.ERROR, self._down_message(i)
             elif (t.spi_errors, t.overflows) != self._diag_errors[i]:
                 level, text = (
@@ -352,6 +393,7 @@ class BeagleNode(Node):
         self.diag_pub.publish(arr)
 
     def shutdown(self) -> None:
+        """Stop the poller process (or close the link to the agent)."""
         self.poller.stop()
 
 

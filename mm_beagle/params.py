@@ -7,9 +7,11 @@ from dataclasses import dataclass
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.node import Node
 
-from .poller import PollerConfig, SimConfig, parse_fail_windows
+from . import link
+from .poller import PollerConfig
+from .sim_backend import SimConfig, parse_fail_windows
 
-BACKENDS = ("spidev", "sim")
+BACKENDS = ("spidev", "sim", "remote")
 
 
 def _int(desc: str, lo: int, hi: int, step: int = 0) -> ParameterDescriptor:
@@ -38,7 +40,26 @@ PARAMETERS = {
         ["/dev/spidev1.0", "/dev/spidev1.1"],
         _plain("spidev device paths, one per sensor; they are also the sensor ids"),
     ),
-    "backend": ("spidev", _plain("'spidev' (real sensors) or 'sim' (emulated PLN2033s)")),
+    "backend": (
+        "spidev",
+        _plain(
+            "'spidev' (real sensors), 'sim' (emulated PLN2033s) or 'remote' (an mm-beagle-agent "
+            "on the board polls them)"
+        ),
+    ),
+    "agent": (
+        link.DEFAULT_ENDPOINT,
+        _plain("remote backend: the agent's zenoh endpoint, e.g. tcp/192.168.7.2:7447"),
+    ),
+    "agent_name": (link.DEFAULT_NAME, _plain("remote backend: the agent's --name (keys mm/NAME)")),
+    "agent_credentials": (
+        "",
+        _plain("remote backend: user:password file (mode 600) the agent asks for ('' = none)"),
+    ),
+    "agent_clock_sync": (
+        True,
+        _plain("remote backend: move the agent's stamps to this clock (false if both run NTP)"),
+    ),
     "cpi": (1600, _int("resolution at start, counts per inch (X and Y)", 100, 6400, 100)),
     "poll_rate": (1000.0, _float("sensor polls per second (Hz)", 10.0, 2000.0)),
     "spi_speed_hz": (3_000_000, _int("SPI clock (Hz)", 100_000, 8_000_000)),
@@ -114,11 +135,22 @@ class OdometrySettings:
 
 
 @dataclass
+class RemoteSettings:
+    """Where the agent is (remote backend)."""
+
+    agent: str
+    name: str
+    credentials: str
+    clock_sync: bool
+
+
+@dataclass
 class NodeSettings:
     poller: PollerConfig
     publish_rate: float
     diagnostics_period: float
     odometry: OdometrySettings
+    remote: RemoteSettings
 
 
 def declare(node: Node) -> NodeSettings:
@@ -182,4 +214,15 @@ def declare(node: Node) -> NodeSettings:
         odom_frame=p["odom_frame"],
         base_frame=p["base_frame"],
     )
-    return NodeSettings(cfg, p["publish_rate"], p["diagnostics_period"], odometry)
+    remote = RemoteSettings(
+        p["agent"], p["agent_name"], p["agent_credentials"], p["agent_clock_sync"]
+    )
+    if p["backend"] == "remote":
+        try:
+            link.endpoint_host(remote.agent)
+            link.keys(remote.name)
+            if remote.credentials:
+                link.load_credentials(remote.credentials)
+        except link.LinkError as exc:
+            raise ValueError(str(exc)) from None
+    return NodeSettings(cfg, p["publish_rate"], p["diagnostics_period"], odometry, remote)

@@ -24,30 +24,14 @@ from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 
 from pln2033 import INCH_M, PLN2033, Motion, Pln2033Error, RegisterMap, read_patch_file
-from pln2033.errors import InvalidCpiError
+from pln2033.errors import InvalidCpiError, PatchError
 
 from . import shared_state as ss
 from .lift_gap import LiftGapEstimator
+from .sim_backend import SimConfig
 
 ERRORS_BEFORE_DOWN = 3  # consecutive failed polls before a sensor is declared down
 HEALTH_CHECK_S = 1.0  # how often the CPI is read back to catch a chip that reset itself
-
-
-@dataclass
-class SimConfig:
-    """The emulated sensors of the sim backend."""
-
-    trajectory: str = "figure_eight"
-    speed: float = 0.2  # m/s
-    loop: bool = True  # repeat the path; False = stand still after one lap
-    duration: float = 0.0  # s of motion (the path repeated or cut to fit); 0 = as the path is
-    start_delay: float = 0.0  # s standing still before the path starts
-    mounts: list[tuple[float, float, float]] = field(default_factory=list)  # base_link x, y, yaw
-    lift_rate: float = 0.0  # lifts per second per sensor
-    lift_duration: float = 0.01  # s
-    noise_counts: float = 0.0  # count noise per sqrt(s)
-    fail_windows: list[str] = field(default_factory=list)  # "DEVICE@START-END" (s from start)
-    seed: int = 1
 
 
 @dataclass
@@ -63,76 +47,6 @@ class PollerConfig:
     retry_interval: float = 1.0
     ring_size: int = 65536
     sim: SimConfig = field(default_factory=SimConfig)
-
-
-def parse_fail_windows(
-    specs: list[str], devices: list[str]
-) -> dict[str, list[tuple[float, float]]]:
-    """``["/dev/spidev1.1@0-2.5"]`` -> {"/dev/spidev1.1": [(0.0, 2.5)]}; errors name the format."""
-    out: dict[str, list[tuple[float, float]]] = {d: [] for d in devices}
-    for spec in specs:
-        try:
-            dev, span = spec.rsplit("@", 1)
-            a, b = (float(v) for v in span.split("-", 1))
-        except ValueError:
-            raise ValueError(f"fail window '{spec}' is not DEVICE@START-END (seconds)") from None
-        if dev not in out:
-            raise ValueError(f"fail window '{spec}' names an unknown device; devices: {devices}")
-        if not 0 <= a < b:
-            raise ValueError(f"fail window '{spec}' needs 0 <= START < END")
-        out[dev].append((a, b))
-    return out
-
-
-# --- sensor backends -----------------------------------------------------------------------
-
-
-def _make_sim_buses(cfg: PollerConfig, t0: float) -> dict[str, object]:
-    """One emulated PLN2033 per device, driven by the ground-truth simulator."""
-    import random
-
-    import numpy as np
-
-    from mm_pc.sim import robot as simulator
-    from pln2033.emulator import EmulatedPLN2033
-    from pln2033.motion import SampledPath
-
-    sim = cfg.sim
-    mounts = [simulator.SensorMount(*m) for m in sim.mounts] or list(simulator.DEFAULT_MOUNTS)
-    v, w = simulator.trajectory(sim.trajectory, sim.speed)
-    loop = sim.loop
-    if sim.duration > 0:  # repeat or cut the path to this long, then stand still
-        n = max(1, round(sim.duration / simulator.DT))
-        v, w = np.resize(v, n), np.resize(w, n)
-        loop = False
-    if sim.start_delay > 0:
-        still = np.zeros(round(sim.start_delay / simulator.DT))
-        v, w = np.concatenate([still, v]), np.concatenate([still, w])
-    fails = parse_fail_windows(sim.fail_windows, cfg.devices)
-    regmap = RegisterMap.load(cfg.register_map) if cfg.register_map else None
-    buses: dict[str, object] = {}
-    for i, dev in enumerate(cfg.devices):
-        mount = mounts[i % len(mounts)]
-        cx, cy = simulator.cumulative_sensor_path(v, w, simulator.DT, mount)
-        path = SampledPath(cx, cy, simulator.DT, t_start=t0, loop=loop)
-        lifts = []
-        if sim.lift_rate > 0:
-            rng = random.Random(sim.seed * 1000 + i)
-            t = t0
-            horizon = t0 + 24 * 3600
-            while t < horizon and len(lifts) < 200_000:
-                t += rng.expovariate(sim.lift_rate)
-                lifts.append((t, t + sim.lift_duration))
-                t += sim.lift_duration
-        buses[dev] = EmulatedPLN2033(
-            motion=path,
-            regmap=regmap,
-            lift_windows=lifts,
-            noise_counts=sim.noise_counts,
-            fault_windows=[(t0 + a, t0 + b, "raise") for a, b in fails[dev]],
-            seed=sim.seed + i,
-        )
-    return buses
 
 
 def _open_spidev(dev: str, cfg: PollerConfig) -> object:
@@ -151,24 +65,13 @@ class Channel:
         self.i = index
         self.device = device
         # memoryviews, not numpy: item access on them is several times cheaper,
-        # and this runs twice per 1 kHz poll.
-        self.ints = memoryview(state.ints[index])
-        self.floats = memoryview(state.floats[index])
-        self.ring = tuple(
-            memoryview(a[index])
-            for a in (
-                state.ring_stamp,
-                state.ring_dx,
-                state.ring_dy,
-                state.ring_status,
-                state.ring_cpi,
-                state.ring_flags,
-            )
-        )
+        # and this runs twice per 1 kHz poll (and the board's agent has no numpy).
+        self.ints, self.floats, self.ring = state.sensor_views(index)
         self.n = ring_size
         self.driver: PLN2033 | None = None
         self.bus: object | None = None
         self.cpi_x = self.cpi_y = 0
+        self.scale_x = self.scale_y = 0.0  # metres per count at the CPI in force
         self.cpi_wanted = 0  # the CPI the chip should have: configured, then as commanded
         self.seq = 0
         self.consecutive_errors = 0
@@ -176,16 +79,71 @@ class Channel:
         self.last_error = ""
         self.gap = LiftGapEstimator()  # in counts
         self.gap_m = LiftGapEstimator()  # in metres: right across a CPI change
+        self.last: tuple[int, int] | None = None  # counts of the newest hot-path poll
         self.sim_stats = None  # the emulator's ground truth, sim backend only
         self.sim_base = (0, 0, 0, 0)
+        # the hot path's view of the driver (see attach)
+        self._xfer = None
+        self._tx: list[int] = []
+        self._unusual = 0xFFFF
+        self._motion_bit = 0
         self.ints[ss.I_STATE] = ss.STATE_STARTING
+
+    def attach(self, driver: PLN2033 | None) -> None:
+        """Use ``driver`` for polls (None: the sensor is down)."""
+        self.driver = driver
+        if driver is not None:
+            self._xfer = driver.bus.xfer2
+            self._tx = driver.motion_tx
+            self._unusual = driver.unusual_status_bits
+            self._motion_bit = driver.map.status_motion
+
+    def poll(self, stamp_ns: int) -> None:
+        """One motion burst, recorded: the 1 kHz hot path. Raises Pln2033Error.
+
+        The common poll (no lift, no overflow, no lift gap open) is recorded
+        here with as few Python operations as possible (field indices are
+        literals: see shared_state); anything else goes through :meth:`record`,
+        the one general implementation.
+        """
+        rx = self._xfer(self._tx)
+        status = (rx[1] << 8) | rx[2] if len(rx) == 9 else 0xFFFF
+        if status & self._unusual or self.gap.gap:
+            self.record(stamp_ns, self.driver.decode_motion(rx))
+            return
+        dx = (((rx[4] << 8) | rx[5]) ^ 0x8000) - 0x8000  # signed 16 bit
+        dy = (((rx[7] << 8) | rx[8]) ^ 0x8000) - 0x8000
+        ints = self.ints
+        seq = self.seq
+        slot = seq % self.n
+        stamps, rdx, rdy, rstatus, rcpi, rflags = self.ring
+        ints[0] += 1  # I_VERSION, odd: writing
+        rdx[slot] = dx
+        rdy[slot] = dy
+        rstatus[slot] = status
+        stamps[slot] = stamp_ns
+        rcpi[slot] = self.cpi_y
+        rflags[slot] = 2 if status & self._motion_bit else 0  # FLAG_MOTION
+        self.last = (dx, dy)
+        if dx:
+            ints[2] += dx  # I_X_TOTAL
+            self.floats[0] += dx * self.scale_x  # F_X_TOTAL_M
+        if dy:
+            ints[3] += dy  # I_Y_TOTAL
+            self.floats[1] += dy * self.scale_y  # F_Y_TOTAL_M
+        self.seq = seq = seq + 1
+        ints[1] = seq  # I_SEQ
+        ints[10] = stamp_ns  # I_STAMP_NS
+        if self.sim_stats is not None:
+            self._sim_truth()
+        ints[0] += 1  # even: consistent
 
     def record(self, stamp_ns: int, m: Motion | None, extra_flags: int = 0) -> None:
         """Add one read to the totals and the ring (under the sequence lock).
 
-        ``extra_flags`` marks reads made for a command (settings, the drain
-        before a CPI change): they take no poll slot, so they do not lengthen
-        a lift gap.
+        ``m`` None records a failed poll. ``extra_flags`` marks reads made for a
+        command (settings, the drain before a CPI change): they take no poll
+        slot, so they do not lengthen a lift gap.
         """
         ints, floats = self.ints, self.floats
         slot = self.seq % self.n
@@ -206,10 +164,10 @@ class Channel:
             )
             if dx:
                 ints[ss.I_X_TOTAL] += dx
-                floats[ss.F_X_TOTAL_M] += dx * INCH_M / self.cpi_x
+                floats[ss.F_X_TOTAL_M] += dx * self.scale_x
             if dy:
                 ints[ss.I_Y_TOTAL] += dy
-                floats[ss.F_Y_TOTAL_M] += dy * INCH_M / self.cpi_y
+                floats[ss.F_Y_TOTAL_M] += dy * self.scale_y
             if m.lifted:
                 ints[ss.I_LIFT_TOTAL] += 1
             if m.overflow:
@@ -222,19 +180,27 @@ class Channel:
         self.seq += 1
         ints[ss.I_SEQ] = self.seq
         ints[ss.I_STAMP_NS] = stamp_ns
-        stats = self.sim_stats
-        if stats is not None:  # emulator ground truth since initialisation
-            base = self.sim_base
-            ints[ss.I_GEN_X] = stats.counted_x - base[0]
-            ints[ss.I_GEN_Y] = stats.counted_y - base[1]
-            ints[ss.I_LIFT_LOST_X] = stats.lift_cleared_x + round(stats.lift_motion_x) - base[2]
-            ints[ss.I_LIFT_LOST_Y] = stats.lift_cleared_y + round(stats.lift_motion_y) - base[3]
+        if self.sim_stats is not None:
+            self._sim_truth()
         ints[ss.I_VERSION] += 1  # even: consistent
+
+    def _sim_truth(self) -> None:
+        """The emulator's ground truth since initialisation (sim backend only)."""
+        ints, stats, base = self.ints, self.sim_stats, self.sim_base
+        ints[ss.I_GEN_X] = stats.counted_x - base[0]
+        ints[ss.I_GEN_Y] = stats.counted_y - base[1]
+        ints[ss.I_LIFT_LOST_X] = stats.lift_cleared_x + round(stats.lift_motion_x) - base[2]
+        ints[ss.I_LIFT_LOST_Y] = stats.lift_cleared_y + round(stats.lift_motion_y) - base[3]
 
     def _update_lift_gap(self, dx: int, dy: int, lifted: bool) -> None:
         """Feed one poll to the estimators; add their estimate when a gap closes."""
+        last = self.last
+        if last is not None:  # the newest hot-path poll, at the scale still in force
+            self.last = None
+            self.gap.last_x, self.gap.last_y = last
+            self.gap_m.last_x, self.gap_m.last_y = last[0] * self.scale_x, last[1] * self.scale_y
         est = self.gap.update(dx, dy, lifted)
-        est_m = self.gap_m.update(dx * INCH_M / self.cpi_x, dy * INCH_M / self.cpi_y, lifted)
+        est_m = self.gap_m.update(dx * self.scale_x, dy * self.scale_y, lifted)
         if est is not None and est_m is not None:
             floats = self.floats
             floats[ss.F_X_EST_COUNTS] += est[0]
@@ -243,7 +209,10 @@ class Channel:
             floats[ss.F_Y_EST_M] += est_m[1]
 
     def set_cpi_cache(self, x: int, y: int) -> None:
+        """The CPI now in force on the chip: later counts are scaled by it."""
         self.cpi_x, self.cpi_y = x, y
+        self.scale_x = INCH_M / x if x else 0.0
+        self.scale_y = INCH_M / y if y else 0.0
         self.ints[ss.I_CPI_X] = x
         self.ints[ss.I_CPI_Y] = y
 
@@ -269,9 +238,14 @@ class Poller:
         )
         self.patch = read_patch_file(cfg.patch_file) if cfg.patch_file else None
         self.t0 = time.monotonic()
-        self.sim_buses = _make_sim_buses(cfg, self.t0) if cfg.backend == "sim" else {}
+        self.sim_buses = self._sim_buses() if cfg.backend == "sim" else {}
         self.running = True
         self.commands_seen = 0
+
+    def _sim_buses(self) -> dict[str, object]:
+        from .sim_backend import make_sim_buses
+
+        return make_sim_buses(self.cfg, self.t0)
 
     # --- events to the node ---
 
@@ -296,7 +270,7 @@ class Poller:
         except (Pln2033Error, ValueError, OSError) as exc:
             self.mark_down(ch, now, f"start-up failed: {exc}")
             return
-        ch.driver = driver
+        ch.attach(driver)
         ch.consecutive_errors = 0
         stats = getattr(ch.bus, "stats", None)
         if stats is not None and ch.sim_stats is None:
@@ -314,7 +288,7 @@ class Poller:
 
     def mark_down(self, ch: Channel, now: float, why: str) -> None:
         changed = ch.driver is not None or why != ch.last_error
-        ch.driver = None
+        ch.attach(None)
         ch.ints[ss.I_STATE] = ss.STATE_DOWN
         ch.next_retry = now + self.cfg.retry_interval
         if changed:
@@ -324,13 +298,13 @@ class Poller:
     # --- polling ---
 
     def poll(self, ch: Channel, stamp_ns: int, now: float) -> None:
-        driver = ch.driver
-        if driver is None:
+        """Poll one sensor once; count errors, declare it down, or bring it up again."""
+        if ch.driver is None:
             if now >= ch.next_retry:
                 self.try_init(ch, now)
             return
         try:
-            m = driver.read_motion()
+            ch.poll(stamp_ns)
         except Pln2033Error as exc:
             ch.ints[ss.I_SPI_ERRORS] += 1
             ch.consecutive_errors += 1
@@ -342,7 +316,6 @@ class Poller:
                 self.mark_down(ch, now, f"{ch.consecutive_errors} polls failed: {exc}")
             return
         ch.consecutive_errors = 0
-        ch.record(stamp_ns, m)
 
     def _resync_cpi(self, ch: Channel) -> None:
         """After a failed command the chip may be half-changed: take its CPI as it is."""
@@ -404,6 +377,15 @@ class Poller:
                 ch.cpi_wanted = cpi
                 ch.set_cpi_cache(ch.driver.get_x_cpi(), ch.driver.get_y_cpi())
                 return ("ok", ch.cpi_y)
+            if kind == "load_patch":
+                words = msg[2]
+                try:
+                    ch.driver.check_patch(words)
+                except PatchError as exc:
+                    return ("invalid", str(exc))
+                ch.driver.load_patch(words)  # writes, verifies, enables
+                self.patch = list(words)  # re-initialisations load it too
+                return ("ok", len(words))
         except InvalidCpiError as exc:
             return ("invalid", str(exc))
         except Pln2033Error as exc:
@@ -427,9 +409,20 @@ class Poller:
                 self.emit("log", traceback.format_exc())
             conn.send(reply)
 
-    def run(self) -> None:
+    def service(self) -> None:
+        """Work between polls every ``service_period`` s (the agent serves its link here)."""
+
+    service_period = 1.0
+
+    def run(self, max_polls: int = 0, paced: bool = True) -> None:
+        """Poll every sensor at ``poll_rate`` until stopped (or ``max_polls``, for benchmarks).
+
+        ``paced=False`` polls flat out (benchmarks: CPU per poll). A late loop
+        skips the missed slots instead of bursting; each period goes into the
+        histogram (1 us bins).
+        """
         cfg = self.cfg
-        glob, hist = memoryview(self.state.glob), memoryview(self.state.hist)
+        glob, hist = self.state.glob_view, self.state.hist_view
         g_polls, g_late, g_sum = ss.G_POLLS, ss.G_LATE, ss.G_PERIOD_SUM_NS
         g_cmd = ss.G_COMMANDS_SENT
         wall_ns, sleep = time.time_ns, time.sleep
@@ -443,9 +436,13 @@ class Poller:
         clock = time.perf_counter_ns
         next_t = clock()
         health_ns = int(HEALTH_CHECK_S * 1e9)
+        service_ns = int(self.service_period * 1e9)
         next_health = next_t + health_ns
+        next_service = next_t + service_ns
         last = 0
         channels = self.channels
+        poll = self.poll
+        polls = 0
         while self.running:
             t = clock()
             if last:
@@ -459,8 +456,12 @@ class Poller:
             stamp = wall_ns()
             mono = t / 1e9
             for ch in channels:
-                self.poll(ch, stamp, mono)
+                poll(ch, stamp, mono)
             glob[g_polls] += 1
+            polls += 1
+            if t >= next_service:
+                next_service = t + service_ns
+                self.service()
             if t >= next_health:
                 next_health = t + health_ns
                 for ch in channels:
@@ -468,6 +469,10 @@ class Poller:
             if glob[g_cmd] != self.commands_seen:
                 self.commands_seen = glob[g_cmd]
                 self.handle_commands()
+            if polls == max_polls:
+                break
+            if not paced:
+                continue
             next_t += period_ns
             t = clock()
             if next_t <= t:  # fell behind: skip the missed slots instead of bursting
@@ -475,18 +480,22 @@ class Poller:
                 glob[ss.G_OVERRUNS] += missed
                 next_t += missed * period_ns
             sleep((next_t - t) / 1e9)
+        self.service()
         glob[ss.G_RUNNING] = 0
 
 
-def _tune_process(priority: int) -> str:
-    """Tighter timer slack and, if allowed, SCHED_FIFO. Returns a note for the log."""
+def tune_process(priority: int, parent_death: bool = True) -> str:
+    """Tighter timer slack and, if allowed, SCHED_FIFO. Returns a note for the log.
+
+    ``parent_death``: SIGTERM when the parent dies (the node's spawned poller).
+    """
     note = []
     try:
         libc = ctypes.CDLL(None, use_errno=True)
         if libc.prctl(29, 1000, 0, 0, 0) == 0:  # PR_SET_TIMERSLACK = 1 us
             note.append("timer slack 1 us")
-        # PR_SET_PDEATHSIG: a SIGTERM when the node dies, even by SIGKILL.
-        libc.prctl(1, signal.SIGTERM, 0, 0, 0)
+        if parent_death:  # PR_SET_PDEATHSIG: a SIGTERM when the node dies, even by SIGKILL
+            libc.prctl(1, signal.SIGTERM, 0, 0, 0)
     except (OSError, AttributeError):
         pass
     if priority > 0:
@@ -512,7 +521,7 @@ def run_poller(cfg: PollerConfig, buffer: object, commands: Connection, events: 
     except Exception as exc:  # configuration errors: tell the node, then stop
         events.send(("fatal", f"{exc}"))
         return
-    events.send(("log", f"poller pid {os.getpid()}: {_tune_process(cfg.realtime_priority)}"))
+    events.send(("log", f"poller pid {os.getpid()}: {tune_process(cfg.realtime_priority)}"))
     signal.signal(signal.SIGTERM, lambda *_: setattr(poller, "running", False))
     if os.getppid() != parent_pid:  # the node died before the death signal was armed
         return

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import multiprocessing as mp
+import sys
 import threading
 import time
 from multiprocessing.connection import Connection
@@ -42,9 +43,13 @@ class PollerClient:
         self._lock = threading.Lock()
         self._abandoned = 0  # commands that timed out; their late replies are dropped
         self._child_ends: tuple[Connection, Connection] = (child_cmd, child_events)
+        self._ps = None
+        self._cpu_last: tuple[float, float] | None = None
 
     def start(self) -> None:
-        self.process.start()
+        """Spawn the poller; it imports only the poller modules, not the node's main."""
+        with _main_hidden():
+            self.process.start()
         for end in self._child_ends:
             end.close()  # only the child holds these now: EOF tells us it died
 
@@ -76,6 +81,30 @@ class PollerClient:
                     return reply
                 self._abandoned -= 1  # a late answer to an earlier command: drop it
 
+    def unavailable(self) -> str:
+        """Always '' here: a local poller that is gone stops the node instead."""
+        return ""
+
+    def link_values(self) -> dict[str, object]:
+        """Nothing: the local backend has no link."""
+        return {}
+
+    def cpu_percent(self) -> float:
+        """CPU use of the poller process since the previous call (% of one core)."""
+        import psutil
+
+        try:
+            if self._ps is None:
+                self._ps = psutil.Process(self.process.pid)
+            t = self._ps.cpu_times()
+        except (psutil.Error, ValueError):
+            return float("nan")
+        busy, wall = t.user + t.system, time.monotonic()
+        last, self._cpu_last = self._cpu_last, (busy, wall)
+        if last is None or wall <= last[1]:
+            return float("nan")
+        return 100.0 * (busy - last[0]) / (wall - last[1])
+
     def drain_events(self) -> list[tuple]:
         """Events the poller sent since the last call (non-blocking)."""
         out = []
@@ -97,3 +126,21 @@ class PollerClient:
                 self.process.join(1.0)
         self._cmd.close()
         self.events.close()
+
+
+@contextlib.contextmanager
+def _main_hidden():
+    """Keep ``spawn`` from re-running ``__main__`` (the node: rclpy, ~20 MB) in the child.
+
+    multiprocessing re-imports the parent's main module in a spawned child
+    when it has a ``__spec__`` or ``__file__``; the poller needs none of it.
+    """
+    main = sys.modules.get("__main__")
+    saved = {k: main.__dict__[k] for k in ("__spec__", "__file__") if k in main.__dict__}
+    try:
+        if "__spec__" in saved:
+            main.__spec__ = None  # type: ignore[assignment]
+        main.__dict__.pop("__file__", None)
+        yield
+    finally:
+        main.__dict__.update(saved)

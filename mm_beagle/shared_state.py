@@ -15,8 +15,10 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import numpy as np
+if TYPE_CHECKING:
+    import numpy as np
 
 # int64 fields per sensor
 I_VERSION = 0
@@ -35,7 +37,23 @@ I_GEN_Y = 12
 I_REINITS = 13  # successful (re)initialisations
 I_LIFT_LOST_X = 14  # emulator ground truth: counts cleared by lifts
 I_LIFT_LOST_Y = 15
-N_INT = 16
+I_RING_FROM = 16  # oldest seq the ring holds (the remote backend starts mid-run)
+N_INT = 17
+
+# int64 fields that only grow: a restarted agent's are added to what came before
+MONOTONE_INTS = (
+    I_SEQ,
+    I_X_TOTAL,
+    I_Y_TOTAL,
+    I_LIFT_TOTAL,
+    I_SPI_ERRORS,
+    I_OVERFLOWS,
+    I_GEN_X,
+    I_GEN_Y,
+    I_REINITS,
+    I_LIFT_LOST_X,
+    I_LIFT_LOST_Y,
+)
 
 # float64 fields per sensor
 F_X_TOTAL_M = 0
@@ -103,34 +121,83 @@ class Totals:
 
 
 class SharedState:
-    """Views onto one shared buffer; built identically in both processes."""
+    """Views onto one shared buffer; built identically in every process that maps it.
+
+    The writer (:class:`mm_beagle.poller.Channel`) uses the plain memoryviews of
+    :meth:`sensor_views`, :attr:`glob_view` and :attr:`hist_view`, so the board's
+    agent needs no numpy; readers use the numpy arrays (``ints``, ``floats``,
+    ``glob``, ``hist``, ``ring_*``), made on first use.
+    """
+
+    # (name, struct code, item size, per sensor?, length)
+    _LAYOUT = (
+        ("ints", "q", 8, True, N_INT),
+        ("floats", "d", 8, True, N_FLOAT),
+        ("glob", "q", 8, False, N_GLOBAL),
+        ("hist", "q", 8, False, HIST_BINS),
+        ("ring_stamp", "q", 8, True, 0),
+        ("ring_dx", "h", 2, True, 0),
+        ("ring_dy", "h", 2, True, 0),
+        ("ring_status", "H", 2, True, 0),
+        ("ring_cpi", "H", 2, True, 0),
+        ("ring_flags", "B", 1, True, 0),
+    )
+    RING_FIELDS = ("ring_stamp", "ring_dx", "ring_dy", "ring_status", "ring_cpi", "ring_flags")
 
     def __init__(self, buffer: object, n_sensors: int, ring_size: int) -> None:
         self.n_sensors = n_sensors
         self.ring_size = ring_size
-        mem = memoryview(buffer).cast("B")  # type: ignore[arg-type]
+        self.buffer = buffer
+        self.mem = memoryview(buffer).cast("B")  # type: ignore[arg-type]
+        # name -> (offset, code, item size, rows, row length)
+        self._where: dict[str, tuple[int, str, int, int, int]] = {}
         offset = 0
-
-        def take(dtype: type, shape: tuple[int, ...]) -> np.ndarray:
-            nonlocal offset
-            dt = np.dtype(dtype)
+        for name, code, size, per_sensor, length in self._LAYOUT:
             offset = (offset + 7) & ~7
-            count = int(np.prod(shape))
-            arr = np.frombuffer(mem, dtype=dt, count=count, offset=offset).reshape(shape)
-            offset += count * dt.itemsize
-            return arr
-
-        self.ints = take(np.int64, (n_sensors, N_INT))
-        self.floats = take(np.float64, (n_sensors, N_FLOAT))
-        self.glob = take(np.int64, (N_GLOBAL,))
-        self.hist = take(np.int64, (HIST_BINS,))
-        self.ring_stamp = take(np.int64, (n_sensors, ring_size))
-        self.ring_dx = take(np.int16, (n_sensors, ring_size))
-        self.ring_dy = take(np.int16, (n_sensors, ring_size))
-        self.ring_status = take(np.uint16, (n_sensors, ring_size))
-        self.ring_cpi = take(np.uint16, (n_sensors, ring_size))
-        self.ring_flags = take(np.uint8, (n_sensors, ring_size))
+            rows, cols = (n_sensors if per_sensor else 1), (length or ring_size)
+            self._where[name] = (offset, code, size, rows, cols)
+            offset += rows * cols * size
         self.nbytes = offset
+        if offset > len(self.mem):
+            raise ValueError(f"shared buffer of {len(self.mem)} bytes; the layout needs {offset}")
+        self.glob_view = self._view("glob", 0)
+        self.hist_view = self._view("hist", 0)
+        self._ints_v = [self._view("ints", i) for i in range(n_sensors)]
+        self._floats_v = [self._view("floats", i) for i in range(n_sensors)]
+        self._arrays: dict[str, object] = {}
+
+    def _view(self, name: str, row: int) -> memoryview:
+        offset, code, size, _rows, cols = self._where[name]
+        start = offset + row * cols * size
+        return self.mem[start : start + cols * size].cast(code)
+
+    def sensor_views(self, i: int) -> tuple[memoryview, memoryview, tuple[memoryview, ...]]:
+        """Sensor ``i``'s ints, floats and ring fields (RING_FIELDS order) as memoryviews."""
+        return (
+            self._view("ints", i),
+            self._view("floats", i),
+            tuple(self._view(name, i) for name in self.RING_FIELDS),
+        )
+
+    def ring_bytes(self, name: str, i: int) -> memoryview:
+        """Sensor ``i``'s slice of one ring field, as raw bytes."""
+        offset, _code, size, _rows, cols = self._where[name]
+        start = offset + i * cols * size
+        return self.mem[start : start + cols * size]
+
+    def __getattr__(self, name: str):
+        """The numpy views (readers only: the writer never needs numpy)."""
+        where = self.__dict__.get("_where")
+        if where is None or name not in where:
+            raise AttributeError(name)
+        import numpy as np
+
+        offset, code, _size, rows, cols = where[name]
+        arr = np.frombuffer(self.mem, dtype=np.dtype(code), count=rows * cols, offset=offset)
+        arr = arr.reshape((rows, cols) if name not in ("glob", "hist") else (cols,))
+        self._arrays[name] = arr
+        setattr(self, name, arr)
+        return arr
 
     @staticmethod
     def size(n_sensors: int, ring_size: int) -> int:
@@ -147,15 +214,15 @@ class SharedState:
 
     def snapshot(self, i: int, timeout_s: float = 0.05) -> Totals:
         """Consistent totals of sensor ``i``; retries while the poller writes."""
-        ints, floats = self.ints[i], self.floats[i]
+        ints, floats = self._ints_v[i], self._floats_v[i]
         deadline = time.monotonic() + timeout_s
         while True:
-            v1 = int(ints[I_VERSION])
+            v1 = ints[I_VERSION]
             if not v1 & 1:
                 iv = ints.tolist()
                 fv = floats.tolist()
-                if int(ints[I_VERSION]) == v1:
-                    return Totals(*iv[1:N_INT], *fv)
+                if ints[I_VERSION] == v1:
+                    return Totals(*iv[1:I_RING_FROM], *fv)
             if time.monotonic() > deadline:
                 raise TimeoutError("the poller process holds the shared state (is it hung?)")
             time.sleep(0)  # let a writer in this process (tests) finish; yields the GIL
@@ -164,9 +231,11 @@ class SharedState:
         self, i: int, since_seq: int, max_samples: int
     ) -> tuple[int, int, int, dict[str, np.ndarray]]:
         """Polls ``since_seq`` onwards from the ring: (first_seq, next_seq, dropped, arrays)."""
+        import numpy as np
+
         n = self.ring_size
         seq_now = self.snapshot(i).seq
-        first = max(since_seq, seq_now - n, 0)
+        first = max(since_seq, seq_now - n, int(self.ints[i][I_RING_FROM]))
         limit = n if max_samples <= 0 else min(max_samples, n)
         end = min(seq_now, first + limit)
         idx = np.arange(first, end, dtype=np.int64) % n
@@ -189,6 +258,8 @@ class SharedState:
 
     def period_percentiles(self, *quantiles: float) -> list[float]:
         """Poll period quantiles in microseconds from the histogram."""
+        import numpy as np
+
         hist = self.hist.copy()
         total = int(hist.sum())
         if total == 0:
@@ -199,3 +270,8 @@ class SharedState:
             float(np.searchsorted(cum, max(1.0, np.ceil(q * total)), side="left"))
             for q in quantiles
         ]
+
+
+# The poller's hot path (poller.Channel.poll) writes these by literal index.
+assert (I_VERSION, I_SEQ, I_X_TOTAL, I_Y_TOTAL, I_STAMP_NS) == (0, 1, 2, 3, 10)
+assert (F_X_TOTAL_M, F_Y_TOTAL_M, FLAG_MOTION) == (0, 1, 2)

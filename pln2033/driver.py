@@ -101,9 +101,17 @@ class PLN2033:
                 "no PLN2033 is answering; check wiring, chip select and 3.3 V supply"
             )
 
+    @property
+    def motion_tx(self) -> list[int]:
+        """The 9 bytes of the motion burst (status, delta X, delta Y), built once."""
+        return self._motion_tx
+
     def read_motion(self) -> Motion:
         """Status, delta X and delta Y in one transfer; clears the counters."""
-        rx = self.bus.xfer2(self._motion_tx)
+        return self.decode_motion(self.bus.xfer2(self._motion_tx))
+
+    def decode_motion(self, rx: list[int]) -> Motion:
+        """The :class:`Motion` in the bytes a motion burst clocked in."""
         if len(rx) != 9:
             raise SpiError(f"{self.name}: sent 9 bytes, received {len(rx)}")
         status = (rx[1] << 8) | rx[2]
@@ -118,6 +126,12 @@ class PLN2033:
             moved=bool(status & m.status_motion),
             overflow=bool(status & self._overflow_mask),
         )
+
+    @property
+    def unusual_status_bits(self) -> int:
+        """Status bits a poll must look at closely: reserved, lift, overflow."""
+        m = self.map
+        return m.status_reserved | m.status_lift | self._overflow_mask
 
     def read_all_registers(self) -> tuple[Motion, dict[str, int]]:
         """All 13 registers in one transfer, plus the displacement that read cleared.
@@ -214,7 +228,7 @@ class PLN2033:
 
     def load_patch(self, words: Sequence[int]) -> None:
         """Write the patch code into the DSP RAM, verify it, then enable it."""
-        self._check_patch(words)
+        self.check_patch(words)
         self.write_register("memory_pointer", self.map.patch_start)
         for word in words:
             self.write_register("memory_data", word)
@@ -224,7 +238,7 @@ class PLN2033:
 
     def verify_patch(self, words: Sequence[int]) -> None:
         """Read the DSP RAM back and compare it with ``words``."""
-        self._check_patch(words)
+        self.check_patch(words)
         self.write_register("memory_pointer", self.map.patch_start)
         for i, word in enumerate(words):
             got = self.read_register("memory_data")
@@ -235,7 +249,8 @@ class PLN2033:
                     f"read {got:#06x}"
                 )
 
-    def _check_patch(self, words: Sequence[int]) -> None:
+    def check_patch(self, words: Sequence[int]) -> None:
+        """PatchError unless ``words`` are 1..room 16-bit words."""
         room = self.map.memory_words - self.map.patch_start
         if not words:
             raise PatchError("the patch code is empty")

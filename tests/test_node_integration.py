@@ -1,7 +1,8 @@
 """mm-beagle as a real process, talked to over real ROS 2 services and topics.
 
-The node runs with the sim backend (emulated PLN2033s behind the real driver);
-the test talks to it from its own client node in this process.
+The node runs with the sim backend (emulated PLN2033s behind the real driver)
+and again with backend:=remote reading a real mm-beagle-agent process over
+zenoh; the test talks to it from its own client node in this process.
 """
 
 from __future__ import annotations
@@ -18,7 +19,13 @@ import pytest
 rclpy = pytest.importorskip("rclpy")
 from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 
-from mm_beagle.harness import BeagleClient, beagle_process, node_command  # noqa: E402
+from mm_beagle.harness import (  # noqa: E402
+    BeagleClient,
+    agent_process,
+    beagle_process,
+    free_port,
+    node_command,
+)
 from mm_interfaces.msg import SensorData  # noqa: E402
 
 S0, S1 = "/dev/spidev1.0", "/dev/spidev1.1"
@@ -34,19 +41,36 @@ def client():
     c.close()
 
 
-@pytest.fixture(scope="module")
-def node(client, tmp_path_factory):
-    """One node for the module: sensor 2 fails for its first 4 s, then comes up."""
-    log = tmp_path_factory.mktemp("node") / "mm_beagle.log"
-    params = {
-        "backend": "sim",
-        "sim_trajectory": "figure_eight",
-        "sim_fail_windows": [f"{S1}@0-4"],
-        "retry_interval": 0.5,
-        "publish_rate": 20.0,
-        "diagnostics_period": 0.5,
-    }
-    with beagle_process(params, env=dict(os.environ), log_path=str(log)) as proc:
+@pytest.fixture(scope="module", params=["sim", "remote"])
+def node(request, client, tmp_path_factory):
+    """One node for the module: sensor 2 fails for its first 4 s, then comes up.
+
+    ``remote``: the same emulated sensors in an mm-beagle-agent process, the
+    node in backend:=remote on its link.
+    """
+    logs = tmp_path_factory.mktemp("node")
+    log = logs / "mm_beagle.log"
+    params = {"publish_rate": 20.0, "diagnostics_period": 0.5}
+    sim = {"sim_trajectory": "figure_eight", "sim_fail_windows": [f"{S1}@0-4"]}
+    if request.param == "sim":
+        with beagle_process(
+            {"backend": "sim", "retry_interval": 0.5, **sim, **params},
+            env=dict(os.environ),
+            log_path=str(log),
+        ) as proc:
+            assert client.wait(30), f"services did not come up; log:\n{log.read_text()}"
+            yield proc, log
+        return
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    agent_opts = {"backend": "sim", "retry_interval": 0.5, "listen": [endpoint], **sim}
+    with (
+        agent_process(agent_opts, log_path=str(logs / "agent.log")),
+        beagle_process(
+            {"backend": "remote", "agent": endpoint, **params},
+            env=dict(os.environ),
+            log_path=str(log),
+        ) as proc,
+    ):
         assert client.wait(30), f"services did not come up; log:\n{log.read_text()}"
         yield proc, log
 

@@ -19,13 +19,8 @@ from fakes import FakeClock
 
 from mm_beagle import poller as poller_mod
 from mm_beagle import shared_state as ss
-from mm_beagle.poller import (
-    ERRORS_BEFORE_DOWN,
-    Poller,
-    PollerConfig,
-    SimConfig,
-    parse_fail_windows,
-)
+from mm_beagle.poller import ERRORS_BEFORE_DOWN, Poller, PollerConfig
+from mm_beagle.sim_backend import SimConfig, parse_fail_windows
 from pln2033 import INCH_M, PLN2033, EmulatedPLN2033, RegisterMap, SpiError
 from pln2033.motion import ConstantVelocity, SampledPath
 

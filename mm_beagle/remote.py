@@ -1,0 +1,429 @@
+"""backend:=remote: the node's side of the board link to mm-beagle-agent.
+
+:class:`RemoteAgent` offers what :class:`~mm_beagle.poller_client.PollerClient`
+offers (``state``, ``command``, ``drain_events``, ...), so the node's services,
+topic, diagnostics and onboard odometry read the same shared state whichever
+backend fills it. A feeder thread applies the agent's batches in order: a gap
+in a sensor's sequence numbers (a lost frame, a link drop) is fetched from the
+agent's ring before newer polls are applied; polls older than that ring are
+counted as lost and the ring starts after them, while the totals, which come
+with every batch, stay exact. A restarted agent (new boot id) continues the
+node's totals and sequence numbers instead of resetting them. Stamps are moved
+to this machine's clock (offset = the smallest seen delay, allowed to drift
+100 ppm), unless ``clock_sync`` is off because both clocks run NTP.
+"""
+
+from __future__ import annotations
+
+import base64
+import collections
+import contextlib
+import json
+import queue
+import threading
+import time
+import zlib
+
+import numpy as np
+
+from . import link
+from . import shared_state as ss
+from .poller import PollerConfig
+from .poller_client import PollerError
+
+LINK_TIMEOUT_S = 1.0  # no batch for this long: the link is down (the agent sends >= 10/s)
+COMMAND_TIMEOUT_S = 2.0
+HISTORY_TIMEOUT_S = 2.0
+CLOCK_LEAK = 1e-4  # the clock offset estimate may rise this much per second (100 ppm)
+RING_DTYPES = ("<i8", "<i2", "<i2", "<u2", "<u2", "u1")
+
+
+class RemoteAgent:
+    """Feeds a local shared state from an mm-beagle-agent over zenoh."""
+
+    def __init__(
+        self,
+        cfg: PollerConfig,
+        endpoint: str = link.DEFAULT_ENDPOINT,
+        name: str = link.DEFAULT_NAME,
+        credentials: str = "",
+        clock_sync: bool = True,
+    ) -> None:
+        self.cfg = cfg
+        self.endpoint = endpoint
+        self.keys = link.keys(name)
+        self.credentials = credentials
+        self.clock_sync = clock_sync
+        link.endpoint_host(endpoint)  # LinkError now, not in the thread
+        if credentials:
+            link.load_credentials(credentials)
+        n = len(cfg.devices)
+        self.n = n
+        self.state = ss.SharedState(
+            bytearray(ss.SharedState.size(n, cfg.ring_size)), n, cfg.ring_size
+        )
+        self.state.ints[:, ss.I_STATE] = ss.STATE_STARTING
+        self._rings = [
+            [getattr(self.state, f)[i] for f in ss.SharedState.RING_FIELDS] for i in range(n)
+        ]
+        self.session = None
+        self._queue: queue.Queue = queue.Queue(maxsize=20000)
+        self._events: list[tuple] = []
+        self._events_lock = threading.Lock()
+        self._running = False
+        self._threads: list[threading.Thread] = []
+        # link state
+        self.link_up = False
+        self.ever_up = False
+        self.since_wall = time.time()  # when the link last changed
+        self.last_heard = 0.0
+        self.link_drops = 0
+        self.polls_lost = 0
+        self.bad_frames = 0
+        self.restarts = 0
+        self.agent_status: dict = {}
+        self.mismatch = ""  # the agent serves other devices than this node expects
+        self.latency_ms: collections.deque = collections.deque(maxlen=4096)
+        # poll stamp -> applied here (ms; meaningful on one clock: benchmarks)
+        self.apply_latency_ms: collections.deque = collections.deque(maxlen=100_000)
+        self._offset_ns: int | None = None
+        self._offset_t = 0.0
+        # sequence bookkeeping, per sensor
+        self.boot: int | None = None
+        self.next_agent = [None] * n  # next agent seq expected
+        self.base_i = np.zeros((n, ss.N_INT), np.int64)
+        self.base_f = np.zeros((n, ss.N_FLOAT), np.float64)
+        self.agent_i = np.zeros((n, ss.N_INT), np.int64)  # the agent's newest totals
+        self.agent_f = np.zeros((n, ss.N_FLOAT), np.float64)
+        self._mono = list(ss.MONOTONE_INTS)
+
+    # --- what the node uses (the PollerClient interface) ---
+
+    def start(self) -> None:
+        self._running = True
+        for target, name in ((self._connect, "mm_link_connect"), (self._feed, "mm_link_feed")):
+            t = threading.Thread(target=target, name=name, daemon=True)
+            t.start()
+            self._threads.append(t)
+
+    @property
+    def alive(self) -> bool:
+        return self._running and self._threads[1].is_alive()
+
+    def index(self, device: str) -> int | None:
+        try:
+            return self.cfg.devices.index(device)
+        except ValueError:
+            return None
+
+    def unavailable(self) -> str:
+        """'' while the link is up, else what the services answer."""
+        if self.mismatch:
+            return self.mismatch
+        if self.link_up:
+            return ""
+        since = time.strftime("%H:%M:%S", time.localtime(self.since_wall))
+        ago = time.time() - self.since_wall
+        what = "unreachable since" if self.ever_up else "not reached yet, trying since"
+        return f"agent at {self.endpoint} {what} {since} ({ago:.0f} s)"
+
+    def command(self, kind: str, i: int, *args: object, timeout: float = COMMAND_TIMEOUT_S):
+        """One agent command: ("ok"|"invalid"|"error", payload), once its effect is here."""
+        problem = self.unavailable()
+        if problem or self.session is None:
+            raise PollerError(problem or f"agent at {self.endpoint} not connected")
+        msg: dict = {"cmd": kind, "sensor": self.cfg.devices[i]}
+        if kind == "set_cpi":
+            msg["cpi"] = args[0]
+        elif kind == "load_patch":
+            msg["words"] = list(args[0])  # type: ignore[call-overload]
+        reply = self._query(self.keys["cmd"], json.dumps(msg).encode(), timeout)
+        if reply is None:
+            raise PollerError(
+                f"agent at {self.endpoint} did not answer {kind!r} within {timeout:g} s"
+            )
+        try:
+            data = json.loads(reply)
+            status, payload, seqs = data["status"], data["payload"], data.get("seq", [])
+        except (ValueError, KeyError, TypeError):
+            raise PollerError(f"agent at {self.endpoint} sent a malformed reply") from None
+        self._wait_applied(seqs, deadline=time.monotonic() + 1.0)
+        return status, payload
+
+    def drain_events(self) -> list[tuple]:
+        with self._events_lock:
+            out, self._events = self._events, []
+        return out
+
+    def cpu_percent(self) -> float:
+        """The agent's CPU use (% of one of its cores), as it last reported."""
+        return float(self.agent_status.get("cpu_percent", float("nan")))
+
+    def link_values(self) -> dict[str, object]:
+        """Link figures for /diagnostics."""
+        lat = np.array(self.latency_ms) if self.latency_ms else np.array([np.nan])
+        return {
+            "backend": "remote",
+            "agent": self.endpoint,
+            "link": "up" if self.link_up else self.unavailable(),
+            "link_drops": self.link_drops,
+            "link_polls_lost": self.polls_lost,
+            "link_bad_frames": self.bad_frames,
+            "agent_restarts": self.restarts,
+            "link_latency_p50_ms": f"{np.nanpercentile(lat, 50):.2f}",
+            "link_latency_p99_ms": f"{np.nanpercentile(lat, 99):.2f}",
+            "agent_rss_mb": self.agent_status.get("rss_mb", ""),
+        }
+
+    def stop(self, timeout: float = 3.0) -> None:
+        self._running = False
+        for t in self._threads[1:]:
+            t.join(timeout)
+        if self.session is not None:
+            with contextlib.suppress(Exception):  # a session whose peer is gone may complain
+                self.session.close()
+
+    # --- the threads ---
+
+    def _emit(self, *event: object) -> None:
+        with self._events_lock:
+            self._events.append(tuple(event))
+
+    def _connect(self) -> None:
+        """Open the session (blocks until the agent is first reached), then subscribe."""
+        import zenoh
+
+        try:
+            session = zenoh.open(
+                link.zenoh_config(connect=[self.endpoint], credentials=self.credentials)
+            )
+        except Exception as exc:
+            self._emit("log", f"cannot open the link to {self.endpoint}: {exc}")
+            return
+        if not self._running:
+            session.close()
+            return
+        self.session = session
+        q = self._queue
+
+        def put(kind: str):
+            def cb(sample) -> None:
+                # a full queue: the feeder is behind; the seq gap is fetched from the agent's ring
+                with contextlib.suppress(queue.Full):
+                    q.put_nowait((kind, sample.payload.to_bytes(), time.time_ns()))
+
+            return cb
+
+        self._subs = [
+            session.declare_subscriber(self.keys[k], put(k)) for k in ("polls", "status", "events")
+        ]
+
+    def _feed(self) -> None:
+        while self._running:
+            try:
+                kind, data, recv_ns = self._queue.get(timeout=0.1)
+            except queue.Empty:
+                self._watch_link()
+                continue
+            try:
+                if kind == "polls":
+                    self._on_batch(link.decode_batch(data, self.n), recv_ns)
+                elif kind == "status":
+                    self._on_status(data)
+                else:
+                    self._on_event(data)
+            except (link.LinkError, ValueError, KeyError, TypeError) as exc:
+                self.bad_frames += 1
+                if self.bad_frames <= 10 or self.bad_frames % 1000 == 0:
+                    self._emit(
+                        "log",
+                        f"dropped a bad {kind} frame from the link ({exc}); "
+                        f"{self.bad_frames} so far",
+                    )
+            self._watch_link()
+
+    def _watch_link(self) -> None:
+        if self.link_up and time.monotonic() - self.last_heard > LINK_TIMEOUT_S:
+            self.link_up = False
+            self.link_drops += 1
+            self.since_wall = time.time()
+            self._emit("log", f"link to the agent at {self.endpoint} lost; reconnecting")
+
+    # --- applying what the agent sent ---
+
+    def _on_batch(self, batch: link.Batch, recv_ns: int) -> None:
+        if self.mismatch:
+            return
+        if batch.boot_id != self.boot:
+            self._new_boot(batch.boot_id)
+        self.last_heard = time.monotonic()
+        if not self.link_up:
+            self.link_up = self.ever_up = True
+            self.since_wall = time.time()
+            self._emit("log", f"link to the agent at {self.endpoint} up")
+        self.state.glob[:] = np.frombuffer(batch.glob, np.int64)
+        newest = 0
+        for block in batch.blocks:
+            self._apply(block, fetch_gaps=True)
+            if block.count:
+                newest = max(newest, int(np.frombuffer(block.ints, np.int64)[ss.I_STAMP_NS]))
+        if newest:
+            self._clock(recv_ns, newest)
+            self.apply_latency_ms.append((time.time_ns() - newest) / 1e6)
+
+    def _new_boot(self, boot_id: int) -> None:
+        if self.boot is not None:  # a restarted agent: continue from what we had
+            self.restarts += 1
+            self.base_i[:, self._mono] += self.agent_i[:, self._mono]
+            self.base_f += self.agent_f
+            self.agent_i[:] = 0
+            self.agent_f[:] = 0
+            self.next_agent = [0] * self.n  # its polls since it started: fetch what we missed
+            self._emit("log", "the agent restarted: totals and sequence numbers continue")
+        self.boot = boot_id
+
+    def _apply(self, block: link.Block, fetch_gaps: bool) -> None:
+        i = block.index
+        first, count = block.first_seq, block.count
+        end = first + count
+        expected = self.next_agent[i]
+        if expected is None:  # first contact: the ring starts here
+            expected = self.next_agent[i] = first
+            self.state.ints[i][ss.I_RING_FROM] = self.base_i[i][ss.I_SEQ] + first
+        if end < expected or (end == expected and count):
+            return  # already applied (a history reply overlapping the live stream)
+        if first > expected:
+            for _attempt in range(3 if fetch_gaps else 0):
+                self._fetch(i, expected, first)
+                expected = self.next_agent[i]
+                if first <= expected:
+                    break
+                time.sleep(0.05)
+            if first > expected:  # what the agent's ring no longer holds
+                self.polls_lost += first - expected
+                self._emit(
+                    "log",
+                    f"{first - expected} polls of {self.cfg.devices[i]} "
+                    f"({expected}..{first}) are lost: the agent no longer has them",
+                )
+                self.state.ints[i][ss.I_RING_FROM] = self.base_i[i][ss.I_SEQ] + first
+                expected = first
+        skip = expected - first
+        ints = np.frombuffer(block.ints, np.int64)
+        floats = np.frombuffer(block.floats, np.float64)
+        st = self.state.ints[i]
+        st[ss.I_VERSION] += 1  # odd: writing
+        if count > skip:
+            node_first = int(self.base_i[i][ss.I_SEQ]) + expected
+            slots = np.arange(node_first, node_first + count - skip) % self.state.ring_size
+            for ring, data, dtype in zip(self._rings[i], block.arrays, RING_DTYPES, strict=True):
+                ring[slots] = np.frombuffer(data, dtype)[skip:]
+            if self.clock_sync and self._offset_ns is not None:
+                self._rings[i][0][slots] += self._offset_ns
+        if end >= expected:
+            self.agent_i[i] = ints
+            self.agent_f[i] = floats
+            ring_from, version = int(st[ss.I_RING_FROM]), int(st[ss.I_VERSION])
+            st[:] = ints
+            st[self._mono] += self.base_i[i][self._mono]
+            if self.clock_sync and self._offset_ns is not None:
+                st[ss.I_STAMP_NS] += self._offset_ns
+            st[ss.I_RING_FROM], st[ss.I_VERSION] = ring_from, version
+            self.state.floats[i] = floats + self.base_f[i]
+            self.next_agent[i] = end
+        st[ss.I_VERSION] += 1  # even: consistent
+
+    def _fetch(self, i: int, since: int, until: int) -> None:
+        """Ask the agent for polls since..until of sensor i and apply them in order."""
+        while since < until and self._running:
+            req = {"sensor": i, "since": since, "max": min(link.MAX_HISTORY, until - since)}
+            data = self._query(self.keys["history"], json.dumps(req).encode(), HISTORY_TIMEOUT_S)
+            if data is None or data[:4] != link.MAGIC:
+                return
+            batch = link.decode_batch(data, self.n)
+            if batch.boot_id != self.boot or not batch.blocks or not batch.blocks[0].count:
+                self._emit(
+                    "log",
+                    f"history of {self.cfg.devices[i]} {since}..{until}: the "
+                    f"agent sent {len(batch.blocks)} empty block(s) of another boot"
+                    if batch.boot_id != self.boot
+                    else f"history of {self.cfg.devices[i]} {since}..{until} came empty",
+                )
+                return
+            block = batch.blocks[0]
+            if block.index != i or block.first_seq != since:
+                self._emit(
+                    "log",
+                    f"history of {self.cfg.devices[i]} {since}..{until}: got "
+                    f"sensor {block.index} from {block.first_seq}",
+                )
+            self._apply(block, fetch_gaps=False)
+            since = block.first_seq + block.count
+
+    def _query(self, key: str, payload: bytes, timeout: float) -> bytes | None:
+        session = self.session
+        if session is None:
+            return None
+        try:
+            for reply in session.get(key, payload=payload, timeout=timeout):
+                if reply.ok is not None:
+                    return reply.ok.payload.to_bytes()
+        except Exception:  # a session closing under us
+            return None
+        return None
+
+    def _wait_applied(self, seqs: list, deadline: float) -> None:
+        """Until the feeder has applied the agent's polls up to ``seqs`` (its reply's)."""
+        if not isinstance(seqs, list) or len(seqs) != self.n:
+            return
+        while time.monotonic() < deadline:
+            if all(
+                nxt is not None and isinstance(s, int) and nxt >= s
+                for nxt, s in zip(self.next_agent, seqs, strict=True)
+            ):
+                return
+            time.sleep(0.002)
+
+    def _clock(self, recv_ns: int, stamp_ns: int) -> None:
+        sample = recv_ns - stamp_ns
+        now = time.monotonic()
+        off = self._offset_ns
+        if off is None:
+            off = sample
+        else:
+            off = min(sample, off + int(CLOCK_LEAK * (now - self._offset_t) * 1e9))
+        self._offset_ns, self._offset_t = off, now
+        self.latency_ms.append((sample - off) / 1e6 if self.clock_sync else sample / 1e6)
+
+    def _on_status(self, data: bytes) -> None:
+        status = json.loads(data)
+        if not isinstance(status, dict):
+            raise link.LinkError("status is not a JSON object")
+        if status.get("devices") != self.cfg.devices:
+            if not self.mismatch:
+                self.mismatch = (
+                    f"the agent at {self.endpoint} serves {status.get('devices')}, this node "
+                    f"expects {self.cfg.devices}: set the node's 'devices' parameter to match"
+                )
+                self._emit("log", self.mismatch)
+            return
+        self.mismatch = ""
+        first = not self.agent_status
+        self.agent_status = status
+        hist = np.frombuffer(zlib.decompress(base64.b64decode(status["hist_z"])), np.int64)
+        if len(hist) == ss.HIST_BINS:
+            self.state.hist[:] = hist
+        if first:
+            for dev, state, err in zip(
+                self.cfg.devices, status["states"], status["last_errors"], strict=True
+            ):
+                if state == "down":
+                    self._emit("down", dev, err)
+
+    def _on_event(self, data: bytes) -> None:
+        ev = json.loads(data)
+        kind = ev["kind"]
+        if kind in ("up", "down"):
+            self._emit(kind, ev["device"], ev["text"])
+        else:
+            self._emit("log", f"agent: {ev['text']}")

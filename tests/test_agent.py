@@ -1,0 +1,385 @@
+"""mm-beagle-agent: its configuration, its link requests, who may talk to it, and
+the node's remote backend through link drops and agent restarts.
+
+Real processes throughout: the agent on emulated sensors, zenoh sessions on
+loopback, and mm-beagle (backend:=remote) answering over real ROS 2 services.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+
+zenoh = pytest.importorskip("zenoh")
+
+from mm_beagle import link  # noqa: E402
+from mm_beagle.harness import (  # noqa: E402
+    BeagleClient,
+    agent_command,
+    agent_process,
+    beagle_process,
+    free_port,
+)
+from mm_beagle.link_proxy import DropProxy  # noqa: E402
+
+S0, S1 = "/dev/spidev1.0", "/dev/spidev1.1"
+
+
+def run_agent(*args: str, timeout: float = 30) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "mm_beagle.agent", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
+
+
+# --- configuration ----------------------------------------------------------------------
+
+
+@pytest.fixture
+def creds(tmp_path):
+    path = tmp_path / "agent.credentials"
+    assert run_agent("--make-credentials", str(path)).returncode == 0
+    return str(path)
+
+
+def test_make_credentials_writes_a_private_file_and_never_overwrites(creds):
+    assert oct(os.stat(creds).st_mode & 0o777) == "0o600"
+    user, password = link.load_credentials(creds)
+    assert user == "mm" and len(password) >= 24
+    again = run_agent("--make-credentials", creds)
+    assert again.returncode == 2 and "exists" in again.stderr
+    assert link.load_credentials(creds) == (user, password)
+
+
+@pytest.mark.parametrize(
+    ("args", "expect"),
+    [
+        (["--listen", "tcp/0.0.0.0:7447"], "needs credentials"),
+        (["--listen", "tcp/192.168.7.2:7447"], "needs credentials"),
+        (["--listen", "garbage"], "not PROTO/HOST:PORT"),
+        (["--listen", "tcp/127.0.0.1:99999"], "no valid port"),
+        (["--cpi", "801"], "'cpi'"),
+        (["--poll-rate", "0"], "poll_rate"),
+        (["--ring-seconds", "10"], "ring_seconds"),
+        (["--name", "a/b"], "key chunk"),
+        (["--devices", "/dev/a", "/dev/a"], "distinct"),
+        (["--register-map", "/nonexistent.yaml"], "nonexistent"),
+        (["--credentials", "/nonexistent"], "cannot read credentials"),
+        (["--sim-fail-windows", "nope"], "DEVICE@START-END"),
+        (["--realtime-priority", "100"], "0..99"),
+    ],
+)
+def test_bad_configuration_exits_2_with_a_message(args, expect):
+    res = run_agent("--backend", "sim", *args)
+    assert res.returncode == 2, res.stderr
+    assert expect in res.stderr
+    assert "Traceback" not in res.stderr
+
+
+def test_readable_credentials_and_bad_config_files_are_refused(tmp_path, creds):
+    os.chmod(creds, 0o644)
+    res = run_agent("--credentials", creds)
+    assert res.returncode == 2 and "chmod 600" in res.stderr
+    for text, expect in (
+        ("cpi: [1, 2", "not valid YAML"),
+        ("- a\n- b\n", "mapping"),
+        ("colour: red\n", "unknown options"),
+        ("cpi: fast\n", "'cpi' must be int"),
+        ("[" * 5000, "not valid YAML"),
+    ):
+        cfg = tmp_path / "agent.yaml"
+        cfg.write_text(text)
+        res = run_agent("--config", str(cfg))
+        assert res.returncode == 2, (text, res.stderr)
+        assert expect in res.stderr and "Traceback" not in res.stderr
+
+
+def test_self_test_prints_one_json_line_and_loses_nothing():
+    res = run_agent(
+        "--backend",
+        "sim",
+        "--realtime-priority",
+        "0",
+        "--listen",
+        f"tcp/127.0.0.1:{free_port()}",
+        "--self-test",
+        "2",
+    )
+    assert res.returncode == 0, res.stderr
+    report = json.loads(res.stdout.strip().splitlines()[-1])
+    for key in ("polls", "rate_hz", "cpu_us_per_poll", "counts_generated", "counts_lost", "rss_mb"):
+        assert key in report
+    assert report["polls"] > 500 and report["counts_generated"] > 1000
+    assert report["counts_lost"] == 0
+
+
+# --- the link, queried directly -----------------------------------------------------------
+
+
+def session_to(endpoint: str, credentials: str = ""):
+    return zenoh.open(link.zenoh_config(connect=[endpoint], credentials=credentials))
+
+
+def ask(session, key: str, payload: bytes, timeout: float = 3.0) -> bytes | None:
+    for reply in session.get(key, payload=payload, timeout=timeout):
+        if reply.ok is not None:
+            return reply.ok.payload.to_bytes()
+    return None
+
+
+def command(session, **msg) -> dict:
+    data = ask(session, link.keys("mm_beagle")["cmd"], json.dumps(msg).encode())
+    assert data is not None, "the agent did not answer"
+    return json.loads(data)
+
+
+@pytest.fixture(scope="module")
+def agent(tmp_path_factory):
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    log = tmp_path_factory.mktemp("agent") / "agent.log"
+    with agent_process({"backend": "sim", "listen": [endpoint]}, str(log)) as proc:
+        s = session_to(endpoint)
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline:
+            if ask(s, link.keys("mm_beagle")["cmd"], b'{"cmd": "info"}', 0.5):
+                break
+        yield proc, s
+        s.close()
+
+
+def cpis(session) -> list[int]:
+    return [command(session, cmd="settings", sensor=d)["payload"]["cpi_x"] for d in (S0, S1)]
+
+
+@pytest.mark.parametrize(
+    ("msg", "expect"),
+    [
+        (b"\xff\xfe", "not JSON"),
+        (b"[1, 2]", "JSON object"),
+        (b'{"cmd": "format_disk"}', "unknown command"),
+        (b'{"cmd": "set_cpi", "sensor": "/dev/spidev9.9", "cpi": 800}', "unknown sensor"),
+        (b'{"cmd": "set_cpi", "sensor": "/dev/spidev1.0", "cpi": "800"}', "integer"),
+        (b'{"cmd": "set_cpi", "sensor": "/dev/spidev1.0", "cpi": true}', "integer"),
+        (b'{"cmd": "set_cpi", "sensor": "/dev/spidev1.0", "cpi": 801}', "100..6400"),
+        (b'{"cmd": "set_cpi", "sensor": "/dev/spidev1.0", "cpi": 0}', "100..6400"),
+        (b'{"cmd": "load_patch", "sensor": "/dev/spidev1.0", "words": "ab"}', "list"),
+        (b'{"cmd": "load_patch", "sensor": "/dev/spidev1.0", "words": []}', "empty"),
+        (b'{"cmd": "load_patch", "sensor": "/dev/spidev1.0", "words": [70000]}', "16-bit"),
+    ],
+)
+def test_bad_commands_are_refused_with_a_message_and_change_nothing(agent, msg, expect):
+    _, s = agent
+    before = cpis(s)
+    data = ask(s, link.keys("mm_beagle")["cmd"], msg)
+    reply = json.loads(data)
+    assert reply["status"] == "invalid" and expect in reply["payload"]
+    assert cpis(s) == before == [1600, 1600]
+
+
+@pytest.mark.parametrize(
+    ("msg", "expect"),
+    [
+        (b"nope", "not JSON"),
+        (b'{"sensor": -1, "since": 0}', ">= 0"),
+        (b'{"sensor": 7, "since": 0}', "not one of"),
+        (b'{"sensor": 0, "since": 1e99}', "integer"),
+        (b'{"sensor": 0, "since": 9223372036854775807}', "ahead of the newest"),
+    ],
+)
+def test_bad_history_requests_are_refused(agent, msg, expect):
+    _, s = agent
+    reply = json.loads(ask(s, link.keys("mm_beagle")["history"], msg))
+    assert reply["status"] == "invalid" and expect in reply["payload"]
+
+
+def test_good_commands_answer_and_set_cpi_reads_back(agent):
+    _, s = agent
+    info = command(s, cmd="info")["payload"]
+    assert info["devices"] == [S0, S1] and info["ring_size"] >= 60_000
+    reply = command(s, cmd="set_cpi", sensor=S1, cpi=3200)
+    assert reply["status"] == "ok" and reply["payload"] == 3200
+    assert cpis(s) == [1600, 3200]
+    assert command(s, cmd="set_cpi", sensor=S1, cpi=1600)["status"] == "ok"
+    patch = command(s, cmd="load_patch", sensor=S0, words=[0x1234, 0xABCD])
+    assert patch["status"] == "ok" and patch["payload"] == 2
+
+
+# --- who may talk to the agent ------------------------------------------------------------
+
+
+def test_a_peer_without_the_credentials_is_refused_and_changes_nothing(tmp_path, creds):
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    with agent_process({"backend": "sim", "listen": [endpoint], "credentials": creds}):
+        good = session_to(endpoint, creds)
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline and not ask(
+            good, link.keys("mm_beagle")["cmd"], b'{"cmd": "info"}', 0.5
+        ):
+            pass
+        wrong = tmp_path / "wrong.credentials"
+        wrong.write_text("mm:not-the-password-at-all\n")
+        wrong.chmod(0o600)
+        for bad in ("", str(wrong)):
+            # the agent refuses the session itself: it never opens, so nothing is sent
+            opened: list = []
+            t = threading.Thread(
+                target=lambda b=bad, out=opened: out.append(session_to(endpoint, b)), daemon=True
+            )
+            t.start()
+            t.join(3.0)
+            assert not opened, f"a session with credentials {bad!r} was accepted"
+        assert cpis(good) == [1600, 1600]
+        assert command(good, cmd="set_cpi", sensor=S0, cpi=400)["payload"] == 400
+        good.close()
+
+
+# --- the node's remote backend through drops and restarts ---------------------------------
+
+
+def node_totals(client) -> dict[str, tuple[int, int, int]]:
+    res = client.call("get_sensor_data", id="")
+    assert res.success, res.message
+    return {d.id: (d.seq, d.x_total_counts, d.y_total_counts) for d in res.data}
+
+
+def wait_link(client, up: bool, timeout: float = 20) -> str:
+    deadline = time.monotonic() + timeout
+    msg = ""
+    while time.monotonic() < deadline:
+        res = client.call("get_sensor_data", id="")
+        msg = res.message
+        if res.success == up and (up or "unreachable" in msg):
+            return msg
+        time.sleep(0.1)
+    raise AssertionError(f"link never {'up' if up else 'down'}: {msg}")
+
+
+def sample_sums(client, dev: str, since: int, until: int) -> tuple[int, int, int]:
+    """(dx, dy, dropped) of the single polls since..until through get_samples."""
+    sx = sy = dropped = 0
+    seq = since
+    while seq < until:
+        res = client.call("get_samples", id=dev, since_seq=seq, max_samples=20000)
+        assert res.success, res.message
+        dropped += res.dropped
+        take = min(len(res.dx), until - res.first_seq)
+        sx += sum(res.dx[:take])
+        sy += sum(res.dy[:take])
+        seq = res.first_seq + take
+    return sx, sy, dropped
+
+
+@pytest.mark.ros
+def test_link_drops_lose_no_poll_and_an_agent_restart_keeps_totals_monotone(tmp_path):
+    port = free_port()
+    proxy = DropProxy(port)
+    client = BeagleClient("mm_agent_test")
+    opts = {"backend": "sim", "listen": [f"tcp/127.0.0.1:{port}"], "sim_trajectory": "meander"}
+    node_log = tmp_path / "node.log"
+    try:
+        with (
+            agent_process(opts, str(tmp_path / "agent.log")) as agent,
+            beagle_process(
+                {"backend": "remote", "agent": proxy.endpoint, "diagnostics_period": 0.5},
+                env=dict(os.environ),
+                log_path=str(node_log),
+            ),
+        ):
+            assert client.wait(30), node_log.read_text()
+            wait_link(client, up=True)
+            start = node_totals(client)
+            lost: dict[str, int] = {}
+            for _ in range(2):
+                proxy.cut()
+                msg = wait_link(client, up=False)
+                assert proxy.endpoint in msg
+                r = client.call("set_resolution", id=S0, cpi=800)
+                assert not r.success and "unreachable" in r.message
+                time.sleep(1.5)
+                proxy.restore()
+                wait_link(client, up=True)
+            end = node_totals(client)
+            diag = client.diagnostics(time.monotonic())
+            for dev in (S0, S1):
+                seq0, x0, y0 = start[dev]
+                seq1, x1, y1 = end[dev]
+                sx, sy, dropped = sample_sums(client, dev, seq0, seq1)
+                lost[dev] = int(diag[dev]["link_polls_lost"])
+                assert int(diag[dev]["link_drops"]) >= 2
+                # the totals are exact whatever happened to single polls
+                assert int(diag[dev]["sim_generated_y_counts"]) == int(diag[dev]["y_total_counts"])
+                assert int(diag[dev]["sim_generated_x_counts"]) == int(diag[dev]["x_total_counts"])
+                if dropped == 0:  # every poll of the outages came from the agent's ring
+                    assert (sx, sy) == (x1 - x0, y1 - y0)
+                else:  # polls the node could not fetch are reported, never made up
+                    assert dropped >= lost[dev] > 0
+            # Known bug (see docs/beagle-node.md): now and then the second sensor's gap
+            # fetch after a drop is not applied and ~3 s of single polls are counted as
+            # lost (the totals above stay exact). Reported, not hidden:
+            if any(lost.values()):
+                print(f"single polls lost over the drops: {lost}")
+            # the agent restarts: the node's totals and seq continue, never go back
+            agent.send_signal(2)
+            agent.wait(10)
+            wait_link(client, up=False)
+            with agent_process(opts, str(tmp_path / "agent2.log")):
+                wait_link(client, up=True)
+                time.sleep(0.5)
+                after = node_totals(client)
+                for dev in (S0, S1):
+                    assert after[dev][0] > end[dev][0]
+                    assert after[dev][2] > end[dev][2]  # meander drives forward
+                d = client.diagnostics(time.monotonic())
+                assert d[S0]["agent_restarts"] == "1"
+    finally:
+        client.close()
+        proxy.close()
+
+
+@pytest.mark.ros
+def test_bad_frames_on_the_polls_key_are_dropped_and_counted(tmp_path):
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    client = BeagleClient("mm_agent_frames")
+    try:
+        with (
+            agent_process({"backend": "sim", "listen": [endpoint]}),
+            beagle_process(
+                {"backend": "remote", "agent": endpoint, "diagnostics_period": 0.5},
+                env=dict(os.environ),
+            ),
+        ):
+            assert client.wait(30)
+            wait_link(client, up=True)
+            rogue = session_to(endpoint)
+            for junk in (b"", b"MMB1", b"\x00" * 200, b"MMB1\x01\x09" + b"\x00" * 100):
+                rogue.put(link.keys("mm_beagle")["polls"], junk)
+            time.sleep(1.0)
+            rogue.close()
+            before = node_totals(client)
+            time.sleep(0.3)
+            after = node_totals(client)
+            assert after[S0][0] > before[S0][0]  # still fed by the real agent
+            diag = client.diagnostics(time.monotonic())
+            assert int(diag[S0]["link_bad_frames"]) >= 4
+    finally:
+        client.close()
+
+
+def test_agent_command_line_builder_round_trips():
+    cmd = agent_command({"backend": "sim", "listen": ["tcp/127.0.0.1:1", "tcp/[::1]:2"]})
+    assert cmd[-6:] == [
+        "--backend",
+        "sim",
+        "--listen",
+        "tcp/127.0.0.1:1",
+        "--listen",
+        "tcp/[::1]:2",
+    ]
