@@ -89,16 +89,6 @@ BEACON_COLOUR = "#7b2fbe"
 GPS_COLOUR = "#e6a800"
 
 
-_executor: concurrent.futures.ThreadPoolExecutor | None = None
-
-
-def _worker() -> concurrent.futures.ThreadPoolExecutor:
-    global _executor
-    if _executor is None:
-        _executor = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="maps-sim")
-    return _executor
-
-
 # --- the view ----------------------------------------------------------------------------------
 
 
@@ -412,7 +402,10 @@ class MapsView(QWidget):
         self.error.hide()
         self.sim_button.setEnabled(False)
         self.status.setText(f"simulating the mowing run (seed {seed})…")
-        self._future = _worker().submit(build_sim_run, seed)
+        # one thread for this run, no module-wide pool: it ends when the run is built
+        worker = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="maps-sim")
+        self._future = worker.submit(build_sim_run, seed)
+        worker.shutdown(wait=False)
         self.timer.start()
 
     @property
