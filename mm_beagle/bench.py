@@ -1,20 +1,20 @@
 """mm-bench: benchmarks that print one JSON object.
 
 mm-bench pose --json
-    Every odometry method of mm_pc.odometry on the same simulated runs
+    Every odometry method of mm_pc.core.odometry on the same simulated runs
     (figure eight, meander; 1 kHz and 15 Hz requests; noise-free and noisy):
     final/heading/RMS error, calibration error, update/integrate samples/s.
-    See mm_pc.bench_pose.
+    See mm_pc.bench.pose.
 
 mm-bench maps --json
     Coverage grid update/init times, trilateration fixes/s and error vs
     noise, raw vs fused drift after a simulated 200 m mowing run.
-    See mm_pc.bench_maps.
+    See mm_pc.bench.maps.
 
 mm-bench gui [--hours H] [--rate HZ] [--frames N] --json
     The real monitor window offscreen with H hours of simulated history at
     HZ, polling a real mm-beagle sim node at HZ: frame time p50/p95 (all
-    tabs and per tab), memory, dropped requests. See mm_pc.monitor.bench_gui.
+    tabs and per tab), memory, dropped requests. See mm_pc.bench.gui.
 
 mm-bench agent [--seconds S] [--drops N] [--drop-seconds D] --json
     The board agent (mm-beagle-agent): CPU per poll with a stub bus (x86, and
@@ -283,18 +283,18 @@ def main(argv: list[str] | None = None) -> int:
             parser.error("need --seconds >= 1, --drops >= 0, --drop-seconds > 0")
         result = bench_agent(args.seconds, args.drops, args.drop_seconds)
     elif args.what == "gui":
-        from mm_pc.monitor.bench_gui import bench_gui
+        from mm_pc.bench.gui import bench_gui
 
         try:
             result = bench_gui(hours=args.hours, rate_hz=args.rate, frames=args.frames)
         except ValueError as e:
             parser.error(str(e))
     elif args.what == "maps":
-        from mm_pc.bench_maps import bench_maps
+        from mm_pc.bench.maps import bench_maps
 
         result = bench_maps()
     elif args.what == "pose":
-        from mm_pc.bench_pose import bench_pose
+        from mm_pc.bench.pose import bench_pose
 
         result = bench_pose()
     elif args.what == "poll":

@@ -28,7 +28,7 @@ from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 
 from mm_interfaces.msg import SensorData
-from mm_pc import ros_spin
+from mm_pc.ros import spin as ros_spin
 
 from . import messages
 from . import shared_state as ss
@@ -276,8 +276,8 @@ class BeagleNode(Node):
         """Optional: integrate every 1 kHz poll here and publish ~/odom (same math, same msg)."""
         from nav_msgs.msg import Odometry as OdometryMsg
 
-        from mm_pc.odometry_node import odometry_message
-        from mm_pc.uncertainty import PoseUncertainty
+        from mm_pc.core.uncertainty import PoseUncertainty
+        from mm_pc.ros.odometry_node import odometry_message
 
         from .onboard_odometry import OnboardOdometry
 

@@ -2,7 +2,7 @@
 
 The seed's improvement "move more to the BBB": instead of the PC's request
 rate, the pose is integrated over the single polls in the ring buffer with
-the same pose math (:mod:`mm_pc.odometry`, vectorised) and published as the
+the same pose math (:mod:`mm_pc.core.odometry`, vectorised) and published as the
 same nav_msgs/Odometry as mm-odometry's. Counts lost to lifts are not added
 here (the gap estimate is a sum, not per poll).
 """
@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from mm_pc.calibration import Calibration
-from mm_pc.geometry import SensorMount
-from mm_pc.odometry import Odometry, Pose2D
+from mm_pc.core.calibration import Calibration
+from mm_pc.core.geometry import SensorMount
+from mm_pc.core.odometry import Odometry, Pose2D
 from pln2033 import INCH_M
 
 from .params import OdometrySettings

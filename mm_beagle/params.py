@@ -181,7 +181,7 @@ def declare(node: Node) -> NodeSettings:
         fail_windows=fails,
     )
     if p["backend"] == "sim":
-        from mm_pc.simulator import TRAJECTORIES
+        from mm_pc.sim.robot import TRAJECTORIES
 
         if sim.trajectory not in TRAJECTORIES:
             raise ValueError(

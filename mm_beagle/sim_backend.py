@@ -58,7 +58,7 @@ def make_sim_buses(cfg, t0: float) -> dict[str, object]:
 
     import numpy as np
 
-    from mm_pc import simulator
+    from mm_pc.sim import robot as simulator
     from pln2033.emulator import EmulatedPLN2033
     from pln2033.motion import SampledPath
 

@@ -28,7 +28,7 @@ DEFAULT_SCREENSHOT = "demo-output/mm-monitor.png"
 
 
 def _parser() -> argparse.ArgumentParser:
-    from ..odometry import METHODS
+    from mm_pc.core.odometry import METHODS
 
     p = argparse.ArgumentParser(prog="mm-monitor", description=__doc__.split("\n\n")[0])
     p.add_argument("--beagle", default="/mm_beagle", help="namespace/name of the mm_beagle node")
@@ -98,8 +98,8 @@ def summary(window, seconds: float) -> str:
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     try:
-        from ..calibration import Calibration  # noqa: F401 - fail early on a broken install
-        from .ros_bridge import validate_rate
+        from mm_pc.core.calibration import Calibration  # noqa: F401 - fail early on a broken install
+        from mm_pc.monitor.ros_bridge import validate_rate
 
         validate_rate(args.rate)
     except ValueError as e:
@@ -140,11 +140,10 @@ def _run(args, headless: bool) -> int:
     from PySide6.QtWidgets import QApplication
 
     from mm_beagle.harness import beagle_process, use_isolated_ros_env
-
-    from .context import MonitorConfig, MonitorContext
-    from .export import grab_png
-    from .main_window import MainWindow
-    from .session import MonitorSession
+    from mm_pc.monitor.context import MonitorConfig, MonitorContext
+    from mm_pc.monitor.export import grab_png
+    from mm_pc.monitor.main_window import MainWindow
+    from mm_pc.monitor.model.session import MonitorSession
 
     config = MonitorConfig(beagle=args.beagle, rate_hz=args.rate, method=args.method)
     if args.calibration is not None:
@@ -165,7 +164,7 @@ def _run(args, headless: bool) -> int:
         app.setApplicationName("Mouse Monitor")
         bridge = None
         if args.replay is None:
-            from .ros_bridge import RosBridge
+            from mm_pc.monitor.ros_bridge import RosBridge
 
             bridge = RosBridge(args.beagle, args.rate)
         session = MonitorSession(method=args.method)
@@ -182,7 +181,7 @@ def _run(args, headless: bool) -> int:
             bridge.start()
             stack.callback(bridge.stop)
         if args.replay is not None:
-            from .replay import start_replay
+            from mm_pc.monitor.replay import start_replay
 
             start_replay(window, args.replay)
         # Python signal handlers run only between bytecodes: wake the interpreter regularly.

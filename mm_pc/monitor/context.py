@@ -14,10 +14,10 @@ from pathlib import Path
 
 from PySide6.QtCore import QObject, Signal
 
-from ..calibration import Calibration
-from ..geometry import DEFAULT_GEOMETRY, RobotGeometry
-from .readings import Reply
-from .session import MonitorSession
+from mm_pc.core.calibration import Calibration
+from mm_pc.core.geometry import DEFAULT_GEOMETRY, RobotGeometry
+from mm_pc.monitor.model.readings import Reply
+from mm_pc.monitor.model.session import MonitorSession
 
 __all__ = ["MonitorConfig", "MonitorContext", "default_calibration_path"]
 

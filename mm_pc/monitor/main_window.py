@@ -29,9 +29,9 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from ..odometry import METHODS
-from .context import MonitorContext
-from .ros_bridge import validate_rate
+from mm_pc.core.odometry import METHODS
+from mm_pc.monitor.context import MonitorContext
+from mm_pc.monitor.ros_bridge import validate_rate
 
 __all__ = ["FRAME_HZ", "MainWindow"]
 
@@ -120,13 +120,13 @@ class MainWindow(QMainWindow):
     # -- construction -------------------------------------------------------------------
 
     def _build_views(self) -> None:
-        from .data_list import DataListView
-        from .debug_view import DebugView
-        from .graphs_view import GraphsView
-        from .health_view import HealthView
-        from .map_view import MapView
-        from .maps_view import MapsView
-        from .registers_view import RegistersView
+        from mm_pc.monitor.widgets.data_list import DataListView
+        from mm_pc.monitor.widgets.debug_view import DebugView
+        from mm_pc.monitor.widgets.graphs_view import GraphsView
+        from mm_pc.monitor.widgets.health_view import HealthView
+        from mm_pc.monitor.widgets.map_view import MapView
+        from mm_pc.monitor.widgets.maps_view import MapsView
+        from mm_pc.monitor.widgets.registers_view import RegistersView
 
         for title, cls in (
             ("Map", MapView),
@@ -142,7 +142,7 @@ class MainWindow(QMainWindow):
             self.tabs.addTab(view, title)
 
     def _build_control_dock(self) -> None:
-        from .resolution_panel import ResolutionPanel
+        from mm_pc.monitor.widgets.resolution_panel import ResolutionPanel
 
         panel = QWidget()
         lay = QVBoxLayout(panel)
@@ -204,7 +204,7 @@ class MainWindow(QMainWindow):
         self.addDockWidget(Qt.LeftDockWidgetArea, dock)
 
     def _build_direction_dock(self) -> None:
-        from .direction_widget import DirectionPanel
+        from mm_pc.monitor.widgets.direction_widget import DirectionPanel
 
         self.direction_panel = DirectionPanel(self.ctx, self)
         dock = QDockWidget("Direction", self)
@@ -303,34 +303,34 @@ class MainWindow(QMainWindow):
         dialog.open()
 
     def open_calibration_wizard(self) -> None:
-        from .calibration_wizard import CalibrationWizard
+        from mm_pc.monitor.widgets.calibration_wizard import CalibrationWizard
 
         self._open_dialog(CalibrationWizard(self.ctx, self))
 
     def open_filter_dialog(self) -> None:
-        from .filter_dialog import FilterDialog
+        from mm_pc.monitor.widgets.filter_dialog import FilterDialog
 
         self._open_dialog(FilterDialog(self.ctx, self))
 
     def open_geometry_dialog(self) -> None:
-        from .geometry_dialog import GeometryDialog
+        from mm_pc.monitor.widgets.geometry_dialog import GeometryDialog
 
         self._open_dialog(GeometryDialog(self.ctx, self))
 
     def open_log_dialog(self) -> None:
-        from .log_dialog import LogDialog
+        from mm_pc.monitor.widgets.log_dialog import LogDialog
 
         dialog = LogDialog(self.ctx, self)
         dialog.setAttribute(Qt.WA_DeleteOnClose)
         dialog.show()
 
     def toggle_recording(self) -> None:
-        from .recording import toggle_recording
+        from mm_pc.monitor.recording import toggle_recording
 
         toggle_recording(self)
 
     def open_replay(self) -> None:
-        from .replay import open_replay
+        from mm_pc.monitor.replay import open_replay
 
         open_replay(self)
 
@@ -344,7 +344,7 @@ class MainWindow(QMainWindow):
         self.statusBar().showMessage("replay stopped", 3000)
 
     def export_png(self) -> None:
-        from .export import export_current_view
+        from mm_pc.monitor.export import export_current_view
 
         export_current_view(self)
 

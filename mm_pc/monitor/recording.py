@@ -41,7 +41,7 @@ from types import SimpleNamespace
 from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import QFileDialog, QLabel
 
-from .readings import Reading, Reply
+from mm_pc.monitor.model.readings import Reading, Reply
 
 __all__ = [
     "META_TOPIC",

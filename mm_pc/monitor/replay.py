@@ -32,9 +32,9 @@ import numpy as np
 from PySide6.QtCore import QObject, Qt, QTimer, Signal
 from PySide6.QtWidgets import QFileDialog, QInputDialog
 
-from .readings import Reply
-from .recording import read_replies
-from .session import MonitorSession
+from mm_pc.monitor.model.readings import Reply
+from mm_pc.monitor.model.session import MonitorSession
+from mm_pc.monitor.recording import read_replies
 
 __all__ = ["SPEEDS", "Replayer", "open_replay", "parse_speed", "start_replay"]
 

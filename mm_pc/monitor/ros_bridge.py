@@ -32,7 +32,7 @@ from typing import ClassVar
 
 from PySide6.QtCore import QObject, Signal
 
-from .readings import Reading, Reply
+from mm_pc.monitor.model.readings import Reading, Reply
 
 __all__ = ["MAX_RATE_HZ", "MIN_RATE_HZ", "BridgeStats", "RosBridge", "validate_rate"]
 

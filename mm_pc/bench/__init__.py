@@ -1,0 +1,1 @@
+"""mm-bench's pose, maps and gui benchmarks."""

@@ -1,0 +1,1 @@
+"""Absolute fixes for fusion: wheels, GPS, NMEA, the perimeter wire."""

@@ -1,0 +1,1 @@
+"""Fusion: the pose EKF, its input records and the one fusion loop."""

@@ -1,0 +1,1 @@
+"""Maps: the coverage grid and beacon trilateration."""

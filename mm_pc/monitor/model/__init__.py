@@ -1,0 +1,1 @@
+"""The monitor's model: no Qt, no rclpy (readings, history, session)."""

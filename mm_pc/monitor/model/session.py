@@ -1,0 +1,373 @@
+"""The monitor's processing pipeline, without Qt or ROS.
+
+Every reply of mm_beagle (live, or replayed from a recording) goes through
+:meth:`MonitorSession.process`:
+
+1. **Deltas from the monotone totals.** The displacement of a sensor since
+   the previous reply is ``total - previous total`` (plus the node's lift-gap
+   estimates when enabled). A slow reply therefore just covers a longer
+   interval: nothing is counted twice and nothing is lost, whatever the
+   network does; and the monitor takes no counts away from other clients.
+   A ``seq`` that goes back means the node restarted: the reply becomes the
+   new baseline (an event is logged; no jump on the map).
+2. **Median filter** per sensor and axis (optional, :mod:`mm_pc.core.filters`).
+3. **Calibration** (mounting angle and scale, :mod:`mm_pc.core.calibration`).
+4. **Pose math** (:mod:`mm_pc.core.odometry`, method selectable) -- unless the
+   calibration wizard is recording a straight run: then the raw sums grow and
+   the robot stays where it is (no pose from uncalibrated data).
+5. One row in the :class:`~.history.History` per reply, read by the views.
+
+Units and frames: metres, seconds, radians. Sensor displacements are in the
+sensor frame of the seed (X right, Y forward); poses are odom -> base_link
+(REP 103/105). Sensor world positions are the mount points carried by the pose.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+from mm_pc.core.calibration import Calibration, calibrate_straight_run
+from mm_pc.core.filters import SensorMedianFilter
+from mm_pc.core.geometry import DEFAULT_MOUNTS, SensorMount
+from mm_pc.core.odometry import METHODS, Odometry, Pose2D, Sample
+from mm_pc.monitor.model.history import History
+from mm_pc.monitor.model.readings import Reading, Reply
+
+__all__ = ["LogEntry", "MonitorSession", "SessionStats", "sensor_columns"]
+
+#: Per-sensor history columns (prefixed ``s0_``, ``s1_``, ...):
+#: raw_dx/raw_dy  displacement served for the interval (m, sensor frame)
+#: dx/dy          after the median filter and the calibration (m)
+#: vx/vy          dx/dt, dy/dt (m/s)
+#: wx/wy          the sensor's position in odom (m)
+#: lifts          polls with the lift bit set in the interval
+#: cpi            resolution in force
+SENSOR_FIELDS = ("raw_dx", "raw_dy", "dx", "dy", "vx", "vy", "wx", "wy", "lifts", "cpi")
+#: Robot columns: t (s since the first reply), dt (s), rtt (s), x/y/yaw (odom, m, rad),
+#: residual (m; two-sensor method only, else NaN), calibrating (1 while the wizard records).
+ROBOT_FIELDS = ("t", "dt", "rtt", "x", "y", "yaw", "residual", "calibrating")
+
+
+def sensor_columns(k: int) -> dict[str, str]:
+    """Field name -> column name for sensor ``k``."""
+    return {f: f"s{k}_{f}" for f in SENSOR_FIELDS}
+
+
+@dataclass(frozen=True)
+class LogEntry:
+    """One line of the log dialog: raw and processed values of one sensor in one reply."""
+
+    t: float
+    sensor: str
+    x_counts: int
+    y_counts: int
+    raw_dx: float
+    raw_dy: float
+    dx: float
+    dy: float
+    x_speed: float
+    y_speed: float
+    cpi: int
+    samples: int
+    lift_events: int
+
+
+@dataclass
+class SessionStats:
+    """Counters the health view and the benchmarks read."""
+
+    replies: int = 0
+    used: int = 0
+    baselines: int = 0
+    restarts: int = 0
+    incomplete: int = 0
+    rejected: int = 0
+    events: deque = field(default_factory=lambda: deque(maxlen=200))
+
+
+class MonitorSession:
+    """State of one monitoring session: baselines, filters, calibration, odometry, history.
+
+    ``devices``: sensor ids in mount order; None = take them from the first
+    reply (in the order served). ``mounts``: one :class:`SensorMount` per
+    device (base_link); default: the original robot's two mounts.
+    """
+
+    def __init__(
+        self,
+        devices: Sequence[str] | None = None,
+        mounts: Sequence[SensorMount] | None = None,
+        method: str = "exact",
+        sensor: int = 0,
+        calibration: Calibration | None = None,
+        use_lift_estimates: bool = True,
+        max_rows: int = 1_000_000,
+        log_length: int = 5000,
+    ) -> None:
+        if method not in METHODS:
+            raise ValueError(f"unknown pose method {method!r}; known: {', '.join(sorted(METHODS))}")
+        self._mounts = tuple(mounts) if mounts is not None else DEFAULT_MOUNTS
+        self._method = method
+        self._sensor = sensor
+        self.calibration = calibration if calibration is not None else Calibration()
+        self.use_lift_estimates = bool(use_lift_estimates)
+        self.max_rows = max_rows
+        self.stats = SessionStats()
+        self.log: deque[LogEntry] = deque(maxlen=log_length)
+        self.filters: dict[str, SensorMedianFilter] = {}
+        self._prev: dict[str, Reading] = {}
+        self._t0_ns: int | None = None
+        self._cal_sums: dict[str, list[float]] | None = None
+        self.devices: tuple[str, ...] = ()
+        self.history: History | None = None
+        self.odometry: Odometry | None = None
+        if devices is not None:
+            self._set_devices(tuple(devices))
+
+    # -- configuration ------------------------------------------------------------
+
+    def _set_devices(self, devices: tuple[str, ...]) -> None:
+        if not devices or len(set(devices)) != len(devices) or not all(devices):
+            raise ValueError(f"devices must be unique, non-empty sensor ids, got {devices!r}")
+        mounts = self._mounts_for(len(devices))
+        odometry = Odometry(mounts, self._method, min(self._sensor, len(devices) - 1))
+        self.devices = devices
+        self._mounts = mounts
+        self.odometry = odometry
+        self.filters = {d: self.filters.get(d, SensorMedianFilter()) for d in devices}
+        cols = list(ROBOT_FIELDS)
+        for k in range(len(devices)):
+            cols += sensor_columns(k).values()
+        self.history = History(cols, max_rows=self.max_rows)
+
+    def _mounts_for(self, n: int) -> tuple[SensorMount, ...]:
+        if len(self._mounts) >= n:
+            return tuple(self._mounts[:n])
+        raise ValueError(f"{n} sensors need {n} mounts, the geometry has {len(self._mounts)}")
+
+    @property
+    def mounts(self) -> tuple[SensorMount, ...]:
+        return self._mounts
+
+    @property
+    def method(self) -> str:
+        return self._method
+
+    @property
+    def sensor(self) -> int:
+        """Index of the sensor the one-sensor methods use."""
+        return self._sensor
+
+    def configure_odometry(
+        self,
+        method: str | None = None,
+        mounts: Sequence[SensorMount] | None = None,
+        sensor: int | None = None,
+    ) -> None:
+        """Change the pose method, geometry or sensor; the pose carries on from where it is.
+
+        Raises ValueError (nothing changed) for an unknown method, a wrong
+        number of mounts, a sensor on the axle line for the one-sensor
+        methods, or a bad sensor index.
+        """
+        method = self._method if method is None else method
+        mounts_t = self._mounts if mounts is None else tuple(mounts)
+        sensor = self._sensor if sensor is None else sensor
+        if method not in METHODS:
+            raise ValueError(f"unknown pose method {method!r}; known: {', '.join(sorted(METHODS))}")
+        if self.devices and len(mounts_t) != len(self.devices):
+            raise ValueError(
+                f"the geometry needs one mount per sensor ({len(self.devices)}), "
+                f"got {len(mounts_t)}"
+            )
+        if self.devices:
+            pose = self.odometry.pose if self.odometry else None
+            new = Odometry(mounts_t, method, sensor, pose=pose)  # raises before any change
+            self.odometry = new
+        else:
+            Odometry(mounts_t, method, sensor)  # validate only
+        self._method, self._mounts, self._sensor = method, mounts_t, sensor
+
+    # -- calibration wizard ----------------------------------------------------------
+
+    @property
+    def calibrating(self) -> bool:
+        """True while the wizard records a straight run (the robot does not move)."""
+        return self._cal_sums is not None
+
+    def start_calibration(self) -> None:
+        """Begin a straight run: zero the raw sums; the pose stops until finished or cancelled."""
+        self._cal_sums = {d: [0.0, 0.0] for d in self.devices}
+
+    def calibration_sums(self) -> dict[str, tuple[float, float]]:
+        """Raw (unfiltered, uncalibrated) summed X, Y (m) per sensor since the run began."""
+        if self._cal_sums is None:
+            return {}
+        return {d: (v[0], v[1]) for d, v in self._cal_sums.items()}
+
+    def compute_calibration(
+        self, true_distance: float | None = None, min_distance: float = 0.05
+    ) -> Calibration:
+        """The calibration of every sensor from the run so far (does not apply it).
+
+        Raises ValueError naming the sensor when a run is too short, sideways
+        or the true distance is bad.
+        """
+        if self._cal_sums is None:
+            raise ValueError("no calibration run in progress; start one first")
+        cal = Calibration()
+        for dev, (x, y) in self.calibration_sums().items():
+            try:
+                cal[dev] = calibrate_straight_run(x, y, true_distance, min_distance)
+            except ValueError as e:
+                raise ValueError(f"{dev}: {e}") from None
+        return cal
+
+    def finish_calibration(self, calibration: Calibration | None) -> None:
+        """End the run; apply ``calibration`` if given (None = keep the old one)."""
+        self._cal_sums = None
+        if calibration is not None:
+            self.calibration = calibration
+
+    # -- filters ----------------------------------------------------------------------
+
+    def set_filter(self, device: str, window: int, filter_x: bool, filter_y: bool) -> None:
+        """Median filter settings of one sensor; ValueError (nothing changed) on bad input."""
+        if device not in self.filters:
+            raise ValueError(f"unknown sensor {device!r}; known: {', '.join(self.filters)}")
+        f = self.filters[device]
+        f.window = window  # validates first
+        f.filter_x, f.filter_y = bool(filter_x), bool(filter_y)
+
+    def clear_filters(self) -> None:
+        """Disable every filter and forget their history."""
+        for f in self.filters.values():
+            f.filter_x = f.filter_y = False
+            f.reset()
+
+    # -- processing --------------------------------------------------------------------
+
+    def _total(self, r: Reading) -> tuple[float, float]:
+        if self.use_lift_estimates:
+            return r.x_total + r.x_lift_total, r.y_total + r.y_lift_total
+        return r.x_total, r.y_total
+
+    def process(self, reply: Reply) -> bool:
+        """Take one reply; True when it produced a history row.
+
+        A reply missing a sensor is kept for nobody: the baselines stay, so
+        the next complete reply covers the gap (no count lost).
+        """
+        self.stats.replies += 1
+        if not self.devices:
+            if not reply.readings:
+                self.stats.incomplete += 1
+                return False
+            self._set_devices(tuple(r.id for r in reply.readings))
+        by_id = reply.by_id()
+        if any(d not in by_id for d in self.devices):
+            self.stats.incomplete += 1
+            return False
+        now = [by_id[d] for d in self.devices]
+        if not all(math.isfinite(v) for r in now for v in (*self._total(r), r.stamp_ns)):
+            self.stats.rejected += 1
+            self.stats.events.append(("rejected", "a reply with a non-finite total"))
+            return False
+        prev = [self._prev.get(d) for d in self.devices]
+        if any(p is None for p in prev) or any(
+            r.seq < p.seq for r, p in zip(now, prev, strict=True)
+        ):
+            restarted = all(p is not None for p in prev)
+            self._baseline(now, restarted)
+            return False
+        dt = (now[0].stamp_ns - prev[0].stamp_ns) / 1e9
+        if dt <= 0:
+            return False  # nothing new was polled since the previous reply
+        self._step(reply, now, prev, dt)
+        for r in now:
+            self._prev[r.id] = r
+        return True
+
+    def _baseline(self, now: list[Reading], restarted: bool) -> None:
+        for r in now:
+            self._prev[r.id] = r
+        if self._t0_ns is None:
+            self._t0_ns = now[0].stamp_ns
+        self.stats.baselines += 1
+        if restarted:
+            self.stats.restarts += 1
+            self.stats.events.append(("restart", "the Beagle node restarted; new baseline"))
+
+    def _step(self, reply: Reply, now: list[Reading], prev: list[Reading], dt: float) -> None:
+        t = (now[0].stamp_ns - self._t0_ns) / 1e9
+        raw, processed = [], []
+        for r, p in zip(now, prev, strict=True):
+            (x1, y1), (x0, y0) = self._total(r), self._total(p)
+            rx, ry = x1 - x0, y1 - y0
+            raw.append((rx, ry))
+            fx, fy = self.filters[r.id].push(rx, ry)
+            processed.append(self.calibration.apply(r.id, fx, fy))
+        if self._cal_sums is not None:
+            for dev, (rx, ry) in zip(self.devices, raw, strict=True):
+                s = self._cal_sums.setdefault(dev, [0.0, 0.0])
+                s[0] += rx
+                s[1] += ry
+            pose = self.odometry.pose
+        else:
+            pose = self.odometry.update(Sample.of(dt, *processed))
+        self.stats.used += 1
+        residual = self.odometry.residual
+        row = [
+            t,
+            dt,
+            reply.rtt_s,
+            pose.x,
+            pose.y,
+            pose.yaw,
+            math.nan if residual is None else residual,
+            1.0 if self._cal_sums is not None else 0.0,
+        ]
+        c, s = math.cos(pose.yaw), math.sin(pose.yaw)
+        for r, (rx, ry), (dx, dy), m in zip(now, raw, processed, self._mounts, strict=True):
+            wx, wy = pose.x + c * m.x - s * m.y, pose.y + s * m.x + c * m.y
+            row += [rx, ry, dx, dy, dx / dt, dy / dt, wx, wy, r.lift_events, r.cpi]
+            self.log.append(
+                LogEntry(
+                    t, r.id, r.x_counts, r.y_counts, rx, ry, dx, dy,
+                    r.x_speed, r.y_speed, r.cpi, r.samples, r.lift_events,
+                )
+            )
+        self.history.append(row)
+
+    def forget_baselines(self, keep_t0: bool = True) -> None:
+        """Take the next reply as a new baseline (switching between live and recorded data).
+
+        Without this the first reply of the other source would be taken as a
+        delta against this source's totals. ``keep_t0=False`` also restarts
+        the time axis at the next reply.
+        """
+        self._prev.clear()
+        if not keep_t0:
+            self._t0_ns = None
+
+    # -- reset ------------------------------------------------------------------------------
+
+    @property
+    def pose(self) -> Pose2D:
+        return self.odometry.pose if self.odometry else Pose2D()
+
+    def reset(self) -> None:
+        """Clear paths, graphs and the pose (back to the origin); the baselines stay,
+        so the counts from now on continue without a jump."""
+        if self.odometry is not None:
+            self.odometry.reset()
+        if self.history is not None:
+            self.history.clear()
+        for f in self.filters.values():
+            f.reset()
+        self.log.clear()
+        if self._prev and self.devices:
+            self._t0_ns = self._prev[self.devices[0]].stamp_ns

@@ -1,0 +1,1 @@
+"""The monitor's Qt widgets: they draw and forward user intent only."""

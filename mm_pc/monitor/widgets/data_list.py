@@ -1,0 +1,345 @@
+"""The plain data list: one table per sensor, newest reply first, copyable and exportable.
+
+The table model reads the history's columns in place (no per-frame copy):
+row ``r`` of the table is history row ``len - 1 - r``. At most
+:data:`MAX_ROWS` of the newest rows are listed; the CSV export writes all
+rows the history holds. New replies are announced to the view as rows
+inserted at the top, so a selection stays on the rows it was made on.
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+from PySide6.QtCore import QAbstractTableModel, QEvent, QModelIndex, Qt, Signal
+from PySide6.QtGui import QGuiApplication, QKeySequence
+from PySide6.QtWidgets import (
+    QAbstractItemView,
+    QFileDialog,
+    QHBoxLayout,
+    QHeaderView,
+    QLabel,
+    QPushButton,
+    QTableView,
+    QTabWidget,
+    QVBoxLayout,
+    QWidget,
+)
+
+from mm_pc.monitor.model.history import History
+from mm_pc.monitor.model.session import sensor_columns
+from mm_pc.monitor.widgets.style import ERROR_STYLE
+
+__all__ = ["COLUMNS", "MAX_ROWS", "DataListView", "HistoryTableModel", "export_csv"]
+
+#: Rows listed per sensor (the newest); the CSV export has them all.
+MAX_ROWS = 100_000
+
+#: (header with unit, field: "t" or a sensor field, scale from SI, format)
+COLUMNS: tuple[tuple[str, str, float, str], ...] = (
+    ("t (s)", "t", 1.0, "{:.3f}"),
+    ("dX (mm)", "dx", 1e3, "{:.4f}"),
+    ("dY (mm)", "dy", 1e3, "{:.4f}"),
+    ("raw dX (mm)", "raw_dx", 1e3, "{:.4f}"),
+    ("raw dY (mm)", "raw_dy", 1e3, "{:.4f}"),
+    ("vX (mm/s)", "vx", 1e3, "{:.2f}"),
+    ("vY (mm/s)", "vy", 1e3, "{:.2f}"),
+    ("lifts", "lifts", 1.0, "{:.0f}"),
+    ("CPI", "cpi", 1.0, "{:.0f}"),
+)
+#: CSV header names (units in the name; dX/dY processed = filtered and calibrated)
+CSV_HEADER = (
+    "t_s", "dx_mm", "dy_mm", "raw_dx_mm", "raw_dy_mm", "vx_mm_s", "vy_mm_s", "lifts", "cpi",
+)
+
+
+_DISPLAY = Qt.ItemDataRole.DisplayRole
+_ALIGNMENT_ROLE = Qt.ItemDataRole.TextAlignmentRole
+_RIGHT = Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignVCenter
+_HORIZONTAL = Qt.Orientation.Horizontal
+
+
+def _column_name(sensor_index: int, field: str) -> str:
+    return field if field == "t" else sensor_columns(sensor_index)[field]
+
+
+def export_csv(history: History | None, sensor_index: int, path: str | Path) -> int:
+    """Write every row of one sensor to a CSV file, oldest first; returns the row count.
+
+    Columns (header line first): t_s, dx_mm, dy_mm (processed), raw_dx_mm,
+    raw_dy_mm, vx_mm_s, vy_mm_s, lifts, cpi. Raises ValueError for no data or
+    a sensor the history does not have (no file written), OSError when the
+    file cannot be written.
+    """
+    if history is None:
+        raise ValueError("no data yet: nothing to export")
+    names = [_column_name(sensor_index, f) for _h, f, _s, _f in COLUMNS]
+    missing = [n for n in names if n not in history.index]
+    if sensor_index < 0 or missing:
+        sensors = sum(1 for c in history.columns if c.endswith("_cpi"))
+        raise ValueError(f"no sensor {sensor_index!r} in the history; sensors: 0..{sensors - 1}")
+    cols = [history.column(n) * scale for n, (_h, _f, scale, _fmt) in zip(names, COLUMNS,
+                                                                          strict=True)]
+    with open(path, "w", newline="") as fh:
+        out = csv.writer(fh)
+        out.writerow(CSV_HEADER)
+        out.writerows(zip(*(c.tolist() for c in cols), strict=True))
+    return len(history)
+
+
+class HistoryTableModel(QAbstractTableModel):
+    """One sensor's history rows, newest first, read in place from the session's History."""
+
+    def __init__(self, session, sensor_index: int, max_rows: int = MAX_ROWS, parent=None) -> None:
+        super().__init__(parent)
+        self.session = session
+        self.sensor_index = sensor_index
+        self.max_rows = max_rows
+        self._names = [_column_name(sensor_index, f) for _h, f, _s, _f in COLUMNS]
+        self._rows = 0  # rows announced to the views
+        self._len = 0  # history length at the last sync
+        self._dropped = 0
+        self._history = None
+        self._version = -1
+        self._cols: list = []  # column views of the history, taken at the last sync
+        self._cache: dict[int, tuple[str, ...]] = {}
+
+    def rowCount(self, parent=QModelIndex()) -> int:  # noqa: B008, N802 - Qt API
+        return 0 if parent.isValid() else self._rows
+
+    def columnCount(self, parent=QModelIndex()) -> int:  # noqa: B008, N802 - Qt API
+        return 0 if parent.isValid() else len(COLUMNS)
+
+    def headerData(self, section, orientation, role=_DISPLAY):  # noqa: N802 - Qt API
+        if role != _DISPLAY:
+            return None
+        if orientation == _HORIZONTAL:
+            return COLUMNS[section][0] if 0 <= section < len(COLUMNS) else None
+        return str(self._len - section)  # the reply's number, 1 = first
+
+    def value(self, row: int, column: int) -> float:
+        """The value shown at (row, column), in display units (mm, mm/s, s)."""
+        hist = self._history
+        return float(hist.column(self._names[column])[self._len - 1 - row]) * COLUMNS[column][2]
+
+    def text(self, row: int, column: int) -> str:
+        return self._row_texts(row)[column]
+
+    def _row_texts(self, row: int) -> tuple[str, ...]:
+        # a repaint asks for every visible cell several times; rows never change once written
+        i = self._len - 1 - row
+        texts = self._cache.get(i)
+        if texts is None:
+            if len(self._cache) > 4096:
+                self._cache.clear()
+            texts = tuple(
+                fmt.format(float(hist_col[i]) * scale)
+                for hist_col, (_h, _f, scale, fmt) in zip(self._cols, COLUMNS, strict=True)
+            )
+            self._cache[i] = texts
+        return texts
+
+    def data(self, index, role=_DISPLAY):
+        if role == _DISPLAY:
+            row = index.row()
+            return self._row_texts(row)[index.column()] if 0 <= row < self._rows else None
+        if role == _ALIGNMENT_ROLE:
+            return _RIGHT
+        return None
+
+    def sync(self) -> None:
+        """Catch up with the history: rows inserted at the top when replies were appended,
+        a model reset when it was cleared or trimmed."""
+        hist = self.session.history
+        if hist is None:
+            if self._rows:
+                self.reset()
+            return
+        if hist is self._history and hist.version == self._version:
+            return
+        n = len(hist)
+        appended = (
+            hist is self._history and hist.dropped_rows == self._dropped and n >= self._len
+        )
+        if not appended:
+            self.reset()
+            return
+        added = n - self._len
+        shown = min(n, self.max_rows)
+        overflow = self._rows + added - shown  # old rows that leave the bottom
+        if overflow > 0:
+            keep = max(0, self._rows - overflow)
+            if keep < self._rows:
+                self.beginRemoveRows(QModelIndex(), keep, self._rows - 1)
+                self._rows = keep
+                self.endRemoveRows()
+        new = shown - self._rows
+        self._version = hist.version
+        self._cols = [hist.column(n) for n in self._names]  # the buffer may have moved
+        if new > 0:
+            self.beginInsertRows(QModelIndex(), 0, new - 1)
+            self._len, self._rows = n, shown
+            self.endInsertRows()
+        else:
+            self._len = n
+        self.headerDataChanged.emit(Qt.Vertical, 0, max(0, self._rows - 1))
+
+    def reset(self) -> None:
+        """Re-read everything (after a clear or when the history dropped old rows)."""
+        self.beginResetModel()
+        hist = self.session.history
+        self._history = hist
+        self._len = len(hist) if hist is not None else 0
+        self._rows = min(self._len, self.max_rows)
+        self._dropped = hist.dropped_rows if hist is not None else 0
+        self._version = hist.version if hist is not None else -1
+        self._cols = [hist.column(n) for n in self._names] if hist is not None else []
+        self._cache.clear()
+        self.endResetModel()
+
+    def rows_text(self, rows: list[int]) -> str:
+        """Tab-separated text of the given rows (display order) with a header line."""
+        lines = ["\t".join(h for h, _f, _s, _fmt in COLUMNS)]
+        for r in sorted(rows):
+            lines.append("\t".join(self.text(r, c) for c in range(len(COLUMNS))))
+        return "\n".join(lines) + "\n"
+
+
+class _CopyTableView(QTableView):
+    """A table view whose Ctrl+C copies whole selected rows (Qt's own copies one cell)."""
+
+    copy_requested = Signal()
+
+    def event(self, event) -> bool:
+        if event.type() == QEvent.ShortcutOverride and event.matches(QKeySequence.Copy):
+            event.accept()  # ours, before any window-wide Ctrl+C shortcut
+            return True
+        return super().event(event)
+
+    def keyPressEvent(self, event) -> None:  # noqa: N802 - Qt API
+        if event.matches(QKeySequence.Copy):
+            self.copy_requested.emit()
+            event.accept()
+            return
+        super().keyPressEvent(event)
+
+
+class SensorTable(QWidget):
+    """One sensor's table with Copy and Export CSV… and the export's error label."""
+
+    def __init__(self, ctx, sensor_index: int, parent=None) -> None:
+        super().__init__(parent)
+        self.ctx = ctx
+        self.sensor_index = sensor_index
+        self.model = HistoryTableModel(ctx.session, sensor_index, parent=self)
+        self.table = _CopyTableView()
+        self.table.setModel(self.model)
+        self.table.setSelectionBehavior(QAbstractItemView.SelectRows)
+        self.table.setSelectionMode(QAbstractItemView.ExtendedSelection)
+        self.table.setAlternatingRowColors(True)
+        vh = self.table.verticalHeader()
+        vh.setSectionResizeMode(QHeaderView.Fixed)
+        vh.setDefaultSectionSize(20)
+        self.table.horizontalHeader().setSectionResizeMode(QHeaderView.Stretch)
+        self.table.copy_requested.connect(self.copy_selection)
+
+        self.copy_button = QPushButton("Copy")
+        self.copy_button.setToolTip("copy the selected rows as tab-separated text (Ctrl+C)")
+        self.copy_button.clicked.connect(self.copy_selection)
+        self.export_button = QPushButton("Export CSV…")
+        self.export_button.setToolTip("every row of this sensor, oldest first, units in the header")
+        self.export_button.clicked.connect(self.choose_export)
+        self.message = QLabel("")
+        self.message.setWordWrap(True)
+        bar = QHBoxLayout()
+        bar.addWidget(self.copy_button)
+        bar.addWidget(self.export_button)
+        bar.addWidget(self.message, 1)
+        lay = QVBoxLayout(self)
+        lay.setContentsMargins(0, 0, 0, 0)
+        lay.addLayout(bar)
+        lay.addWidget(self.table, 1)
+
+    def selected_rows(self) -> list[int]:
+        sel = self.table.selectionModel()
+        return sorted({i.row() for i in sel.selectedIndexes()}) if sel else []
+
+    def copy_selection(self) -> str:
+        """Put the selected rows on the clipboard (header line first); returns the text."""
+        rows = self.selected_rows()
+        if not rows:
+            return ""
+        text = self.model.rows_text(rows)
+        QGuiApplication.clipboard().setText(text)
+        return text
+
+    def choose_export(self) -> None:
+        dev = self.ctx.session.devices[self.sensor_index].strip("/").replace("/", "_")
+        path, _ = QFileDialog.getSaveFileName(
+            self, "Export CSV", f"{dev}.csv", "CSV files (*.csv);;All files (*)"
+        )
+        if path:
+            self.export_to(path)
+
+    def export_to(self, path: str | Path) -> bool:
+        """Export this sensor's rows; the result or the error is shown beside the button."""
+        try:
+            n = export_csv(self.ctx.session.history, self.sensor_index, path)
+        except (OSError, ValueError) as e:
+            self.message.setStyleSheet(ERROR_STYLE)
+            self.message.setText(f"export failed: {e}")
+            return False
+        self.message.setStyleSheet("")
+        self.message.setText(f"{n} rows written to {path}")
+        return True
+
+
+class DataListView(QWidget):
+    """Tabs with one :class:`SensorTable` per sensor."""
+
+    def __init__(self, ctx, parent=None) -> None:
+        super().__init__(parent)
+        self.ctx = ctx
+        self.tables: list[SensorTable] = []
+        self.tabs = QTabWidget()
+        self.tabs.currentChanged.connect(lambda _i: self.refresh())
+        self.note = QLabel(
+            f"newest first; the newest {MAX_ROWS:,} rows are listed, the CSV export has all. "
+            "dX/dY: filtered and calibrated; raw: as the node served them (sensor frame)."
+        )
+        self.note.setWordWrap(True)
+        self.waiting = QLabel("waiting for the first reply")
+        lay = QVBoxLayout(self)
+        lay.addWidget(self.note)
+        lay.addWidget(self.waiting)
+        lay.addWidget(self.tabs, 1)
+        ctx.devices_known.connect(self._build)
+        ctx.session_reset.connect(self._on_reset)
+        if ctx.session.devices:
+            self._build(ctx.session.devices)
+
+    def _build(self, devices: tuple[str, ...]) -> None:
+        if len(self.tables) == len(devices):
+            return
+        self.tabs.clear()
+        self.tables = []
+        for k, dev in enumerate(devices):
+            table = SensorTable(self.ctx, k, self)
+            self.tables.append(table)
+            self.tabs.addTab(table, dev)
+        self.waiting.hide()
+
+    def _on_reset(self) -> None:
+        for t in self.tables:
+            t.model.reset()
+
+    def refresh(self) -> None:
+        """Announce new rows to the visible table (nothing to do when nothing changed)."""
+        if not self.tables:
+            if not self.ctx.session.devices:
+                return
+            self._build(self.ctx.session.devices)
+        table = self.tables[self.tabs.currentIndex()] if self.tables else None
+        if table is not None:
+            table.model.sync()

@@ -1,0 +1,207 @@
+"""Direction widgets: the newest displacement of each sensor as an amplified arrow.
+
+One :class:`DirectionWidget` per sensor, in the sensor frame (X right =
+robot right, Y up = robot forward), as the original monitor's "Direction
+Widget". The arrow is the processed (filtered, calibrated) displacement of
+the newest history row, ``s{k}_dx, s{k}_dy`` (m), times a gain in screen
+pixels per metre: chosen automatically (a 1-2-5 step that keeps the largest
+displacement of the last second inside the circle) or fixed by the user.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from PySide6.QtCore import QPointF, QRectF, Qt
+from PySide6.QtGui import QColor, QFont, QFontMetricsF, QPainter, QPen, QPolygonF
+from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
+
+from mm_pc.monitor.context import MonitorContext
+from mm_pc.monitor.widgets.style import sensor_colour
+
+__all__ = ["GAINS_PX_PER_MM", "DirectionPanel", "DirectionWidget", "auto_gain"]
+
+#: Gains offered (screen pixels per millimetre of displacement), 1-2-5 steps.
+GAINS_PX_PER_MM = (0.1, 0.2, 0.5, 1, 2, 5, 10, 20, 50, 100, 200, 500, 1000)
+#: Rows the auto gain looks back over for the largest displacement.
+PEAK_ROWS = 100
+#: Part of the circle's radius the largest recent displacement may fill.
+FILL = 0.9
+
+
+def auto_gain(peak_m: float, radius_px: float) -> float:
+    """The largest offered gain (px/m) that draws ``peak_m`` within ``FILL`` of the radius."""
+    best = GAINS_PX_PER_MM[0] * 1e3
+    for g in GAINS_PX_PER_MM:
+        if peak_m * g * 1e3 <= FILL * radius_px:
+            best = g * 1e3
+    return best
+
+
+class DirectionWidget(QWidget):
+    """Arrow of one sensor's newest displacement (sensor frame, X right, Y up).
+
+    ``gain_setting``: px per metre, or None for the automatic gain.
+    """
+
+    def __init__(self, index: int, device: str, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.index = index
+        self.device = device
+        self.colour = QColor(sensor_colour(index))
+        self.gain_setting: float | None = None
+        self.gain = GAINS_PX_PER_MM[0] * 1e3  # px/m in force
+        self.dx = self.dy = 0.0  # m, sensor frame
+        self.speed = 0.0  # m/s
+        self.setMinimumSize(140, 140)
+        self.setToolTip(
+            f"sensor {index + 1} ({device}): newest processed displacement, sensor frame "
+            "(X right, Y forward = up), amplified by the gain shown"
+        )
+
+    def radius_px(self) -> float:
+        """Radius of the faint reference circle (px)."""
+        return 0.36 * min(self.width(), self.height())
+
+    def set_sample(self, dx: float, dy: float, speed: float, peak: float) -> None:
+        """Show displacement ``dx, dy`` (m), ``speed`` (m/s); ``peak`` (m) sets the auto gain."""
+        self.dx, self.dy, self.speed = float(dx), float(dy), float(speed)
+        if self.gain_setting is None:
+            self.gain = auto_gain(peak, self.radius_px())
+        else:
+            self.gain = self.gain_setting
+        self.update()
+
+    def vector_px(self) -> tuple[float, float]:
+        """The drawn arrow (px): (dx, dy) times the gain, sensor frame (X right, Y up)."""
+        return self.dx * self.gain, self.dy * self.gain
+
+    def paintEvent(self, _event) -> None:  # noqa: N802 - Qt API
+        p = QPainter(self)
+        p.setRenderHint(QPainter.RenderHint.Antialiasing)
+        p.fillRect(self.rect(), Qt.GlobalColor.white)
+        w, h = self.width(), self.height()
+        cx, cy, r = w / 2, h / 2 + 4, self.radius_px()
+        faint = QPen(QColor("#d0d0d0"), 1)
+        p.setPen(faint)
+        p.drawEllipse(QPointF(cx, cy), r, r)
+        p.drawLine(QPointF(cx - r, cy), QPointF(cx + r, cy))
+        p.drawLine(QPointF(cx, cy - r), QPointF(cx, cy + r))
+        small = QFont(self.font())
+        small.setPointSizeF(max(6.0, small.pointSizeF() * 0.85))
+        p.setFont(small)
+        p.setPen(QColor("#909090"))
+        p.drawText(QPointF(cx + r + 3, cy + 4), "X")
+        p.drawText(QPointF(cx - 4, cy - r - 3), "Y")
+
+        vx, vy = self.vector_px()
+        self._draw_arrow(p, cx, cy, vx, vy)
+
+        p.setPen(QColor("#202020"))
+        bold = QFont(self.font())
+        bold.setBold(True)
+        p.setFont(bold)
+        line = QFontMetricsF(bold).height()
+        title = QRectF(4, 2, w - 8, line)
+        p.drawText(title, Qt.AlignmentFlag.AlignLeft, f"sensor {self.index + 1}")
+        p.drawText(title, Qt.AlignmentFlag.AlignRight, f"{self.speed * 1e3:.1f} mm/s")
+        p.setFont(small)
+        p.setPen(QColor("#606060"))
+        small_line = QFontMetricsF(small).height()
+        p.drawText(QRectF(4, 2 + line, w - 8, small_line), Qt.AlignmentFlag.AlignLeft,
+                   self.device)
+        mode = "auto" if self.gain_setting is None else "fixed"
+        p.drawText(QRectF(4, h - small_line - 2, w - 8, small_line), Qt.AlignmentFlag.AlignRight,
+                   f"gain ×{self.gain / 1e3:g} px/mm ({mode})")
+        p.end()
+
+    def _draw_arrow(self, p: QPainter, cx: float, cy: float, vx: float, vy: float) -> None:
+        length = math.hypot(vx, vy)
+        if not length >= 0.5:  # also NaN
+            p.setBrush(self.colour)
+            p.setPen(Qt.PenStyle.NoPen)
+            p.drawEllipse(QPointF(cx, cy), 2.5, 2.5)
+            return
+        tip = QPointF(cx + vx, cy - vy)  # screen y grows downwards
+        p.setPen(QPen(self.colour, 2.5, Qt.PenStyle.SolidLine, Qt.PenCapStyle.RoundCap))
+        p.drawLine(QPointF(cx, cy), tip)
+        head = min(10.0, 0.4 * length)
+        a = math.atan2(-vy, vx)
+        left = QPointF(tip.x() - head * math.cos(a - 0.45), tip.y() - head * math.sin(a - 0.45))
+        right = QPointF(tip.x() - head * math.cos(a + 0.45), tip.y() - head * math.sin(a + 0.45))
+        p.setBrush(self.colour)
+        p.drawPolygon(QPolygonF([tip, left, right]))
+
+
+class DirectionPanel(QWidget):
+    """A gain choice and one :class:`DirectionWidget` per sensor (built when the devices
+    are known). :meth:`refresh` repaints only when the history changed."""
+
+    def __init__(self, ctx: MonitorContext, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.ctx = ctx
+        self.widgets: list[DirectionWidget] = []
+        self._seen: tuple | None = None
+        self.gain_box = QComboBox()
+        self.gain_box.addItem("auto", None)
+        for g in GAINS_PX_PER_MM:
+            self.gain_box.addItem(f"×{g:g} px/mm", g * 1e3)
+        self.gain_box.setToolTip("arrow length per millimetre of displacement (auto: fits "
+                                 "the largest displacement of the last samples)")
+        self.gain_box.currentIndexChanged.connect(self._on_gain)
+        top = QHBoxLayout()
+        top.addWidget(QLabel("Gain"))
+        top.addWidget(self.gain_box, 1)
+        self.waiting = QLabel("waiting for the sensors…")
+        self.waiting.setStyleSheet("color: #777777")
+        self.box = QVBoxLayout()
+        lay = QVBoxLayout(self)
+        lay.setContentsMargins(4, 4, 4, 4)
+        lay.addLayout(top)
+        lay.addWidget(self.waiting)
+        lay.addLayout(self.box, 1)
+        ctx.devices_known.connect(self._ensure_widgets)
+        ctx.session_reset.connect(self._invalidate)
+        self._ensure_widgets()
+
+    def _ensure_widgets(self, *_args) -> None:
+        devices = self.ctx.session.devices
+        for k in range(len(self.widgets), len(devices)):
+            w = DirectionWidget(k, devices[k], self)
+            w.gain_setting = self.gain_box.currentData()
+            self.box.addWidget(w, 1)
+            w.show()  # the layout would only show it from the event loop
+            self.widgets.append(w)
+            self._seen = None
+        self.waiting.setVisible(not self.widgets)
+
+    def _invalidate(self) -> None:
+        self._seen = None
+
+    def _on_gain(self, _index: int) -> None:
+        for w in self.widgets:
+            w.gain_setting = self.gain_box.currentData()
+        self._seen = None
+        self.refresh()
+
+    def refresh(self) -> None:
+        """Show the newest row of every sensor; nothing to do when the history is unchanged."""
+        hist = self.ctx.session.history
+        key = (id(hist), hist.version) if hist is not None else None
+        if key == self._seen:
+            return
+        self._seen = key
+        self._ensure_widgets()
+        if hist is None:
+            return
+        tail = hist.tail(PEAK_ROWS)
+        for k, w in enumerate(self.widgets):
+            if not len(tail):
+                w.set_sample(0.0, 0.0, 0.0, 0.0)
+                continue
+            col = {f: tail[:, hist.index[f"s{k}_{f}"]] for f in ("dx", "dy", "vx", "vy")}
+            mags = np.hypot(col["dx"], col["dy"])
+            peak = float(np.nanmax(mags)) if np.isfinite(mags).any() else 0.0
+            w.set_sample(col["dx"][-1], col["dy"][-1],
+                         math.hypot(col["vx"][-1], col["vy"][-1]), peak)

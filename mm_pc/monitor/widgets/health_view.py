@@ -1,0 +1,347 @@
+"""Health of the link and the sensors (issue item 8).
+
+* A table per sensor from the Beagle node's ``/diagnostics`` (state, achieved
+  poll rate, poll period p50/p99, late polls, SPI errors, lift events,
+  overflows, poller CPU, last error), each row coloured by the status level.
+* A plot of the two-sensor residual over time (history column ``residual``,
+  metres; NaN -- and said so -- unless the pose method is
+  ``two-sensor``) and of the lift events per sample (``s{k}_lifts``).
+* The session's counters (replies, used, restarts, incomplete) and the
+  bridge's (dropped requests, skipped ticks).
+
+``refresh()`` is cheap when nothing changed (history version and counters
+compared) and redraws the curves at most ``PLOT_HZ`` times a second. An hour
+at 100 Hz is 360 000 rows, far more than the plot has pixels, so the curves
+show at most ``MAX_POINTS`` points of the visible time range, each the
+*largest* value of its bucket of rows (:class:`BucketMax`): a residual peak
+or a single lift is never hidden by the thinning. While the plot follows the
+data, only the rows added since the last redraw are read (a full column of
+an hour's history is ~2.5 ms to read, the table being row-major). The plots
+have no grid: with a grid, pyqtgraph's software paint took ~20 ms here.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pyqtgraph as pg
+from PySide6.QtCore import Qt
+from PySide6.QtGui import QBrush, QColor
+from PySide6.QtWidgets import (
+    QHeaderView,
+    QLabel,
+    QSplitter,
+    QTableWidget,
+    QTableWidgetItem,
+    QVBoxLayout,
+    QWidget,
+)
+
+from mm_pc.monitor.context import MonitorContext
+
+__all__ = ["DIAG_COLUMNS", "LEVEL_COLOURS", "BucketMax", "HealthView", "bucket_max"]
+
+#: (column title, /diagnostics key)
+DIAG_COLUMNS = (
+    ("Level", "level"),
+    ("State", "state"),
+    ("Rate (Hz)", "achieved_rate_hz"),
+    ("Period p50 (µs)", "period_p50_us"),
+    ("Period p99 (µs)", "period_p99_us"),
+    ("Late polls", "late_polls"),
+    ("SPI errors", "spi_errors"),
+    ("Lift events", "lift_events"),
+    ("Overflows", "overflows"),
+    ("Poller CPU (%)", "poller_cpu_percent"),
+    ("Last error", "last_error"),
+    ("Message", "message"),
+)
+#: diagnostic_msgs/DiagnosticStatus level -> (name, row background)
+LEVEL_COLOURS = {
+    0: ("OK", "#d9f2d9"),
+    1: ("WARN", "#fff0b3"),
+    2: ("ERROR", "#f7c6c6"),
+    3: ("STALE", "#dddddd"),
+}
+PLOT_HZ = 4.0
+MAX_POINTS = 2000
+#: zoomed in to at most this many rows: thin them afresh (finer than the cache)
+ZOOM_ROWS = 50_000
+STALE_S = 5.0
+SENSOR_PENS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd")
+
+
+class HealthView(QWidget):
+    """Diagnostics table, residual and lift plots, session and bridge counters."""
+
+    def __init__(self, ctx: MonitorContext, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.ctx = ctx
+        pg.setConfigOptions(antialias=False)
+        self.diagnostics: dict[str, dict] = {}
+        self._diag_time: float | None = None
+        self._version = -1
+        self._method = ""
+        self._last_plot = 0.0
+        self._stats_key: tuple = ()
+        self.bridge_stats = None
+        self._caches: dict[str, BucketMax] = {}
+        self._hist_key: tuple = ()
+
+        self.table = QTableWidget(0, len(DIAG_COLUMNS))
+        self.table.setHorizontalHeaderLabels([c for c, _ in DIAG_COLUMNS])
+        self.table.setEditTriggers(QTableWidget.NoEditTriggers)
+        self.table.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeToContents)
+        self.table.horizontalHeader().setStretchLastSection(True)
+        self.diag_state = QLabel("no /diagnostics received yet")
+        self.session_label = QLabel()
+        self.bridge_label = QLabel()
+        self.residual_note = QLabel()
+        self.residual_note.setWordWrap(True)
+
+        self.plots = pg.GraphicsLayoutWidget()
+        self.plots.setBackground("w")
+        self.residual_plot = self.plots.addPlot(row=0, col=0, title="Two-sensor residual")
+        self.residual_plot.setLabel("left", "residual", units="m")
+        self.residual_curve = self._curve(self.residual_plot, "#ff7f0e")
+        self.lift_plot = self.plots.addPlot(row=1, col=0, title="Lift events per sample")
+        self.lift_plot.setLabel("left", "polls lifted")
+        self.lift_plot.setLabel("bottom", "time", units="s")
+        self.lift_plot.setXLink(self.residual_plot)
+        self.lift_plot.addLegend(offset=(10, 5))
+        self.lift_curves: list[pg.PlotDataItem] = []
+
+        top = QWidget()
+        tl = QVBoxLayout(top)
+        tl.setContentsMargins(0, 0, 0, 0)
+        tl.addWidget(QLabel("<b>Sensors</b> (Beagle node /diagnostics)"))
+        tl.addWidget(self.table)
+        tl.addWidget(self.diag_state)
+        tl.addWidget(self.session_label)
+        tl.addWidget(self.bridge_label)
+        tl.addWidget(self.residual_note)
+        split = QSplitter(Qt.Vertical)
+        split.addWidget(top)
+        split.addWidget(self.plots)
+        split.setStretchFactor(1, 2)
+        QVBoxLayout(self).addWidget(split)
+
+        if ctx.bridge is not None:
+            ctx.bridge.diagnostics_received.connect(self.on_diagnostics)
+            ctx.bridge.stats_updated.connect(self.on_bridge_stats)
+        ctx.session_reset.connect(self._invalidate)
+        ctx.odometry_changed.connect(self._invalidate)
+        self.residual_plot.getViewBox().sigXRangeChanged.connect(self._range_changed)
+        self._show_counters()
+
+    @staticmethod
+    def _curve(plot, colour: str, name: str | None = None) -> pg.PlotDataItem:
+        return plot.plot(pen=pg.mkPen(colour, width=1), name=name, connect="finite")
+
+    # -- inputs -----------------------------------------------------------------------------
+
+    def on_diagnostics(self, status: dict) -> None:
+        """One /diagnostics message: {device: {"level", "message", key: value-string}}."""
+        self._diag_time = time.monotonic()
+        for dev, values in status.items():
+            self.diagnostics[dev] = dict(values)
+        devices = list(self.diagnostics)
+        if self.table.rowCount() != len(devices):
+            self.table.setRowCount(len(devices))
+            self.table.setVerticalHeaderLabels(devices)
+        for r, dev in enumerate(devices):
+            self._fill_row(r, self.diagnostics[dev])
+        self.diag_state.setText(f"/diagnostics: {len(devices)} sensor(s), updated just now")
+
+    def _fill_row(self, r: int, values: dict) -> None:
+        level = _level(values.get("level"))
+        name, colour = LEVEL_COLOURS.get(level, (str(level), "#ffffff"))
+        brush = QBrush(QColor(colour))
+        for c, (_title, key) in enumerate(DIAG_COLUMNS):
+            text = name if key == "level" else str(values.get(key, "–"))
+            item = self.table.item(r, c)
+            if item is None:
+                item = QTableWidgetItem()
+                self.table.setItem(r, c, item)
+            item.setText(text)
+            item.setBackground(brush)
+
+    def on_bridge_stats(self, stats) -> None:
+        self.bridge_stats = stats
+        self._show_counters()
+
+    def _invalidate(self) -> None:
+        self._caches.clear()
+        self._version = -1
+        self._last_plot = 0.0
+
+    def _range_changed(self, *_args) -> None:
+        """Zoomed or panned: thin the newly visible range on the next refresh."""
+        self._version = -1
+
+    # -- drawing ------------------------------------------------------------------------------
+
+    def refresh(self) -> None:
+        """Redraw what changed (cheap when nothing did)."""
+        self._show_counters()
+        if self._diag_time is not None:
+            age = time.monotonic() - self._diag_time
+            if age > STALE_S:
+                self.diag_state.setText(f"/diagnostics: no update for {age:.0f} s (stale)")
+        hist = self.ctx.session.history
+        method = self.ctx.session.method
+        if hist is None or (hist.version == self._version and method == self._method):
+            return
+        now = time.monotonic()
+        if now - self._last_plot < 1.0 / PLOT_HZ:
+            return
+        self._last_plot = now
+        self._version, self._method = hist.version, method
+        self._draw(hist, method)
+
+    def _thinned(self, hist, name: str, t_all: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The column ``name`` for the plot's time range, thinned to MAX_POINTS."""
+        y_all = hist.column(name)
+        cache = self._caches.setdefault(name, BucketMax())
+        cache.update(t_all, y_all)
+        vb = self.residual_plot.getViewBox()
+        if vb.autoRangeEnabled()[0] or len(t_all) == 0:
+            return cache.points()
+        x0, x1 = vb.viewRange()[0]
+        lo, hi = np.searchsorted(t_all, [x0, x1])
+        lo, hi = max(int(lo) - 1, 0), min(int(hi) + 1, len(t_all))
+        if hi - lo <= ZOOM_ROWS:
+            return bucket_max(t_all[lo:hi], y_all[lo:hi])
+        t, y = cache.points()
+        keep = (t >= t_all[lo]) & (t <= t_all[hi - 1])
+        return t[keep], y[keep]
+
+    def _draw(self, hist, method: str) -> None:
+        key = (id(hist), hist.dropped_rows)
+        if key != self._hist_key:
+            self._hist_key = key
+            self._caches.clear()
+        t_all = hist.column("t")
+        self.residual_curve.setData(*self._thinned(hist, "residual", t_all))
+        if method == "two-sensor":
+            self.residual_note.setText(
+                "Residual: how far the two sensors disagree with one rigid motion (m); "
+                "large values mean slip, a lift or a wrong geometry."
+            )
+        else:
+            self.residual_note.setText(
+                f"Residual: only computed by the two-sensor method; the pose method now is "
+                f"'{method}', so new samples have none (NaN, not drawn)."
+            )
+        n = len(self.ctx.session.devices)
+        while len(self.lift_curves) < n:
+            k = len(self.lift_curves)
+            name = self.ctx.session.devices[k]
+            pen = SENSOR_PENS[k % len(SENSOR_PENS)]
+            self.lift_curves.append(self._curve(self.lift_plot, pen, name))
+        for k, curve in enumerate(self.lift_curves[:n]):
+            curve.setData(*self._thinned(hist, f"s{k}_lifts", t_all))
+
+    def _show_counters(self) -> None:
+        s = self.ctx.session.stats
+        b = self.bridge_stats
+        key = (s.replies, s.used, s.restarts, s.incomplete, s.rejected, s.baselines, id(b))
+        if key == self._stats_key:
+            return
+        self._stats_key = key
+        self.session_label.setText(
+            f"Session: {s.replies} replies, {s.used} used, {s.baselines} baselines, "
+            f"{s.restarts} node restarts, {s.incomplete} incomplete, {s.rejected} rejected"
+        )
+        if self.ctx.bridge is None:
+            self.bridge_label.setText("Bridge: offline (no ROS connection)")
+        elif b is None:
+            self.bridge_label.setText("Bridge: no figures yet")
+        else:
+            self.bridge_label.setText(
+                f"Bridge ({b.state}): {b.requests} requests, {b.replies} replies, "
+                f"{b.dropped_requests} dropped requests, {b.skipped_ticks} skipped ticks, "
+                f"{b.failed_replies} failed replies"
+            )
+
+    def residual_data(self) -> tuple[np.ndarray, np.ndarray]:
+        """What the residual curve shows now (t in s, residual in m)."""
+        x, y = self.residual_curve.getOriginalDataset()
+        return (np.asarray(x) if x is not None else np.empty(0),
+                np.asarray(y) if y is not None else np.empty(0))
+
+
+def bucket_max(
+    t: np.ndarray, y: np.ndarray, max_points: int = MAX_POINTS
+) -> tuple[np.ndarray, np.ndarray]:
+    """At most ``max_points`` points: each bucket of rows as (its first t, its largest y).
+
+    NaN is ignored within a bucket (a bucket of only NaN stays NaN).
+    """
+    n = len(t)
+    if n <= max_points:
+        return t, y
+    idx = np.arange(0, n, -(-n // max_points))
+    return t[idx], np.fmax.reduceat(y, idx)
+
+
+class BucketMax:
+    """:func:`bucket_max` of a growing column, reading only the rows added since the last call.
+
+    Buckets are ``step`` rows long, aligned to row 0; when there are more than
+    ``max_points`` complete buckets, neighbours merge (``step`` doubles). The
+    rows after the last complete bucket form one partial bucket, recomputed on
+    every call. Call :meth:`update` with the full columns (append-only; a
+    shorter column starts over).
+    """
+
+    def __init__(self, max_points: int = MAX_POINTS) -> None:
+        self.max_points = max_points
+        self._reset()
+
+    def _reset(self) -> None:
+        self.step = 1
+        self._done = 0  # rows covered by complete buckets
+        self._t = np.empty(0)
+        self._y = np.empty(0)
+        self._tail: tuple[np.ndarray, np.ndarray] = (np.empty(0), np.empty(0))
+        self.rows_read = 0
+
+    def update(self, t: np.ndarray, y: np.ndarray) -> None:
+        n = len(t)
+        if n < self._done:
+            self._reset()
+        #: rows read by this call (the new rows and the partial bucket)
+        self.rows_read = n - self._done
+        k = (n - self._done) // self.step
+        if k:
+            end = self._done + k * self.step
+            block = y[self._done : end].reshape(k, self.step)
+            self._y = np.concatenate([self._y, np.fmax.reduce(block, axis=1)])
+            self._t = np.concatenate([self._t, t[self._done : end : self.step]])
+            self._done = end
+            while len(self._y) > self.max_points:
+                m = len(self._y) // 2
+                self._y = np.fmax(self._y[0 : 2 * m : 2], self._y[1 : 2 * m : 2])
+                self._t = self._t[0 : 2 * m : 2]
+                self.step *= 2
+                self._done = m * self.step
+        if n > self._done:
+            self._tail = (t[self._done : self._done + 1], np.fmax.reduce(y[self._done : n])[None])
+        else:
+            self._tail = (np.empty(0), np.empty(0))
+
+    def points(self) -> tuple[np.ndarray, np.ndarray]:
+        """(t, largest y) per bucket, oldest first."""
+        return np.concatenate([self._t, self._tail[0]]), np.concatenate([self._y, self._tail[1]])
+
+
+def _level(value) -> int:
+    """A diagnostics level as int (it may arrive as int, bytes or text)."""
+    if isinstance(value, bytes):
+        return int.from_bytes(value, "little")
+    try:
+        return int(value)
+    except (TypeError, ValueError):
+        return 3

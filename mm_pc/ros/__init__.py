@@ -1,0 +1,1 @@
+"""rclpy adapters (never Qt): spinning, parameters, messages, the thin nodes."""

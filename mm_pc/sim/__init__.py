@@ -1,0 +1,1 @@
+"""Ground truth: the robot motion simulator and the simulated mowing-field run."""

@@ -1,0 +1,223 @@
+"""The whole monitor against a real mm-beagle process: connection, restarts, rate, CLI."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("rclpy")
+pytest.importorskip("PySide6")
+
+from mm_beagle.harness import BeagleClient, beagle_process, stop_process
+from mm_pc.monitor.context import MonitorConfig, MonitorContext
+from mm_pc.monitor.main_window import MainWindow
+from mm_pc.monitor.model.session import MonitorSession
+from mm_pc.monitor.ros_bridge import RosBridge
+
+pytestmark = pytest.mark.ros
+ROOT = Path(__file__).resolve().parents[2]
+STRAIGHT = {
+    "backend": "sim",
+    "sim_trajectory": "straight",
+    "sim_start_delay": 4.0,
+    "sim_duration": 3.0,
+    "sim_loop": False,
+}
+
+
+def make_window(qtbot, tmp_path, rate=50.0):
+    config = MonitorConfig(rate_hz=rate, calibration_file=tmp_path / "cal.yaml")
+    bridge = RosBridge("/mm_beagle", rate, node_name="mm_monitor_test")
+    ctx = MonitorContext(MonitorSession(), bridge, config)
+    window = MainWindow(ctx)
+    qtbot.addWidget(window)
+    window.show()
+    bridge.start()
+    return window, bridge
+
+
+def wait_until(qtbot, predicate, timeout=20.0):
+    qtbot.waitUntil(predicate, timeout=int(timeout * 1000))
+
+
+def test_monitor_connects_counts_everything_and_survives_a_restart(qtbot, tmp_path):
+    window, bridge = make_window(qtbot, tmp_path)
+    try:
+        assert "waiting" in window.state_label.text()
+        log = str(tmp_path / "beagle1.log")
+        with beagle_process(STRAIGHT, env=dict(os.environ), log_path=log) as proc:
+            wait_until(qtbot, lambda: "connected to /mm_beagle" in window.state_label.text())
+            wait_until(qtbot, lambda: "ms" in window.rtt_label.text(), 5)
+            # the run: 4 s still, 3 s at 0.2 m/s, then still; wait for it to end
+            session = window.ctx.session
+            wait_until(qtbot, lambda: session.pose.x > 0.59, 20)
+            qtbot.wait(600)
+            client = BeagleClient("mm_monitor_check")
+            try:
+                node_y = client.diagnostics()["/dev/spidev1.0"]["y_total_counts"]
+            finally:
+                client.close()
+            served = sum(session.history.column("s0_raw_dy"))
+            # every count the node measured after our baseline reached the pose
+            assert session.pose.x == pytest.approx(0.6, abs=0.002)
+            assert served == pytest.approx(int(node_y) * 0.0254 / 1600, abs=2e-4)
+            stop_process(proc)
+        wait_until(qtbot, lambda: "lost /mm_beagle" in window.state_label.text(), 15)
+        pose_before = session.pose
+        with beagle_process(STRAIGHT, env=dict(os.environ), log_path=str(tmp_path / "b2.log")):
+            wait_until(qtbot, lambda: bridge.state == "connected", 30)
+            wait_until(qtbot, lambda: session.stats.restarts >= 1, 10)
+            # no jump at the restart; the second run adds its own 0.6 m
+            assert session.pose.x == pytest.approx(pose_before.x, abs=1e-9)
+            wait_until(qtbot, lambda: session.pose.x > pose_before.x + 0.59, 20)
+        assert bridge.stats().dropped_requests >= 0
+    finally:
+        bridge.stop()
+        window.close()
+
+
+def test_rate_field_refuses_zero_and_junk_and_applies_good_values(qtbot, tmp_path):
+    window, bridge = make_window(qtbot, tmp_path, rate=15.0)
+    try:
+        editor = window.rate_editor
+        for bad, msg in (("0", "1..500 Hz"), ("abc", "number of Hz"), ("501", "1..500"),
+                         ("nan", "1..500"), ("", "number of Hz")):  # fmt: skip
+            editor.edit.setText(bad)
+            assert not editor.apply()
+            assert msg in editor.error.text()
+            assert not editor.error.isHidden()
+            assert bridge.rate_hz == 15.0 and window.ctx.config.rate_hz == 15.0
+        editor.edit.setText("100")
+        assert editor.apply()
+        assert editor.error.isHidden()
+        assert bridge.rate_hz == 100.0 and window.ctx.config.rate_hz == 100.0
+    finally:
+        bridge.stop()
+        window.close()
+
+
+def test_pause_stops_requests(qtbot, tmp_path):
+    with beagle_process({"backend": "sim"}, env=dict(os.environ), log_path=str(tmp_path / "b.log")):
+        window, bridge = make_window(qtbot, tmp_path, rate=50.0)
+        try:
+            wait_until(qtbot, lambda: bridge.replies > 5)
+            window.pause_button.setChecked(True)
+            qtbot.wait(300)
+            n = bridge.requests
+            qtbot.wait(700)
+            assert bridge.requests == n
+            assert window.pause_button.text() == "Resume polling"
+            window.pause_button.setChecked(False)
+            wait_until(qtbot, lambda: bridge.requests > n + 5, 5)
+        finally:
+            bridge.stop()
+            window.close()
+
+
+def test_method_selector_switches_the_pose_method(qtbot, tmp_path):
+    config = MonitorConfig(calibration_file=tmp_path / "cal.yaml")
+    ctx = MonitorContext(MonitorSession(), None, config)
+    window = MainWindow(ctx)
+    qtbot.addWidget(window)
+    window.method_box.setCurrentText("two-sensor")
+    assert ctx.session.method == "two-sensor"
+    assert window.method_error.isHidden()
+    assert "offline" in window.state_label.text()
+
+
+def test_headless_cli_runs_against_the_sim_and_writes_a_screenshot(tmp_path):
+    shot = tmp_path / "shot.png"
+    env = dict(os.environ, QT_QPA_PLATFORM="offscreen")
+    out = subprocess.run(
+        [sys.executable, "-m", "mm_pc.monitor.app", "--sim", "--headless", "--duration", "6",
+         "--rate", "30", "--screenshot", str(shot)],
+        capture_output=True, text=True, timeout=120, env=env,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert shot.stat().st_size > 10_000
+    assert "was connected to /mm_beagle" in out.stdout
+    assert "the robot (exact) travelled" in out.stdout
+
+
+def test_no_display_falls_back_to_headless_with_a_message(tmp_path):
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    env.pop("QT_QPA_PLATFORM", None)
+    shot = tmp_path / "fallback.png"
+    t0 = time.monotonic()
+    out = subprocess.run(
+        [sys.executable, "-m", "mm_pc.monitor.app", "--duration", "2", "--screenshot", str(shot),
+         "--beagle", "/nobody_here"],
+        capture_output=True, text=True, timeout=60, env=env,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    assert "no display" in out.stdout and "running headless for 2 s" in out.stdout
+    assert "waited for /nobody_here" in out.stdout or "No sensor data arrived" in out.stdout
+    assert shot.exists()
+    assert time.monotonic() - t0 < 50
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [(["--rate", "0"], "1..500"), (["--rate", "junk"], "invalid float value"),
+     (["--duration", "-1"], "--duration must be >= 0")],
+)  # fmt: skip
+def test_bad_command_line_exits_2_with_a_message(args, message):
+    out = subprocess.run(
+        [sys.executable, "-m", "mm_pc.monitor.app", "--headless", *args],
+        capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    assert out.returncode == 2
+    assert message in out.stderr
+
+
+
+def test_a_call_without_answer_fails_once_and_its_late_reply_is_ignored(qtbot):
+    """A node that answers a settings read only after 1.5 s: the monitor reports the timeout
+    next to the request and ignores the late reply (no second, contradicting signal)."""
+    import threading
+
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+
+    from mm_interfaces.srv import GetSensorSettings
+
+    ctx = Context()
+    rclpy.init(context=ctx)
+    server = rclpy.create_node("slow_beagle", namespace="/slow", context=ctx)
+
+    def slow(req, res):
+        time.sleep(1.5)
+        res.success = True
+        res.settings.spi_device = req.id
+        return res
+
+    server.create_service(GetSensorSettings, "/slow/mm_beagle/get_sensor_settings", slow)
+    executor = SingleThreadedExecutor(context=ctx)
+    executor.add_node(server)
+    spin = threading.Thread(target=executor.spin, daemon=True)
+    spin.start()
+    bridge = RosBridge("/slow/mm_beagle", 15.0, node_name="mm_monitor_slow", timeout_s=0.2)
+    failed, received = [], []
+    bridge.settings_failed.connect(lambda dev, msg: failed.append((dev, msg)))
+    bridge.settings_received.connect(lambda dev, msg: received.append(dev))
+    bridge.start()
+    try:
+        client = bridge._clients["get_sensor_settings"]
+        qtbot.waitUntil(client.service_is_ready, timeout=20_000)
+        bridge.request_settings("/dev/spidev1.0")
+        qtbot.waitUntil(lambda: bool(failed), timeout=5_000)
+        assert failed == [("/dev/spidev1.0", "no answer within 0.5 s")]
+        qtbot.wait(2_000)  # the late reply arrives meanwhile
+        assert received == [] and len(failed) == 1
+    finally:
+        bridge.stop()
+        executor.shutdown(timeout_sec=1.0)
+        spin.join(3.0)
+        server.destroy_node()
+        ctx.try_shutdown()

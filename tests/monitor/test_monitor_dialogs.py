@@ -1,0 +1,648 @@
+"""The monitor's dialogs and debug/health views: calibration wizard, median filters,
+robot geometry, health (diagnostics, residual), debug (manual samples, 1 kHz polls).
+
+Offline tests feed simulated replies through ``ctx.on_reply`` (the same path
+live replies take) and emit a constructed-but-not-started RosBridge's real
+signals. One ``ros`` test drives the debug view against a real mm-beagle sim
+node.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+pytest.importorskip("pytestqt")
+from PySide6.QtCore import SIGNAL, Qt
+from PySide6.QtGui import QImage
+from PySide6.QtWidgets import QWizard
+
+from mm_pc.core.calibration import Calibration, SensorCalibration
+from mm_pc.core.frames import counts_to_m
+from mm_pc.core.geometry import DEFAULT_MOUNTS, SensorMount
+from mm_pc.monitor.context import MonitorConfig, MonitorContext
+from mm_pc.monitor.model.readings import Reading, Reply
+from mm_pc.monitor.model.session import MonitorSession
+from mm_pc.monitor.model.sim_feed import DEFAULT_DEVICES, sim_replies
+from mm_pc.monitor.ros_bridge import RosBridge
+from mm_pc.monitor.widgets.calibration_wizard import (
+    PAGE_DISTANCE,
+    PAGE_DRIVE,
+    PAGE_RESULTS,
+    PAGE_SAVE,
+    CalibrationWizard,
+)
+from mm_pc.monitor.widgets.debug_view import DebugView
+from mm_pc.monitor.widgets.filter_dialog import FilterDialog
+from mm_pc.monitor.widgets.geometry_dialog import GeometryDialog
+from mm_pc.monitor.widgets.health_view import LEVEL_COLOURS, BucketMax, HealthView, bucket_max
+from mm_pc.sim.robot import with_mount_yaw
+
+D0, D1 = DEFAULT_DEVICES
+WINDOW_MSG = r"median window must be an integer number of samples in 1\.\.999"
+
+
+@pytest.fixture
+def ctx(tmp_path):
+    config = MonitorConfig(calibration_file=tmp_path / "cfg" / "calibration.yaml")
+    return MonitorContext(MonitorSession(), None, config)
+
+
+def assert_shows_content(img: QImage, name: str, min_colours: int = 12) -> None:
+    """A screenshot shows more than a blank frame."""
+    assert img.width() > 300 and img.height() > 200
+    colours = {
+        img.pixel(x, y)
+        for x in range(0, img.width(), 3)
+        for y in range(0, img.height(), 3)
+    }
+    assert len(colours) > min_colours, f"{name}: only {len(colours)} colours"
+
+
+def hand_reply(seq: int, totals: list[tuple[float, float]], devices=DEFAULT_DEVICES) -> Reply:
+    """A reply with given totals (m) at 1 kHz poll ``seq``."""
+    stamp = 1_700_000_000_000_000_000 + seq * 1_000_000
+    return Reply(
+        tuple(
+            Reading(d, stamp, seq, x, y, cpi=1600, samples=10, interval=0.01)
+            for d, (x, y) in zip(devices, totals, strict=True)
+        )
+    )
+
+
+# -- calibration wizard --------------------------------------------------------------------
+
+
+def straight_with_5deg():
+    return list(sim_replies("straight", 50, mounts=with_mount_yaw(DEFAULT_MOUNTS, math.radians(5))))
+
+
+def open_wizard(qtbot, ctx) -> CalibrationWizard:
+    wiz = CalibrationWizard(ctx)
+    qtbot.addWidget(wiz)
+    wiz.show()
+    wiz.next()
+    assert wiz.currentId() == PAGE_DRIVE
+    return wiz
+
+
+def next_enabled(wiz) -> bool:
+    return wiz.button(QWizard.NextButton).isEnabled()
+
+
+@pytest.mark.screenshot
+def test_wizard_computes_saves_and_applies_a_calibration(qtbot, ctx, screenshot, feed):
+    replies = straight_with_5deg()
+    ctx.on_reply(replies[0])  # baseline: the sensors are known
+    wiz = open_wizard(qtbot, ctx)
+    assert not next_enabled(wiz)  # not started
+    qtbot.mouseClick(wiz.drive_page.start_button, Qt.LeftButton)
+    assert ctx.session.calibrating
+    pose0 = ctx.session.pose
+    feed(ctx, replies[1:])
+    # the robot stood still on the map while the run was recorded
+    assert ctx.session.pose == pose0
+    hist = ctx.session.history
+    assert len(hist) == len(replies) - 1
+    assert np.all(hist.column("calibrating") == 1.0)
+    assert np.all(hist.column("x") == pose0.x)
+    # live sums shown in cm: 1 m driven
+    x_cm, y_cm = (float(wiz.drive_page.table.item(0, c).text()) for c in (1, 2))
+    sx, sy = ctx.session.calibration_sums()[D0]
+    assert (x_cm, y_cm) == (pytest.approx(sx * 100, abs=0.006), pytest.approx(sy * 100, abs=0.006))
+    assert math.hypot(x_cm, y_cm) == pytest.approx(100.0, abs=0.1)
+    assert next_enabled(wiz)
+
+    wiz.next()
+    assert wiz.currentId() == PAGE_DISTANCE
+    wiz.distance_page.edit.setText("100")  # the true run: 1 m
+    wiz.next()
+    assert wiz.currentId() == PAGE_RESULTS
+    cal = wiz.calibration
+    assert cal is not None and set(cal) == {D0, D1}
+    for k, dev in enumerate((D0, D1)):
+        c = cal[dev]
+        assert c.angle_offset_deg == pytest.approx(5.0, abs=0.1)
+        assert c.distance == pytest.approx(1.0, abs=1e-3)
+        assert c.scale == pytest.approx(1.0 / c.distance)
+        row = [wiz.results_page.table.item(k, i).text() for i in range(4)]
+        assert row == [dev, f"{c.angle_offset_deg:.2f}", f"{c.distance * 100:.2f}",
+                       f"{c.scale:.4f}"]
+    assert ctx.session.calibration == Calibration()  # not applied yet
+    assert ctx.session.calibrating
+    assert_shows_content(screenshot(wiz, "wizard.png"), "wizard.png")
+
+    wiz.next()
+    assert wiz.currentId() == PAGE_SAVE
+    path = ctx.config.calibration_file
+    assert wiz.save_page.path_edit.text() == str(path)
+    with qtbot.waitSignal(ctx.calibration_changed, timeout=1000):
+        qtbot.mouseClick(wiz.save_page.save_button, Qt.LeftButton)
+    assert path.exists()
+    assert Calibration.load(path) == cal
+    assert ctx.session.calibration == cal
+    assert not ctx.session.calibrating
+    assert "saved to" in wiz.save_page.status.text()
+    wiz.accept()
+
+    # the calibration comes before the pose math: the same mis-mounted sensors now
+    # drive a straight line (no heading drift) and the robot moves again
+    feed(ctx, straight_with_5deg())
+    pose = ctx.session.pose
+    assert pose.x == pytest.approx(1.0, abs=0.005)
+    assert abs(pose.y) < 0.002 and abs(pose.yaw) < 0.005
+    # and a fresh context loads the file at start
+    ctx2 = MonitorContext(MonitorSession(), None, ctx.config)
+    assert ctx2.load_calibration()
+    assert ctx2.session.calibration == cal
+
+
+def test_wizard_too_short_run_keeps_next_disabled(qtbot, ctx, feed):
+    replies = straight_with_5deg()
+    ctx.on_reply(replies[0])
+    wiz = open_wizard(qtbot, ctx)
+    wiz.drive_page.start()
+    feed(ctx, replies[1:11])  # 0.2 s at 0.2 m/s: 4 cm < 5 cm
+    d_cm = float(wiz.drive_page.table.item(0, 3).text())
+    assert d_cm == pytest.approx(4.0, abs=0.05)
+    assert not wiz.drive_page.isComplete()
+    assert not next_enabled(wiz)
+    assert "still short of 5 cm" in wiz.drive_page.state.text()
+    wiz.drive_page.min_spin.setValue(3.0)  # a lower minimum is the user's choice
+    assert next_enabled(wiz)
+    wiz.drive_page.min_spin.setValue(5.0)
+    feed(ctx, replies[11:20])  # 7.6 cm
+    assert next_enabled(wiz)
+    # Restart zeroes the sums: too short again
+    qtbot.mouseClick(wiz.drive_page.restart_button, Qt.LeftButton)
+    assert ctx.session.calibration_sums()[D0] == (0.0, 0.0)
+    assert not next_enabled(wiz)
+
+
+def test_wizard_cancel_keeps_the_old_calibration_and_the_robot_moves_again(qtbot, ctx, feed):
+    old = Calibration({D0: SensorCalibration(0.01, 0.5, 1.0)})
+    ctx.set_calibration(old)
+    replies = straight_with_5deg()
+    ctx.on_reply(replies[0])
+    wiz = open_wizard(qtbot, ctx)
+    wiz.drive_page.start()
+    feed(ctx, replies[1:100])
+    assert ctx.session.pose.x == 0.0
+    wiz.next()
+    wiz.next()
+    assert wiz.currentId() == PAGE_RESULTS and wiz.calibration is not None
+    wiz.reject()  # Cancel
+    assert not ctx.session.calibrating
+    assert ctx.session.calibration is old
+    assert not ctx.config.calibration_file.exists()
+    feed(ctx, replies[100:])
+    assert ctx.session.pose.x > 0.5
+    assert ctx.receivers(SIGNAL("reply_processed(PyObject)")) == 0  # closed: not listening
+
+
+def test_wizard_refuses_a_bad_true_distance(qtbot, ctx, feed):
+    replies = straight_with_5deg()
+    ctx.on_reply(replies[0])
+    wiz = open_wizard(qtbot, ctx)
+    wiz.drive_page.start()
+    feed(ctx, replies[1:])
+    wiz.next()
+    page = wiz.distance_page
+    for bad in ("abc", "0", "-5", "nan", "inf", "1,5"):
+        page.edit.setText(bad)
+        wiz.next()
+        assert wiz.currentId() == PAGE_DISTANCE, bad
+        assert page.error.isVisible()
+        assert page.error.text() == (
+            f"true distance must be a number of cm > 0, or empty for scale 1, got {bad!r}"
+        )
+    assert wiz.calibration is None and ctx.session.calibrating
+    page.edit.setText("")  # empty: scale 1
+    wiz.next()
+    assert wiz.currentId() == PAGE_RESULTS
+    assert not page.error.isVisible()
+    assert {c.scale for c in wiz.calibration.sensors.values()} == {1.0}
+
+
+def test_wizard_shows_a_sideways_run_and_a_write_error_on_the_page(qtbot, ctx, tmp_path):
+    ctx.on_reply(hand_reply(0, [(0.0, 0.0), (0.0, 0.0)]))
+    wiz = open_wizard(qtbot, ctx)
+    wiz.drive_page.start()
+    ctx.on_reply(hand_reply(10, [(0.1, 0.0), (0.0, 0.1)]))  # sensor 0 went exactly sideways
+    assert next_enabled(wiz)
+    wiz.next()
+    wiz.next()
+    assert wiz.currentId() == PAGE_RESULTS
+    assert wiz.calibration is None
+    assert "moved exactly sideways" in wiz.results_page.error.text()
+    assert D0 in wiz.results_page.error.text()
+    assert not next_enabled(wiz)
+    # back, restart, a good run
+    wiz.back()
+    wiz.back()
+    wiz.drive_page.restart_button.click()
+    ctx.on_reply(hand_reply(20, [(0.1, 0.1), (0.0, 0.2)]))
+    wiz.next()
+    wiz.next()
+    assert wiz.calibration is not None
+    wiz.next()
+    blocker = tmp_path / "a_file"
+    blocker.write_text("x")
+    old = ctx.session.calibration
+    assert not wiz.save(blocker / "calibration.yaml")  # parent is a file
+    assert wiz.save_page.error.text().startswith("not saved and not applied:")
+    assert ctx.session.calibration is old and ctx.session.calibrating
+    wiz.accept()  # Finish applies without writing
+    assert ctx.session.calibration == wiz.calibration and not ctx.session.calibrating
+
+
+# -- median filter dialog --------------------------------------------------------------------
+
+
+def filter_state(session):
+    return {d: (f.window, f.filter_x, f.filter_y) for d, f in session.filters.items()}
+
+
+def test_filter_dialog_refuses_bad_windows(qtbot, ctx):
+    ctx.on_reply(next(sim_replies("straight", 50)))
+    dlg = FilterDialog(ctx)
+    qtbot.addWidget(dlg)
+    before = filter_state(ctx.session)
+    row = dlg.rows[D0]
+    for bad in ("abc", "0", "1000", "2.5", "", "nan"):
+        row.window.setText(bad)
+        assert not dlg.apply_all()
+        assert filter_state(ctx.session) == before, bad
+        assert not row.error.isHidden()
+        assert row.error.text().startswith(f"{D0}: median window must be an integer number")
+        assert row.error.text().endswith("nothing changed")
+        # live apply by a check box is refused too, and the box goes back
+        row.fx.setChecked(True)
+        assert not row.fx.isChecked()
+        assert filter_state(ctx.session) == before
+    assert "not applied" in dlg.status.text()
+    with pytest.raises(ValueError, match=WINDOW_MSG):
+        from mm_pc.monitor.widgets.filter_dialog import parse_window
+
+        parse_window("1000")
+
+
+@pytest.mark.screenshot
+def test_filter_dialog_applies_x_and_y_to_the_right_axes(qtbot, ctx, screenshot, feed):
+    replies = list(sim_replies("figure_eight", 50, seconds=6))
+    dlg = FilterDialog(ctx)  # opened before any data: rows come with the sensors
+    qtbot.addWidget(dlg)
+    assert dlg.rows == {} and not dlg.apply_button.isEnabled()
+    ctx.on_reply(replies[0])
+    assert set(dlg.rows) == {D0, D1}
+    r0, r1 = dlg.rows[D0], dlg.rows[D1]
+    r0.window.setText("7")
+    r1.window.setText("3")
+    r0.fx.setChecked(True)  # live: X box -> filter_x of sensor 0
+    assert filter_state(ctx.session)[D0] == (7, True, False)
+    r1.fy.setChecked(True)
+    assert filter_state(ctx.session)[D1] == (3, False, True)
+    r1.window.setText("9")
+    assert dlg.apply_all()
+    assert filter_state(ctx.session) == {D0: (7, True, False), D1: (9, False, True)}
+    # the filters act on the named axis only
+    feed(ctx, replies[1:])
+    h = ctx.session.history
+    assert np.array_equal(h.column("s0_dy"), h.column("s0_raw_dy"))
+    assert not np.array_equal(h.column("s0_dx"), h.column("s0_raw_dx"))
+    assert np.array_equal(h.column("s1_dx"), h.column("s1_raw_dx"))
+    assert not np.array_equal(h.column("s1_dy"), h.column("s1_raw_dy"))
+    assert_shows_content(screenshot(dlg, "filters.png"), "filters.png", min_colours=5)
+    qtbot.mouseClick(dlg.clear_button, Qt.LeftButton)
+    assert filter_state(ctx.session) == {D0: (7, False, False), D1: (9, False, False)}
+    assert not r0.fx.isChecked() and not r1.fy.isChecked()
+
+
+# -- geometry dialog -----------------------------------------------------------------------------
+
+
+def test_geometry_dialog_refuses_bad_input_and_changes_nothing(qtbot, ctx):
+    ctx.on_reply(next(sim_replies("straight", 50)))
+    dlg = GeometryDialog(ctx)
+    qtbot.addWidget(dlg)
+    session = ctx.session
+    before = (session.mounts, session.sensor, session.method, session.odometry)
+    emitted = []
+    ctx.odometry_changed.connect(lambda: emitted.append(1))
+    cases = [
+        (dlg.rows[0].x, "abc", rf"{D0} x \(cm\) must be a number, got 'abc'"),
+        (dlg.rows[1].y, "nan", rf"{D1} y \(cm\) must be a finite number, got 'nan'"),
+        (dlg.rows[0].yaw, "", rf"{D0} yaw \(deg\) must be a number, got ''"),
+        (dlg.axis_edit, "0", r"axis length must be > 0 cm, got '0'"),
+        (dlg.rows[0].x, "0", r"sensor 0 at base_link \(0.0 m, -0.0395 m\) lies on the axle line"),
+    ]
+    for edit, text, msg in cases:
+        dlg.load_from_session()
+        edit.setText(text)
+        assert not dlg.apply()
+        assert not dlg.error.isHidden()
+        assert dlg.error.text().startswith("not applied: ")
+        import re
+
+        assert re.search(msg, dlg.error.text()), dlg.error.text()
+        assert (session.mounts, session.sensor, session.method, session.odometry) == before
+    assert emitted == []
+
+
+def test_geometry_dialog_applies_good_input_and_round_trips_yaml(qtbot, ctx, tmp_path):
+    ctx.on_reply(next(sim_replies("straight", 50)))
+    dlg = GeometryDialog(ctx)
+    qtbot.addWidget(dlg)
+    dlg.rows[0].x.setText("6")
+    dlg.rows[0].y.setText("-4")
+    dlg.rows[0].yaw.setText("1.5")
+    dlg.axis_edit.setText("10")
+    dlg.sensor_box.setCurrentIndex(1)
+    with qtbot.waitSignal(ctx.odometry_changed, timeout=1000):
+        assert dlg.apply()
+    assert ctx.session.mounts == (SensorMount(0.06, -0.04, math.radians(1.5)), DEFAULT_MOUNTS[1])
+    assert ctx.session.sensor == 1
+    assert ctx.session.odometry.mounts == ctx.session.mounts
+    assert ctx.robot_geometry.axis_length == pytest.approx(0.10)
+    path = tmp_path / "geometry.yaml"
+    assert dlg.save(path)
+    dlg2 = GeometryDialog(ctx)
+    qtbot.addWidget(dlg2)
+    dlg2.rows[0].x.setText("1")  # overwritten by the load
+    assert dlg2.load(path)
+    assert dlg2.read_geometry() == dlg.read_geometry()
+    path.write_text("version: 1\nmounts: []\n")
+    assert not dlg2.load(path)
+    assert "'mounts' must be a non-empty list" in dlg2.error.text()
+
+
+# -- health view -----------------------------------------------------------------------------------
+
+
+def diag(level: int, late: int, state: str = "up") -> dict:
+    return {
+        "level": level, "message": "up" if level == 0 else "SPI errors", "state": state,
+        "polls": "5000", "achieved_rate_hz": "999.8", "period_p50_us": "1000",
+        "period_p99_us": "1210", "late_polls": str(late), "overruns": "0",
+        "spi_errors": str(3 * level), "lift_events": "2", "overflows": "0", "cpi": "1600",
+        "reinits": "0", "poller_cpu_percent": "4.2", "last_error": "" if level == 0 else "CRC",
+    }
+
+
+@pytest.mark.screenshot
+def test_health_view_shows_diagnostics_residual_and_counters(qtbot, ctx, screenshot, feed):
+    bridge = RosBridge()  # constructed, never started: its real signals, no ROS
+    ctx.bridge = bridge
+    # the monitor believes sensor 1 sits 1 cm further forward than it does: a residual
+    # while turning (with the right geometry the simulated counts fit exactly)
+    wrong = (DEFAULT_MOUNTS[0], SensorMount(0.059, 0.0395))
+    ctx.session = MonitorSession(mounts=wrong, method="two-sensor")
+    view = HealthView(ctx)
+    qtbot.addWidget(view)
+    view.resize(1000, 700)
+    bridge.diagnostics_received.emit({D0: diag(0, 4), D1: diag(1, 9)})
+    t = view.table
+    assert t.rowCount() == 2
+    assert [t.verticalHeaderItem(r).text() for r in range(2)] == [D0, D1]
+    headers = [t.horizontalHeaderItem(c).text() for c in range(t.columnCount())]
+    row1 = dict(zip(headers, (t.item(1, c).text() for c in range(t.columnCount())), strict=True))
+    assert row1["Level"] == "WARN" and row1["Late polls"] == "9" and row1["SPI errors"] == "3"
+    assert row1["Period p99 (µs)"] == "1210" and row1["Last error"] == "CRC"
+    assert t.item(0, 0).background().color().name() == LEVEL_COLOURS[0][1]
+    assert t.item(1, 5).background().color().name() == LEVEL_COLOURS[1][1]
+    bridge.diagnostics_received.emit({D0: diag(2, 5, state="down")})  # one sensor updates
+    assert t.item(0, 1).text() == "down" and t.item(0, 0).text() == "ERROR"
+
+    replies = list(sim_replies("figure_eight", 50, seconds=8))
+    # the simulated node reports no lifts: mark a few polls of sensor 1 as lifted
+    replies = [
+        Reply((r.readings[0], replace(r.readings[1], lift_events=3)), r.received_s, r.rtt_s)
+        if i % 37 == 36 else r
+        for i, r in enumerate(replies)
+    ]
+    feed(ctx, replies)
+    ctx.on_reply(Reply(replies[-1].readings[:1]))  # incomplete
+    view.refresh()
+    h = ctx.session.history
+    x, y = view.residual_data()
+    assert np.array_equal(x, h.column("t"))
+    assert np.array_equal(y, h.column("residual"))
+    assert np.all(np.isfinite(y)) and 1e-5 < y.max() < 1e-2  # 0.01..10 mm
+    assert "two sensors disagree" in view.residual_note.text()
+    _, ly = view.lift_curves[1].getOriginalDataset()
+    assert np.array_equal(ly, h.column("s1_lifts")) and ly.sum() == 3 * 10
+    s = ctx.session.stats
+    assert f"{s.replies} replies, {s.used} used" in view.session_label.text()
+    assert "1 incomplete" in view.session_label.text()
+    bridge.stats_updated.emit(bridge.stats())
+    assert "0 dropped requests, 0 skipped ticks" in view.bridge_label.text()
+    assert_shows_content(screenshot(view, "health.png"), "health.png")
+
+    ctx.session.configure_odometry(method="exact")
+    ctx.odometry_changed.emit()
+    feed(ctx, sim_replies("figure_eight", 50, seconds=1, start_ns=1_800_000_000_000_000_000))
+    view.refresh()
+    assert "only computed by the two-sensor method" in view.residual_note.text()
+    assert np.isnan(view.residual_data()[1][-1])
+    version = h.version
+    view.refresh()  # nothing changed: nothing redrawn
+    assert h.version == version
+
+
+def test_bucket_max_reads_only_new_rows_and_keeps_every_peak():
+    rng = np.random.default_rng(3)
+    n = 50_000
+    table = rng.random((n, 3))
+    table[:, 0] = np.arange(n) * 0.01
+    table[rng.random(n) < 0.3, 2] = np.nan
+    table[12_345, 2] = 7.0  # one peak among NaN and noise
+    cache = BucketMax(max_points=500)
+    end = 0
+    for chunk in rng.integers(1, 4000, 60):
+        end = min(n, end + int(chunk))
+        t, y = table[:end, 0], table[:end, 2]
+        cache.update(t, y)
+        bt, by = cache.points()
+        assert len(bt) <= 501
+        step = cache.step
+        starts = np.arange(0, end, step)
+        assert np.array_equal(bt, t[starts])
+        assert np.array_equal(by, np.fmax.reduceat(y, starts), equal_nan=True)
+    assert end == n and np.nanmax(by) == 7.0
+    cache.update(table[:10, 0], table[:10, 2])  # shorter: the history was cleared
+    assert np.array_equal(cache.points()[1], table[:10, 2], equal_nan=True)
+    t, y = bucket_max(table[:, 0], table[:, 2], 100)
+    assert len(t) == 100 and np.nanmax(y) == 7.0
+
+
+def test_health_view_thins_a_long_history(qtbot, ctx, feed):
+    ctx.session.configure_odometry(method="two-sensor")
+    feed(ctx, sim_replies("figure_eight", 100, seconds=1))
+    h = ctx.session.history
+    rows = np.resize(h.tail(len(h)), (100_000, len(h.columns)))
+    rows[:, h.index["t"]] = 1.0 + np.arange(1, 100_001) / 100  # 1000 s more at 100 Hz
+    rows[:, h.index["s0_lifts"]] = 0
+    rows[54_321, h.index["s0_lifts"]] = 5  # at t = 544.22 s
+    h.extend(rows)
+    view = HealthView(ctx)
+    qtbot.addWidget(view)
+    view.refresh()
+    x, y = view.lift_curves[0].getOriginalDataset()
+    assert len(x) <= 2001 and y.max() == 5  # the single lift survives the thinning
+    cache = view._caches["s0_lifts"]
+    assert cache.rows_read == len(h)  # the first draw reads every row
+    for _ in range(10):
+        h.append(rows[-1])
+        view._last_plot = 0.0
+        view.refresh()
+        assert cache.rows_read <= 2 * cache.step  # the new row and its partial bucket only
+    view.residual_plot.setXRange(544.0, 545.0, padding=0)  # zoom in: every row again
+    view._last_plot = 0.0
+    view.refresh()
+    x, y = view.lift_curves[0].getOriginalDataset()
+    assert x[0] <= 544.0 and x[-1] >= 545.0 and len(x) < 105 and np.allclose(np.diff(x), 0.01)
+    assert y[np.argmin(abs(x - 544.22))] == 5 and y.sum() == 5
+
+
+# -- debug view ---------------------------------------------------------------------------------
+
+
+def fake_polls(n: int, first_seq: int):
+    from mm_interfaces.srv import GetSamples
+
+    k = np.arange(n)
+    return GetSamples.Response(
+        success=True, first_seq=first_seq, next_seq=first_seq + n, dropped=0, cpi=1600,
+        stamp_ns=(1_700_000_000_000_000_000 + (first_seq + k) * 1_000_000).tolist(),
+        dx=(np.round(3 * np.sin(k / 40))).astype(int).tolist(),
+        dy=(12 + (k % 3)).tolist(), status=[0x80] * n, flags=[2] * (n - 1) + [3],
+    )
+
+
+def test_debug_view_without_bridge_is_disabled(qtbot, ctx):
+    view = DebugView(ctx)
+    qtbot.addWidget(view)
+    assert not view.pause_button.isEnabled() and not view.request_button.isEnabled()
+    assert "offline" in view.state.text()
+    view.request_sample()  # nothing to ask: nothing happens
+    assert view.table.rowCount() == 0
+
+
+@pytest.mark.screenshot
+def test_debug_view_lists_manual_replies_and_single_polls(qtbot, ctx, screenshot):
+    pytest.importorskip("mm_interfaces")
+    bridge = RosBridge()  # not started
+    ctx.bridge = bridge
+    bridge.data_received.connect(ctx.on_reply)  # as the main window does
+    asked = []
+    bridge.request_samples = lambda dev, since_seq=0, max_samples=0: asked.append(
+        (dev, since_seq, max_samples)
+    )
+    view = DebugView(ctx)
+    qtbot.addWidget(view)
+    view.resize(1100, 750)
+    replies = list(sim_replies("figure_eight", 20, seconds=3))
+    bridge.data_received.emit(replies[0])  # periodic: not a row
+    assert view.fetch_buttons.keys() == {D0, D1}
+    qtbot.mouseClick(view.pause_button, Qt.LeftButton)
+    assert bridge.polling is False and view.pause_button.text() == "Resume polling"
+    manual = []
+    for r in replies[1:]:
+        if len(manual) < 12 and r is not replies[-1]:
+            qtbot.mouseClick(view.request_button, Qt.LeftButton)
+            manual.append(r)
+        bridge.data_received.emit(r)
+    assert view.table.rowCount() == len(manual) == 12
+    assert len(ctx.session.history) == len(replies) - 1  # every reply processed
+    r = manual[3].by_id()
+    cells = [view.table.item(3, c).text() for c in range(1, 7)]
+    assert cells == [
+        str(r[D0].x_counts), str(r[D0].y_counts),
+        f"{counts_to_m(r[D0].x_counts, 1600) * 1e3:.3f}",
+        f"{counts_to_m(r[D0].y_counts, 1600) * 1e3:.3f}",
+        str(r[D0].samples), f"{r[D0].interval * 1e3:.1f}",
+    ]
+    view.refresh()
+    x, y = view.request_data(D1, "dY")
+    assert np.array_equal(x, np.arange(1, 13))
+    assert np.array_equal(y, [m.by_id()[D1].y_counts for m in manual])
+
+    qtbot.mouseClick(view.fetch_buttons[D0], Qt.LeftButton)
+    assert asked == [(D0, 0, 2000)]
+    bridge.samples_received.emit(D0, fake_polls(300, 4000))
+    px, py = view.poll_curves[(D0, "dY")].getOriginalDataset()
+    assert len(py) == 300 and py[0] == 12 and px[1] == pytest.approx(0.001)
+    assert "300 polls (seq 4000..4299)" in view.polls_label.text()
+    assert "1 lifted" in view.polls_label.text()
+    qtbot.mouseClick(view.fetch_buttons[D0], Qt.LeftButton)
+    assert asked[-1] == (D0, 4300, 2000)  # goes on after the polls already shown
+    bridge.samples_received.emit(D1, fake_polls(250, 4100))
+    bridge.samples_failed.emit(D1, "no such sensor")
+    assert "no such sensor" in view.error.text()
+    view.error.hide()
+    assert_shows_content(screenshot(view, "debug.png"), "debug.png")
+    bridge.set_polling(True)  # resumed elsewhere: the button follows
+    view.refresh()
+    assert not view.pause_button.isChecked()
+
+
+# -- against the real node -------------------------------------------------------------------------
+
+
+#: the module-wide mm-beagle of tests/monitor/conftest.py
+BEAGLE_PARAMS = {"backend": "sim", "sim_trajectory": "straight", "diagnostics_period": 0.2}
+
+
+@pytest.mark.ros
+def test_manual_request_against_the_node_loses_no_counts(qtbot, beagle_node, tmp_path):
+    bridge = RosBridge(rate_hz=50.0)
+    ctx = MonitorContext(MonitorSession(), bridge, MonitorConfig(calibration_file=tmp_path / "c"))
+    replies: list[Reply] = []
+    bridge.data_received.connect(replies.append)
+    bridge.data_received.connect(ctx.on_reply)
+    view = DebugView(ctx)
+    health = HealthView(ctx)
+    qtbot.addWidget(view)
+    qtbot.addWidget(health)
+    bridge.start()
+    try:
+        qtbot.waitUntil(
+            lambda: ctx.session.history is not None and len(ctx.session.history) >= 10,
+            timeout=20000,
+        )
+        qtbot.waitUntil(lambda: health.table.rowCount() == 2, timeout=5000)
+        qtbot.mouseClick(view.pause_button, Qt.LeftButton)
+        assert not bridge.polling
+        qtbot.wait(300)  # a request in flight lands
+        n_replies, x_before = len(replies), ctx.session.pose.x
+        qtbot.wait(300)
+        assert len(replies) == n_replies  # paused: nobody asks
+        qtbot.mouseClick(view.request_button, Qt.LeftButton)
+        qtbot.waitUntil(lambda: view.table.rowCount() == 1, timeout=5000)
+        assert len(replies) == n_replies + 1
+        last = replies[-1].by_id()
+        # the row is the manual reply: it covers the whole pause (>= 0.3 s of 1 kHz polls)
+        assert view.table.item(0, 1).text() == str(last[ctx.session.devices[0]].x_counts)
+        assert int(view.table.item(0, 5).text()) >= 300
+        assert ctx.session.pose.x > x_before  # the map moved
+        first = replies[0].by_id()
+        h = ctx.session.history
+        for k, dev in enumerate(ctx.session.devices):
+            monitor_y = float(np.sum(h.column(f"s{k}_raw_dy")))
+            monitor_x = float(np.sum(h.column(f"s{k}_raw_dx")))
+            assert monitor_y == pytest.approx(last[dev].y_total - first[dev].y_total, abs=1e-9)
+            assert monitor_x == pytest.approx(last[dev].x_total - first[dev].x_total, abs=1e-9)
+            assert monitor_y > 0.05
+        dev0 = ctx.session.devices[0]
+        qtbot.mouseClick(view.fetch_buttons[dev0], Qt.LeftButton)
+        qtbot.waitUntil(lambda: dev0 in view.polls, timeout=5000)
+        res = view.polls[dev0]
+        assert 0 < len(res.dy) <= 2000 and view.next_seq[dev0] == res.next_seq
+        assert health.diagnostics[dev0]["state"] == "up"
+    finally:
+        bridge.stop()
+        time.sleep(0.05)

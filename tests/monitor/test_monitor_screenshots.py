@@ -1,0 +1,96 @@
+"""Screenshots of every main tab of the whole monitor, against a real mm-beagle sim node.
+
+The images are monitor-<tab>.png in the screenshot folder (tests/monitor/conftest.py;
+`./compile docs-images` puts them in docs/images, which the user guide shows);
+each is checked for non-trivial content: many distinct colours and a
+sizeable part of the picture that is not background.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("rclpy")
+pytest.importorskip("PySide6")
+
+from PySide6.QtGui import QImage
+
+from mm_pc.monitor.context import MonitorConfig, MonitorContext
+from mm_pc.monitor.export import grab_png
+from mm_pc.monitor.main_window import MainWindow
+from mm_pc.monitor.model.session import MonitorSession
+from mm_pc.monitor.ros_bridge import RosBridge
+
+pytestmark = pytest.mark.ros
+
+
+def content_stats(path: Path) -> tuple[int, float]:
+    """(distinct colours, share of pixels that differ from the most common colour)."""
+    img = QImage(str(path))
+    assert not img.isNull(), path
+    counts: dict[int, int] = {}
+    step = 3
+    n = 0
+    for y in range(0, img.height(), step):
+        for x in range(0, img.width(), step):
+            c = img.pixel(x, y)
+            counts[c] = counts.get(c, 0) + 1
+            n += 1
+    background = max(counts.values())
+    return len(counts), 1.0 - background / n
+
+
+#: the module-wide mm-beagle of tests/monitor/conftest.py
+BEAGLE_PARAMS = {"backend": "sim", "sim_trajectory": "figure_eight", "sim_lift_rate": 0.5}
+
+
+@pytest.fixture(scope="module")
+def live_window(qapp, beagle_node, tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("shots")
+    config = MonitorConfig(rate_hz=50.0, calibration_file=tmp / "cal.yaml")
+    bridge = RosBridge("/mm_beagle", 50.0, node_name="mm_monitor_shots")
+    ctx = MonitorContext(MonitorSession(), bridge, config)
+    window = MainWindow(ctx)
+    window.resize(1280, 800)
+    window.show()
+    bridge.start()
+    try:
+        yield window
+    finally:
+        bridge.stop()
+        window.close()
+
+
+def wait(qapp, predicate, seconds: float) -> None:
+    import time
+
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline and not predicate():
+        qapp.processEvents()
+        time.sleep(0.02)
+    assert predicate()
+
+
+@pytest.mark.screenshot
+def test_every_tab_screenshot_has_content(live_window, qapp, screenshot_dir):
+    window = live_window
+    session = window.ctx.session
+    # about 8 s of the figure eight at 50 Hz
+    wait(qapp, lambda: session.history is not None and len(session.history) > 400, 40)
+    assert window.views["Registers"].request_registers() == 2
+    table = window.views["Registers"].table
+    wait(qapp, lambda: table.item(0, 0) is not None and "0x" in table.item(0, 0).text(), 10)
+    for i in range(window.tabs.count()):
+        title = window.tabs.tabText(i)
+        window.tabs.setCurrentIndex(i)
+        for _ in range(5):
+            window.frame()
+            qapp.processEvents()
+        path = grab_png(window, screenshot_dir / f"monitor-{title.lower()}.png")
+        colours, share = content_stats(path)
+        assert colours > 20, f"{title}: only {colours} colours"
+        assert share > 0.05, f"{title}: {share:.1%} of the picture is not background"
+    window.tabs.setCurrentIndex(0)
+    assert session.stats.used > 400

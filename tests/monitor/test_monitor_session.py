@@ -1,0 +1,244 @@
+"""The monitor's processing pipeline (no Qt, no ROS): totals, restarts, calibration, history."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from mm_pc.core.calibration import Calibration, SensorCalibration
+from mm_pc.core.geometry import DEFAULT_MOUNTS, SensorMount
+from mm_pc.monitor.model.history import History
+from mm_pc.monitor.model.readings import Reading, Reply
+from mm_pc.monitor.model.session import MonitorSession
+from mm_pc.monitor.model.sim_feed import DEFAULT_DEVICES, sim_replies
+from mm_pc.sim.robot import integrate_pose, trajectory, with_mount_yaw
+
+A, B = DEFAULT_DEVICES
+
+
+def reply(seq: int, totals: dict[str, tuple[float, float]], lift=None) -> Reply:
+    lift = lift or {}
+    return Reply(
+        tuple(
+            Reading(
+                id=d,
+                stamp_ns=seq * 1_000_000,
+                seq=seq,
+                x_total=x,
+                y_total=y,
+                x_lift_total=lift.get(d, (0.0, 0.0))[0],
+                y_lift_total=lift.get(d, (0.0, 0.0))[1],
+                cpi=1600,
+            )
+            for d, (x, y) in totals.items()
+        )
+    )
+
+
+def test_first_reply_is_the_baseline_then_deltas_come_from_the_totals():
+    s = MonitorSession()
+    assert not s.process(reply(100, {A: (0.5, 1.0), B: (0.5, 1.0)}))  # node ran before us
+    assert s.devices == (A, B)
+    assert s.process(reply(110, {A: (0.5, 1.01), B: (0.5, 1.01)}))
+    h = s.history
+    assert len(h) == 1
+    assert h.last("s0_raw_dy") == pytest.approx(0.01)
+    assert h.last("dt") == pytest.approx(0.010)
+    assert h.last("s0_vy") == pytest.approx(1.0)
+    assert s.pose.x == pytest.approx(0.01)
+
+
+def test_a_slow_reply_covers_the_gap_exactly_no_double_count():
+    """Totals make the sum of deltas independent of how the replies were spaced."""
+    fast, slow = MonitorSession(), MonitorSession()
+    ys = np.linspace(0, 0.3, 31)
+    for k, y in enumerate(ys):
+        fast.process(reply(10 * k, {A: (0.0, y), B: (0.0, y)}))
+        if k % 7 == 0 or k == len(ys) - 1:  # replies that came late, some lost
+            slow.process(reply(10 * k, {A: (0.0, y), B: (0.0, y)}))
+    assert fast.history.column("s0_raw_dy").sum() == pytest.approx(0.3)
+    assert slow.history.column("s0_raw_dy").sum() == pytest.approx(0.3)
+    assert slow.pose.x == pytest.approx(fast.pose.x)
+
+
+def test_lift_estimates_are_added_only_when_enabled():
+    on, off = MonitorSession(), MonitorSession(use_lift_estimates=False)
+    for s in (on, off):
+        s.process(reply(0, {A: (0, 0), B: (0, 0)}))
+        s.process(reply(10, {A: (0, 0.1), B: (0, 0.1)}, lift={A: (0, 0.02), B: (0, 0.02)}))
+    assert on.history.last("s0_raw_dy") == pytest.approx(0.12)
+    assert off.history.last("s0_raw_dy") == pytest.approx(0.1)
+
+
+def test_node_restart_rebaselines_without_a_jump():
+    s = MonitorSession()
+    s.process(reply(0, {A: (0, 0), B: (0, 0)}))
+    s.process(reply(500, {A: (0, 0.1), B: (0, 0.1)}))
+    x_before = s.pose.x
+    assert not s.process(reply(20, {A: (0, 0.001), B: (0, 0.001)}))  # seq went back
+    assert s.stats.restarts == 1
+    assert s.pose.x == x_before
+    assert s.process(reply(30, {A: (0, 0.011), B: (0, 0.011)}))
+    assert s.pose.x == pytest.approx(x_before + 0.01)
+    assert any(kind == "restart" for kind, _ in s.stats.events)
+
+
+def test_a_reply_missing_a_sensor_is_kept_for_later_no_count_lost():
+    s = MonitorSession()
+    s.process(reply(0, {A: (0, 0), B: (0, 0)}))
+    assert not s.process(reply(10, {A: (0, 0.05)}))
+    assert s.stats.incomplete == 1
+    assert s.process(reply(20, {A: (0, 0.1), B: (0, 0.1)}))
+    assert s.history.column("s1_raw_dy").sum() == pytest.approx(0.1)
+    assert s.history.column("s0_raw_dy").sum() == pytest.approx(0.1)
+
+
+def test_non_finite_totals_are_rejected_and_change_nothing():
+    s = MonitorSession()
+    s.process(reply(0, {A: (0, 0), B: (0, 0)}))
+    before = (s.pose, len(s.history), dict(s._prev))
+    assert not s.process(reply(10, {A: (math.nan, 0.1), B: (0, 0.1)}))
+    assert s.stats.rejected == 1
+    assert (s.pose, len(s.history), dict(s._prev)) == before
+
+
+def test_sim_figure_eight_matches_ground_truth():
+    s = MonitorSession()
+    for r in sim_replies("figure_eight", 50):
+        s.process(r)
+    v, w = trajectory("figure_eight")
+    truth = integrate_pose(v, w, 0.001)[-1]
+    assert s.pose.x == pytest.approx(truth[0], abs=2e-3)
+    assert s.pose.y == pytest.approx(truth[1], abs=2e-3)
+
+
+def test_calibration_run_keeps_the_robot_still_and_recovers_the_angle():
+    mounts = with_mount_yaw(DEFAULT_MOUNTS, math.radians(5))
+    s = MonitorSession()
+    feed = sim_replies("straight", 50, mounts=mounts)
+    s.process(next(feed))
+    s.start_calibration()
+    for r in feed:
+        s.process(r)
+    assert s.calibrating
+    assert s.pose == type(s.pose)()  # did not move on uncalibrated data
+    assert s.history.column("calibrating").min() == 1.0
+    cal = s.compute_calibration(true_distance=1.0)
+    for dev in DEFAULT_DEVICES:
+        assert cal[dev].angle_offset_deg == pytest.approx(5.0, abs=0.05)
+        assert cal[dev].scale == pytest.approx(1.0, abs=1e-3)
+    s.finish_calibration(cal)
+    assert not s.calibrating
+    assert s.calibration == cal
+
+
+def test_calibration_errors_name_the_sensor_and_apply_nothing():
+    s = MonitorSession()
+    s.process(reply(0, {A: (0, 0), B: (0, 0)}))
+    with pytest.raises(ValueError, match="no calibration run in progress"):
+        s.compute_calibration()
+    s.start_calibration()
+    s.process(reply(10, {A: (0, 0.01), B: (0, 0.01)}))
+    with pytest.raises(ValueError, match=f"{A}: calibration run too short"):
+        s.compute_calibration()
+    s.finish_calibration(None)
+    assert s.calibration == Calibration()
+
+
+def test_calibration_is_applied_before_the_pose_math():
+    cal = Calibration({A: SensorCalibration(math.radians(90), 1.0, 2.0)})
+    s = MonitorSession(calibration=cal)
+    s.process(reply(0, {A: (0, 0), B: (0, 0)}))
+    s.process(reply(10, {A: (-0.01, 0), B: (0, 0.01)}))  # turned by 90 deg: X becomes Y
+    assert s.history.last("s0_dy") == pytest.approx(-0.02)
+    assert s.history.last("s0_dx") == pytest.approx(0.0, abs=1e-12)
+
+
+def test_configure_odometry_validates_and_keeps_the_pose():
+    s = MonitorSession()
+    for r in sim_replies("straight", 20, seconds=1.0):
+        s.process(r)
+    pose = s.pose
+    with pytest.raises(ValueError, match="unknown pose method"):
+        s.configure_odometry(method="magic")
+    with pytest.raises(ValueError, match="one mount per sensor"):
+        s.configure_odometry(mounts=DEFAULT_MOUNTS[:1])
+    with pytest.raises(ValueError):
+        s.configure_odometry(mounts=(SensorMount(0.0, -0.04), SensorMount(0.0, 0.04)))
+    assert (s.method, s.mounts, s.pose) == ("exact", DEFAULT_MOUNTS, pose)
+    s.configure_odometry(method="two-sensor")
+    assert s.method == "two-sensor"
+    assert s.pose == pose
+
+
+def test_filters_validate_and_clear():
+    s = MonitorSession(devices=DEFAULT_DEVICES)
+    with pytest.raises(ValueError, match="unknown sensor"):
+        s.set_filter("/dev/nope", 5, True, False)
+    with pytest.raises(ValueError):
+        s.set_filter(A, 0, True, False)
+    assert s.filters[A].window == 5 and not s.filters[A].filter_x
+    s.set_filter(A, 7, True, False)
+    assert (s.filters[A].window, s.filters[A].filter_x, s.filters[A].filter_y) == (7, True, False)
+    s.clear_filters()
+    assert not s.filters[A].filter_x
+
+
+def test_reset_clears_history_and_pose_but_counting_continues():
+    s = MonitorSession()
+    feed = list(sim_replies("straight", 20, seconds=1.0))
+    for r in feed[:10]:
+        s.process(r)
+    s.reset()
+    assert len(s.history) == 0 and s.pose.x == 0.0
+    for r in feed[10:]:
+        s.process(r)
+    assert s.pose.x == pytest.approx(
+        feed[-1].readings[0].y_total - feed[9].readings[0].y_total, abs=1e-9
+    )
+
+
+def test_history_is_bounded_and_reports_dropped_rows():
+    h = History(["a", "b"], max_rows=100, initial=8)
+    for i in range(250):
+        h.append((i, -i))
+    assert len(h) <= 100
+    assert h.last("a") == 249
+    assert h.dropped_rows == 250 - len(h)
+    col = h.column("a")
+    assert np.all(np.diff(col) == 1)
+    with pytest.raises(ValueError):
+        col[0] = 5  # views are read-only
+    h.extend(np.arange(40.0).reshape(20, 2))
+    assert h.last("b") == 39
+    with pytest.raises(ValueError, match="expected shape"):
+        h.extend(np.zeros((3, 3)))
+    with pytest.raises(KeyError, match="no column 'c'"):
+        h.column("c")
+
+
+def test_reading_from_msg_reads_every_field():
+    @dataclasses.dataclass
+    class Stamp:
+        sec: int = 2
+        nanosec: int = 5
+
+    msg = type("Msg", (), {})()
+    values = dict(
+        id="/dev/x", stamp=Stamp(), seq=7, x_total_disp=0.1, y_total_disp=0.2,
+        x_lift_est_total_disp=0.01, y_lift_est_total_disp=0.02, x_speed=1.0, y_speed=2.0,
+        x_counts=3, y_counts=4, cpi=800, samples=10, lift_events=1, lift_events_total=2,
+        interval=0.01, x_disp=0.001, y_disp=0.002, x_total_counts=6, y_total_counts=12,
+        x_lift_est_counts=0.5, y_lift_est_counts=1.5, x_lift_est_disp=1e-5, y_lift_est_disp=2e-5,
+    )  # fmt: skip
+    for k, v in values.items():
+        setattr(msg, k, v)
+    r = Reading.from_msg(msg)
+    assert r.stamp_ns == 2_000_000_005
+    assert (r.x_total, r.y_lift_total, r.cpi, r.lift_events_total) == (0.1, 0.02, 800, 2)
+    assert (r.x_disp, r.y_total_counts, r.y_lift_est_counts, r.y_lift_est_disp) == (
+        0.001, 12, 1.5, 2e-5,
+    )

@@ -1,0 +1,167 @@
+"""mm-odometry against a real mm-beagle process: nav_msgs/Odometry and Path out."""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import threading
+import time
+
+import pytest
+
+pytest.importorskip("rclpy")
+from nav_msgs.msg import Odometry, Path
+
+from mm_beagle.harness import BeagleClient, beagle_process
+from mm_pc.core.uncertainty import PoseUncertainty, twist_covariance
+
+pytestmark = pytest.mark.ros
+
+
+@pytest.mark.parametrize("method", ["exact", "two-sensor"])
+def test_straight_run_ends_where_the_robot_stopped(method, tmp_path, ros_command):
+    """Robot stands 4 s, drives 2 s straight at 0.2 m/s, stands: odom ends at x = 0.4 m."""
+    ns = f"/odo_{method.replace('-', '_')}"
+    beagle = {
+        "backend": "sim",
+        "sim_trajectory": "straight",
+        "sim_start_delay": 4.0,
+        "sim_duration": 2.0,
+    }
+    # mm-odometry first: it waits for the service, so its baseline is the node's first
+    # reply, long before the robot starts (a late start under load missed part of the run)
+    params = {"beagle": "/mm_beagle", "rate": 50.0, "method": method, "path_rate": 5.0}
+    odo = subprocess.Popen(
+        ros_command("mm_pc.ros.odometry_node", params, ns),
+        env=dict(os.environ),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    try:
+        with beagle_process(beagle, env=dict(os.environ), log_path=str(tmp_path / "beagle.log")):
+            client = BeagleClient("odo_test_client")
+            assert client.wait(30)
+            got: list[Odometry] = []
+            paths: list[Path] = []
+            lock = threading.Lock()
+
+            def on_odom(m):
+                with lock:
+                    got.append(m)
+
+            client.node.create_subscription(Odometry, f"{ns}/mm_odometry/odom", on_odom, 10)
+            client.node.create_subscription(Path, f"{ns}/mm_odometry/path", paths.append, 10)
+            try:
+                deadline = time.monotonic() + 25
+                final = None
+                while time.monotonic() < deadline:
+                    time.sleep(0.2)
+                    with lock:
+                        last = got[-1] if got else None
+                    if (
+                        last is not None
+                        and last.pose.pose.position.x > 0.39
+                        and last.twist.twist.linear.x == 0
+                    ):
+                        final = last
+                        break
+                assert final is not None, f"no final pose; last: {got[-1] if got else None}"
+                pos = final.pose.pose.position
+                assert pos.x == pytest.approx(0.4, abs=0.002)
+                assert pos.y == pytest.approx(0.0, abs=0.002)
+                yaw = 2 * math.atan2(final.pose.pose.orientation.z, final.pose.pose.orientation.w)
+                assert yaw == pytest.approx(0.0, abs=0.005)
+                assert final.header.frame_id == "odom" and final.child_frame_id == "base_link"
+                # covariance grew with the 0.4 m travelled
+                assert final.pose.covariance[0] == pytest.approx(0.015**2 * 0.4, rel=0.05)
+                assert paths and len(paths[-1].poses) > 10
+            finally:
+                client.close()
+    finally:
+        odo.send_signal(signal.SIGINT)
+        out, _ = odo.communicate(timeout=15)
+    assert odo.returncode == 0, out
+
+
+def test_bad_method_exits_with_a_message(ros_command):
+    out = subprocess.run(
+        ros_command("mm_pc.ros.odometry_node", {"method": "guess"}, "/odo_bad"),
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=dict(os.environ),
+    )
+    assert out.returncode == 2
+    assert "unknown odometry method 'guess'" in out.stderr
+
+
+def test_uncertainty_grows_with_distance_and_turn():
+    u = PoseUncertainty()
+    u.add(1.0, 0.0)
+    assert u.pose_covariance()[0] == pytest.approx(0.015**2)
+    assert u.pose_covariance()[35] == pytest.approx(0.01**2)
+    u.add(-1.0, -math.pi)
+    assert u.pose_covariance()[0] == pytest.approx(2 * 0.015**2)
+    assert u.pose_covariance()[35] == pytest.approx(2 * 0.01**2 + math.pi * 0.01**2)
+    with pytest.raises(ValueError, match="q_pos"):
+        PoseUncertainty(q_pos=-1.0)
+    with pytest.raises(ValueError, match="cpi and dt"):
+        twist_covariance(0, 0.1)
+
+
+@pytest.mark.parametrize("method", ["exact", "two-sensor"])
+def test_beagle_onboard_odometry_integrates_every_poll(method, tmp_path):
+    """mm-beagle's own ~/odom (odometry_rate > 0): the same run, integrated at 1 kHz."""
+    beagle = {
+        "backend": "sim",
+        "sim_trajectory": "straight",
+        "sim_start_delay": 3.0,
+        "sim_duration": 2.0,
+        "odometry_rate": 20.0,
+        "odometry_method": method,
+    }
+    with beagle_process(beagle, env=dict(os.environ), log_path=str(tmp_path / "beagle.log")):
+        client = BeagleClient(f"onboard_{method.replace('-', '_')}")
+        assert client.wait(30)
+        got: list[Odometry] = []
+        client.node.create_subscription(Odometry, "/mm_beagle/odom", got.append, 10)
+        try:
+            deadline = time.monotonic() + 20
+            final = None
+            while time.monotonic() < deadline and final is None:
+                time.sleep(0.2)
+                last = got[-1] if got else None
+                stopped = last is not None and last.twist.twist.linear.x == 0
+                if stopped and last.pose.pose.position.x > 0.39:
+                    final = last
+            assert final is not None, (tmp_path / "beagle.log").read_text()[-2000:]
+            assert final.pose.pose.position.x == pytest.approx(0.4, abs=0.002)
+            assert final.pose.pose.position.y == pytest.approx(0.0, abs=0.002)
+        finally:
+            client.close()
+
+
+def test_beagle_rejects_bad_odometry_settings():
+    from mm_beagle.harness import node_command
+
+    for params, expect in (
+        ({"backend": "sim", "odometry_rate": 10.0, "odometry_method": "guess"}, "guess"),
+        ({"backend": "sim", "odometry_rate": 10.0, "mounts": [0.1, 0.2]}, "'mounts' needs x, y"),
+        (
+            {"backend": "sim", "odometry_rate": 10.0, "calibration_file": "/nonexistent.yaml"},
+            "nonexistent.yaml",
+        ),
+    ):
+        out = subprocess.run(
+            node_command(params, "/bad_odo"),
+            capture_output=True,
+            text=True,
+            timeout=60,
+            env=dict(os.environ),
+        )
+        assert out.returncode == 2, out.stdout + out.stderr
+        assert expect in out.stdout + out.stderr
+        assert "Traceback" not in out.stdout + out.stderr
