@@ -8,13 +8,12 @@ hand) never see each other and nothing leaves this machine.
 from __future__ import annotations
 
 import os
-import random
 
 from hypothesis import settings
 
-os.environ["ROS_DOMAIN_ID"] = str(random.randint(120, 220))
-os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-os.environ.pop("ROS_STATIC_PEERS", None)
+from mm_beagle.harness import use_isolated_ros_env
+
+use_isolated_ros_env()  # the harness's one definition (domain, localhost, no static peers)
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 
 # Hypothesis: the same examples on every run by default ("repeatable"), so CI on a

@@ -42,6 +42,11 @@ def _parser() -> argparse.ArgumentParser:
         "--sim", nargs="?", const="figure_eight", default=None, metavar="TRAJECTORY",
         help="start mm-beagle on emulated sensors driving TRAJECTORY (default figure_eight)",
     )  # fmt: skip
+    p.add_argument(
+        "--agent", action="store_true",
+        help="with --sim: the BBB chain, mm-beagle-agent on emulated sensors and mm-beagle "
+        "backend:=remote on its link",
+    )  # fmt: skip
     p.add_argument("--replay", type=Path, default=None, help="replay an MCAP recording")
     p.add_argument("--tab", default="Map", help="tab to show first (Map, Graphs, Data, ...)")
     return p
@@ -108,6 +113,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.duration < 0:
         print("mm-monitor: --duration must be >= 0", file=sys.stderr)
         return 2
+    if args.agent and not args.sim:
+        print("mm-monitor: --agent goes with --sim (the emulated sensors behind an agent)",
+              file=sys.stderr)
+        return 2
     headless = args.headless
     if not headless and not _has_display() and os.environ.get("QT_QPA_PLATFORM") != "offscreen":
         duration = args.duration or 20.0
@@ -139,7 +148,7 @@ def _run(args, headless: bool) -> int:
     from PySide6.QtCore import QTimer
     from PySide6.QtWidgets import QApplication
 
-    from mm_beagle.harness import beagle_process, use_isolated_ros_env
+    from mm_beagle.harness import emulated_sensors, use_isolated_ros_env
     from mm_pc.monitor.context import MonitorConfig, MonitorContext
     from mm_pc.monitor.export import grab_png
     from mm_pc.monitor.main_window import MainWindow
@@ -152,14 +161,13 @@ def _run(args, headless: bool) -> int:
         if args.sim:
             env = use_isolated_ros_env()
             log = Path(os.environ.get("TMPDIR", "/tmp")) / "mm_monitor_sim_beagle.log"
+            chain = "mm-beagle-agent + mm-beagle backend:=remote" if args.agent else "mm-beagle"
             print(
-                f"mm-monitor: starting mm-beagle on emulated sensors ({args.sim}, "
+                f"mm-monitor: starting {chain} on emulated sensors ({args.sim}, "
                 f"ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}); node log: {log}",
                 flush=True,
             )
-            stack.enter_context(
-                beagle_process({"backend": "sim", "sim_trajectory": args.sim}, env, str(log))
-            )
+            stack.enter_context(emulated_sensors(args.sim, env, str(log), args.agent))
         app = QApplication.instance() or QApplication([sys.argv[0]])
         app.setApplicationName("Mouse Monitor")
         bridge = None

@@ -128,17 +128,12 @@ class RosBridge(QObject):
         from rclpy.context import Context
         from rclpy.executors import SingleThreadedExecutor
 
-        from mm_interfaces.srv import GetSamples, GetSensorData, GetSensorSettings, SetResolution
+        from mm_beagle.services import service_types
 
         self._ctx = Context()
         rclpy.init(context=self._ctx)
         self.node = rclpy.create_node(self.node_name, context=self._ctx)
-        self._types = {
-            "get_sensor_data": GetSensorData,
-            "get_sensor_settings": GetSensorSettings,
-            "set_resolution": SetResolution,
-            "get_samples": GetSamples,
-        }
+        self._types = service_types()
         self._clients = {
             n: self.node.create_client(t, f"{self.beagle}/{n}") for n, t in self._types.items()
         }

@@ -14,7 +14,7 @@ pytest.importorskip("rclpy")
 from mm_beagle.params import PARAMETERS
 from mm_beagle.watch import HEADER, SensorView, format_row
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_params_file_lists_every_parameter_with_its_default():
