@@ -340,6 +340,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sim-noise-counts", type=float)
     p.add_argument("--sim-lift-rate", type=float)
     p.add_argument("--sim-fail-windows", nargs="*", help="DEVICE@START-END (s) failure windows")
+    p.add_argument("--sim-start-delay", type=float, help="s standing still before the path")
+    p.add_argument("--sim-duration", type=float, help="s of motion, then still (0 = the path)")
+    p.add_argument("--sim-loop", action=argparse.BooleanOptionalAction, help="repeat the path")
     p.add_argument("--self-test", type=float, metavar="SECONDS", help="run, print one JSON line")
     # mm-bench agent: the motion burst answered by a constant stub, flat out unless paced
     p.add_argument("--bench-stub", action="store_true", help=argparse.SUPPRESS)
@@ -366,6 +369,9 @@ DEFAULTS = {
     "sim_noise_counts": 0.0,
     "sim_lift_rate": 0.0,
     "sim_fail_windows": [],
+    "sim_start_delay": 0.0,
+    "sim_duration": 0.0,
+    "sim_loop": True,
 }
 
 
@@ -443,7 +449,12 @@ def config_from_args(args: argparse.Namespace) -> AgentConfig:
         noise_counts=values["sim_noise_counts"],
         lift_rate=values["sim_lift_rate"],
         fail_windows=list(values["sim_fail_windows"]),
+        start_delay=values["sim_start_delay"],
+        duration=values["sim_duration"],
+        loop=values["sim_loop"],
     )
+    if not (0 <= sim.start_delay <= 3600 and 0 <= sim.duration <= 1e6):
+        raise ValueError("'sim_start_delay' must be 0..3600 s and 'sim_duration' 0..1e6 s")
     parse_fail_windows(sim.fail_windows, devices)
     ring = round(values["ring_seconds"] * values["poll_rate"])
     cfg = poller_config(values, ring, sim)

@@ -119,7 +119,9 @@ def agent_command(options: dict[str, object]) -> list[str]:
     cmd = [sys.executable, "-m", "mm_beagle.agent"]
     for name, value in options.items():
         flag = "--" + name.replace("_", "-")
-        if isinstance(value, (list, tuple)):
+        if isinstance(value, bool):
+            cmd.append(flag if value else "--no-" + name.replace("_", "-"))
+        elif isinstance(value, (list, tuple)):
             if name == "listen":
                 for v in value:
                     cmd += [flag, str(v)]

@@ -13,7 +13,13 @@ import pytest
 pytest.importorskip("rclpy")
 pytest.importorskip("PySide6")
 
-from mm_beagle.harness import BeagleClient, beagle_process, stop_process
+from mm_beagle.harness import (
+    BeagleClient,
+    agent_process,
+    beagle_process,
+    free_port,
+    stop_process,
+)
 from mm_pc.monitor.context import MonitorConfig, MonitorContext
 from mm_pc.monitor.main_window import MainWindow
 from mm_pc.monitor.model.session import MonitorSession
@@ -76,6 +82,46 @@ def test_monitor_connects_counts_everything_and_survives_a_restart(qtbot, tmp_pa
             assert session.pose.x == pytest.approx(pose_before.x, abs=1e-9)
             wait_until(qtbot, lambda: session.pose.x > pose_before.x + 0.59, 20)
         assert bridge.stats().dropped_requests >= 0
+    finally:
+        bridge.stop()
+        window.close()
+
+
+def test_monitor_through_the_agent_counts_everything_and_an_agent_restart_is_seamless(
+    qtbot, tmp_path
+):
+    """The BBB chain: agent on emulated sensors, mm-beagle backend:=remote, the monitor.
+
+    The agent restarting mid-run is not a node restart: the node continues its totals,
+    so the monitor sees no jump and adds the second run's 0.6 m."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    agent_opts = {k: v for k, v in STRAIGHT.items() if k != "backend"}
+    agent_opts.update(backend="sim", listen=[endpoint])
+    window, bridge = make_window(qtbot, tmp_path)
+    session = window.ctx.session
+    try:
+        with beagle_process(
+            {"backend": "remote", "agent": endpoint}, env=dict(os.environ),
+            log_path=str(tmp_path / "node.log"),
+        ):  # fmt: skip
+            with agent_process(agent_opts, str(tmp_path / "agent1.log")):
+                wait_until(qtbot, lambda: bridge.state == "connected", 30)
+                wait_until(qtbot, lambda: session.pose.x > 0.59, 25)
+                qtbot.wait(600)
+                client = BeagleClient("mm_monitor_agent_check")
+                try:
+                    node_y = client.diagnostics()["/dev/spidev1.0"]["y_total_counts"]
+                finally:
+                    client.close()
+                served = sum(session.history.column("s0_raw_dy"))
+                assert session.pose.x == pytest.approx(0.6, abs=0.002)
+                assert served == pytest.approx(int(node_y) * 0.0254 / 1600, abs=2e-4)
+            pose_before = session.pose
+            with agent_process(agent_opts, str(tmp_path / "agent2.log")):
+                wait_until(qtbot, lambda: session.pose.x > pose_before.x + 0.59, 30)
+                qtbot.wait(1000)  # the run's last centimetre
+            assert session.stats.restarts == 0  # the node never went back
+            assert session.pose.x == pytest.approx(pose_before.x + 0.6, abs=0.004)
     finally:
         bridge.stop()
         window.close()
@@ -144,6 +190,19 @@ def test_headless_cli_runs_against_the_sim_and_writes_a_screenshot(tmp_path):
     assert "the robot (exact) travelled" in out.stdout
 
 
+def test_headless_cli_with_agent_runs_the_bbb_chain(tmp_path):
+    env = dict(os.environ, QT_QPA_PLATFORM="offscreen")
+    out = subprocess.run(
+        [sys.executable, "-m", "mm_pc.monitor.app", "--sim", "--agent", "--headless",
+         "--duration", "6", "--rate", "30"],
+        capture_output=True, text=True, timeout=120, env=env,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert "mm-beagle-agent + mm-beagle backend:=remote" in out.stdout
+    assert "was connected to /mm_beagle" in out.stdout
+    assert " 0 samples used" not in out.stdout
+
+
 def test_no_display_falls_back_to_headless_with_a_message(tmp_path):
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
     env.pop("QT_QPA_PLATFORM", None)
@@ -164,7 +223,8 @@ def test_no_display_falls_back_to_headless_with_a_message(tmp_path):
 @pytest.mark.parametrize(
     ("args", "message"),
     [(["--rate", "0"], "1..500"), (["--rate", "junk"], "invalid float value"),
-     (["--duration", "-1"], "--duration must be >= 0")],
+     (["--duration", "-1"], "--duration must be >= 0"),
+     (["--agent"], "--agent goes with --sim")],
 )  # fmt: skip
 def test_bad_command_line_exits_2_with_a_message(args, message):
     out = subprocess.run(
