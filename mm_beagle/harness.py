@@ -18,11 +18,20 @@ from contextlib import contextmanager, suppress
 
 from .services import service_types
 
+ISOLATED_MARK = "MM_ISOLATED_ROS_DOMAIN"  # set once a process has its private domain
+
 
 def isolated_ros_env(domain_id: int | None = None) -> dict[str, str]:
-    """This process's environment with a private domain and localhost-only discovery."""
+    """This process's environment with a private domain and localhost-only discovery.
+
+    A process that already has one (a test session, the demo) keeps it: a second,
+    different domain would cut it off from the nodes it already talks to.
+    """
     env = dict(os.environ)
-    env["ROS_DOMAIN_ID"] = str(domain_id if domain_id is not None else random.randint(120, 220))
+    if domain_id is None:
+        kept = env.get(ISOLATED_MARK)
+        domain_id = int(kept) if kept and kept.isdigit() else random.randint(120, 220)
+    env["ROS_DOMAIN_ID"] = env[ISOLATED_MARK] = str(domain_id)
     env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     env.pop("ROS_STATIC_PEERS", None)
     env["PYTHONUNBUFFERED"] = "1"
@@ -32,7 +41,7 @@ def isolated_ros_env(domain_id: int | None = None) -> dict[str, str]:
 def use_isolated_ros_env(domain_id: int | None = None) -> dict[str, str]:
     """Apply :func:`isolated_ros_env` to this process (before rclpy.init)."""
     env = isolated_ros_env(domain_id)
-    for key in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE"):
+    for key in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", ISOLATED_MARK):
         os.environ[key] = env[key]
     os.environ.pop("ROS_STATIC_PEERS", None)
     return env
