@@ -6,6 +6,7 @@ not checked here.
 
 from __future__ import annotations
 
+import json
 import os
 
 import pytest
@@ -51,3 +52,40 @@ def test_the_spidev_path_imports_no_numpy_on_armhf(armhf_root):
     assert report is not None, why
     assert report["imports_numpy"] is False
     assert report["backend"] == "spidev"
+
+
+def test_install_agent_installs_and_runs_on_armhf(armhf_root, tmp_path):
+    """./compile agent inside the armhf root, offline (the zenoh wheel from a folder),
+    without systemd: the installed launcher runs with the installed config file."""
+    import shutil
+    import subprocess
+
+    tool = bench_agent.armhf_tool()
+    src = armhf_root / "opt" / "mm-install-src"
+    shutil.rmtree(src, ignore_errors=True)
+    src.mkdir(parents=True)
+    repo = bench_agent.Path(bench_agent.__file__).resolve().parents[1]
+    for name in ("compile", "mm_beagle", "pln2033", "mm_pc", "docs"):
+        path = repo / name
+        if path.is_dir():
+            shutil.copytree(path, src / name, ignore=shutil.ignore_patterns("__pycache__"))
+        else:
+            shutil.copy2(path, src / name)
+    prefix = "/opt/mm-install-test"
+    out = subprocess.run(
+        [tool, "run", "sh", "-c",
+         f"rm -rf {prefix} && cd /opt/mm-install-src && ./compile agent --prefix {prefix} "
+         "--wheel-dir /tmp/wheels --no-systemd"],
+        capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "done" in out.stdout
+    run = subprocess.run(
+        [tool, "run", f"{prefix}/bin/mm-beagle-agent", "--config", "/etc/mouse-monitor/agent.yaml",
+         "--backend", "sim", "--realtime-priority", "0", "--self-test", "2"],
+        capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr[-2000:]
+    report = json.loads(run.stdout.strip().splitlines()[-1])
+    assert report["machine"].startswith("arm") and report["counts_lost"] == 0
+    assert report["polls"] > 100
