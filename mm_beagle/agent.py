@@ -44,7 +44,8 @@ class AgentConfig:
 
 
 class AgentLink:
-    """The agent's zenoh side: publishers, and queryables read without threads."""
+    """The agent's zenoh side: publishers, and a queryable and a subscriber read with
+    ``try_recv`` on the poll thread (no callbacks, no second thread)."""
 
     def __init__(self, session, name: str, poller: AgentPoller) -> None:
         import zenoh
@@ -74,7 +75,6 @@ class AgentLink:
         self.cpu_last = (os.times(), time.monotonic())
         self.cpu_percent = float("nan")
         self.bytes_sent = 0
-        self.hist_z = b""
 
     # --- between polls ---
 
@@ -208,8 +208,7 @@ class AgentLink:
             busy = (times.user + times.system) - (last.user + last.system)
             self.cpu_percent = 100.0 * busy / (wall - last_wall)
         self.cpu_last = (times, wall)
-        hist = self.poller.state.hist_view.tobytes()
-        self.hist_z = zlib.compress(hist, 1)
+        hist_z = zlib.compress(self.poller.state.hist_view.tobytes(), 1)
         chans = self.poller.channels
         status = {
             "boot_id": self.boot_id,
@@ -220,7 +219,7 @@ class AgentLink:
             "cpu_percent": round(self.cpu_percent, 2),
             "rss_mb": round(rss_mb(), 2),
             "bytes_sent": self.bytes_sent,
-            "hist_z": base64.b64encode(self.hist_z).decode(),
+            "hist_z": base64.b64encode(hist_z).decode(),
         }
         self.status_pub.put(json.dumps(status).encode())
 
@@ -249,7 +248,6 @@ class AgentPoller(Poller):
     def __init__(self, cfg: PollerConfig, state: ss.SharedState) -> None:
         super().__init__(cfg, state, None, None)  # type: ignore[arg-type]
         self.link: AgentLink | None = None
-        self.log: list[str] = []
 
     def emit(self, kind: str, *args: object) -> None:
         text = " ".join(str(a) for a in args)
@@ -301,9 +299,9 @@ def rss_mb() -> float:
 
 
 def make_state(cfg: PollerConfig) -> ss.SharedState:
+    """A private shared-state buffer for the agent's poller (nobody else maps it)."""
     n = len(cfg.devices)
-    state = ss.SharedState(bytearray(ss.SharedState.size(n, cfg.ring_size)), n, cfg.ring_size)
-    return state
+    return ss.SharedState(bytearray(ss.SharedState.size(n, cfg.ring_size)), n, cfg.ring_size)
 
 
 # --- command line -------------------------------------------------------------------------
