@@ -342,12 +342,14 @@ class RemoteAgent:
         if end >= expected:
             self.agent_i[i] = ints
             self.agent_f[i] = floats
-            ring_from, version = int(st[ss.I_RING_FROM]), int(st[ss.I_VERSION])
-            st[:] = ints
-            st[self._mono] += self.base_i[i][self._mono]
+            # every field but the lock word (never the agent's version, even for a moment:
+            # a reader would take a half-written snapshot) and the node's own ring start
+            fields = ints.copy()
+            fields[self._mono] += self.base_i[i][self._mono]
             if self.clock_sync and self._offset_ns is not None:
-                st[ss.I_STAMP_NS] += self._offset_ns
-            st[ss.I_RING_FROM], st[ss.I_VERSION] = ring_from, version
+                fields[ss.I_STAMP_NS] += self._offset_ns
+            st[1 : ss.I_RING_FROM] = fields[1 : ss.I_RING_FROM]
+            st[ss.I_RING_FROM + 1 :] = fields[ss.I_RING_FROM + 1 :]
             self.state.floats[i] = floats + self.base_f[i]
             self.next_agent[i] = end
         st[ss.I_VERSION] += 1  # even: consistent

@@ -51,6 +51,21 @@ def wait_until(qtbot, predicate, timeout=20.0):
     qtbot.waitUntil(predicate, timeout=int(timeout * 1000))
 
 
+def assert_run_counted(qtbot, session, timeout: float) -> None:
+    """The STRAIGHT run ended at 0.6 m, and every count the node measured after the
+    monitor's baseline reached the pose (the node's total from /diagnostics)."""
+    wait_until(qtbot, lambda: session.pose.x > 0.59, timeout)
+    qtbot.wait(600)
+    client = BeagleClient("mm_monitor_check")
+    try:
+        node_y = client.diagnostics()["/dev/spidev1.0"]["y_total_counts"]
+    finally:
+        client.close()
+    served = sum(session.history.column("s0_raw_dy"))
+    assert session.pose.x == pytest.approx(0.6, abs=0.002)
+    assert served == pytest.approx(int(node_y) * 0.0254 / 1600, abs=2e-4)
+
+
 def test_monitor_connects_counts_everything_and_survives_a_restart(qtbot, tmp_path):
     window, bridge = make_window(qtbot, tmp_path)
     try:
@@ -61,17 +76,7 @@ def test_monitor_connects_counts_everything_and_survives_a_restart(qtbot, tmp_pa
             wait_until(qtbot, lambda: "ms" in window.rtt_label.text(), 5)
             # the run: 4 s still, 3 s at 0.2 m/s, then still; wait for it to end
             session = window.ctx.session
-            wait_until(qtbot, lambda: session.pose.x > 0.59, 20)
-            qtbot.wait(600)
-            client = BeagleClient("mm_monitor_check")
-            try:
-                node_y = client.diagnostics()["/dev/spidev1.0"]["y_total_counts"]
-            finally:
-                client.close()
-            served = sum(session.history.column("s0_raw_dy"))
-            # every count the node measured after our baseline reached the pose
-            assert session.pose.x == pytest.approx(0.6, abs=0.002)
-            assert served == pytest.approx(int(node_y) * 0.0254 / 1600, abs=2e-4)
+            assert_run_counted(qtbot, session, timeout=20)
             stop_process(proc)
         wait_until(qtbot, lambda: "lost /mm_beagle" in window.state_label.text(), 15)
         pose_before = session.pose
@@ -106,16 +111,7 @@ def test_monitor_through_the_agent_counts_everything_and_an_agent_restart_is_sea
         ):  # fmt: skip
             with agent_process(agent_opts, str(tmp_path / "agent1.log")):
                 wait_until(qtbot, lambda: bridge.state == "connected", 30)
-                wait_until(qtbot, lambda: session.pose.x > 0.59, 25)
-                qtbot.wait(600)
-                client = BeagleClient("mm_monitor_agent_check")
-                try:
-                    node_y = client.diagnostics()["/dev/spidev1.0"]["y_total_counts"]
-                finally:
-                    client.close()
-                served = sum(session.history.column("s0_raw_dy"))
-                assert session.pose.x == pytest.approx(0.6, abs=0.002)
-                assert served == pytest.approx(int(node_y) * 0.0254 / 1600, abs=2e-4)
+                assert_run_counted(qtbot, session, timeout=25)
             pose_before = session.pose
             with agent_process(agent_opts, str(tmp_path / "agent2.log")):
                 wait_until(qtbot, lambda: session.pose.x > pose_before.x + 0.59, 30)
