@@ -140,6 +140,46 @@ def meander(
     return _segments(parts, dt)
 
 
+def _smooth(duration: float, v_of_t, w_of_t, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """One segment whose twist changes every step: v(t), omega(t) at the step midpoints."""
+    t = (np.arange(round(duration / dt)) + 0.5) * dt
+    v = np.broadcast_to(v_of_t(t), t.shape).astype(float)
+    return v, np.broadcast_to(w_of_t(t), t.shape).astype(float)
+
+
+def s_curves(speed: float = 0.2, duration: float = 50.0, dt: float = DT):
+    """Speed and curvature changing continuously (no step in either): v swings
+    between 0.5x and 1.5x ``speed``, omega is a sum of two sines (peak ~1 rad/s).
+    About ``speed * duration`` metres (10 m by default)."""
+    return _smooth(
+        duration,
+        lambda t: speed * (1.0 + 0.5 * np.sin(2 * np.pi * t / 13.0)),
+        lambda t: 0.7 * np.sin(2 * np.pi * t / 9.0) + 0.3 * np.sin(2 * np.pi * t / 4.1),
+        dt,
+    )
+
+
+def mixed_tour(speed: float = 0.2, dt: float = DT):
+    """The ~12 m test tour: straights, continuously varying S-curves, spins on the
+    spot both ways, reverse driving with a turn, an arc and a fast straight
+    (2.5x ``speed``). The benchmark tour of ``mm-bench pose``."""
+    parts = [
+        _segments([(2.0 / speed, speed, 0.0)], dt),
+        _smooth(
+            4.0 / speed,
+            lambda t: speed * (1.0 + 0.5 * np.sin(2 * np.pi * t / 7.0)),
+            lambda t: 1.0 * np.sin(2 * np.pi * t / 8.0),
+            dt,
+        ),
+        _segments([(2 * math.pi / 1.0, 0.0, 1.0)], dt),  # one full spin left
+        _segments([(1.0 / speed, -speed, 0.2)], dt),  # reverse with a gentle turn
+        _segments([(2.0 / (1.5 * speed), 1.5 * speed, -1.5 * speed / 0.6)], dt),  # arc right, r 0.6
+        _segments([((math.pi / 2) / 1.0, 0.0, -1.0)], dt),  # quarter spin right
+        _segments([(3.0 / (2.5 * speed), 2.5 * speed, 0.0)], dt),  # fast straight
+    ]
+    return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+
 TRAJECTORIES = {
     "still": still,
     "straight": straight,
@@ -147,6 +187,8 @@ TRAJECTORIES = {
     "square": square,
     "round_trip": round_trip,
     "meander": meander,
+    "s_curves": s_curves,
+    "mixed_tour": mixed_tour,
 }
 
 
