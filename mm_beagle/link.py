@@ -221,8 +221,11 @@ def zenoh_config(
     The agent listens (peer mode); the node connects as a client and keeps
     retrying every 0.1-1 s. With ``credentials`` both sides authenticate with
     zenoh's user/password scheme: a listener then refuses peers without them.
+    ``RUST_LOG`` (e.g. ``zenoh=debug``) turns on zenoh's own log on stderr.
     """
     import zenoh
+
+    zenoh.try_init_log_from_env()
 
     cfg: dict = {
         "mode": "peer" if listen else "client",

@@ -11,7 +11,6 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-import threading
 import time
 from dataclasses import dataclass
 
@@ -71,23 +70,20 @@ def run(duration: float, namespace: str, refresh: float, out=sys.stdout) -> int:
     if not rclpy.ok():
         rclpy.init()
     node = rclpy.create_node("mm_watch")
-    lock = threading.Lock()
     views: dict[str, SensorView] = {}
     states: dict[str, str] = {}
     received = 0
 
     def on_data(msg) -> None:
         nonlocal received
-        with lock:
-            views.setdefault(msg.id, SensorView()).update(msg)
-            received += 1
+        views.setdefault(msg.id, SensorView()).update(msg)
+        received += 1
 
     def on_diag(msg) -> None:
-        with lock:
-            for s in msg.status:
-                values = {kv.key: kv.value for kv in s.values}
-                if "state" in values:
-                    states[s.hardware_id] = values["state"]
+        for s in msg.status:
+            values = {kv.key: kv.value for kv in s.values}
+            if "state" in values:
+                states[s.hardware_id] = values["state"]
 
     node.create_subscription(
         SensorData, f"{namespace}/sensor_data", on_data, qos_profile_sensor_data
@@ -95,18 +91,19 @@ def run(duration: float, namespace: str, refresh: float, out=sys.stdout) -> int:
     node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 10)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
-    spinner.start()
     end = time.monotonic() + duration if duration > 0 else math.inf
     tty = out.isatty()
+    # Spun here, not on a thread: a daemon thread still inside spin() when the
+    # interpreter exits aborts the process ("terminate called without an active exception").
     try:
         while time.monotonic() < end:
-            time.sleep(refresh)
-            with lock:
-                rows = [
-                    format_row(dev, v, states.get(dev, "?"), v.take_rate())
-                    for dev, v in sorted(views.items())
-                ]
+            redraw = min(end, time.monotonic() + refresh)
+            while (left := redraw - time.monotonic()) > 0:
+                executor.spin_once(timeout_sec=left)
+            rows = [
+                format_row(dev, v, states.get(dev, "?"), v.take_rate())
+                for dev, v in sorted(views.items())
+            ]
             if tty:
                 out.write("\x1b[H\x1b[2J")  # redraw in place on a terminal
             stamp = time.strftime("%H:%M:%S")

@@ -58,6 +58,25 @@ def test_demo_runs_and_shows_both_sensors():
     assert "SensorData messages received" in out.stdout
 
 
+@pytest.mark.ros
+def test_watch_command_ends_cleanly_after_its_duration(tmp_path):
+    """mm-watch --duration used to abort at exit (rc 134, a daemon thread inside spin)."""
+    from mm_beagle.harness import beagle_process
+
+    with beagle_process({"backend": "sim"}, env=dict(os.environ), log_path=str(tmp_path / "n.log")):
+        runs = [
+            subprocess.run(
+                [sys.executable, "-m", "mm_beagle.watch", "--duration", "3"],
+                capture_output=True, text=True, timeout=60, env=dict(os.environ),
+            )
+            for _ in range(2)
+        ]
+    for out in runs:
+        assert out.returncode == 0, out.stdout + out.stderr
+        assert "terminate called" not in out.stderr
+    assert "/dev/spidev1.0       up" in runs[-1].stdout
+
+
 def test_bench_rejects_bad_arguments():
     out = subprocess.run(
         [sys.executable, "-m", "mm_beagle.bench", "poll", "--seconds", "1"],
