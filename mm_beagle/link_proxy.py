@@ -3,7 +3,8 @@
 The node connects to the proxy, the proxy to the agent. :meth:`DropProxy.cut`
 closes every forwarded connection and refuses new ones until :meth:`restore`:
 to the node and the agent that is a real link drop (the peer's socket closes),
-not a paused process.
+not a paused process. :meth:`DropProxy.flap` is a link that drops again a moment
+after it came back.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ class DropProxy:
         self._conns: list[socket.socket] = []
         self._lock = threading.Lock()
         self._running = True
+        self._connected = threading.Event()  # set at each forwarded connection
         threading.Thread(target=self._accept, name="drop_proxy", daemon=True).start()
 
     def _accept(self) -> None:
@@ -46,6 +48,7 @@ class DropProxy:
                     upstream.close()
                     continue
                 self._conns += [client, upstream]
+            self._connected.set()
             for a, b in ((client, upstream), (upstream, client)):
                 threading.Thread(target=self._pipe, args=(a, b), daemon=True).start()
 
@@ -72,6 +75,20 @@ class DropProxy:
 
     def restore(self) -> None:
         self._open = True
+
+    def flap(self, up_s: float, down_s: float, timeout: float = 30.0) -> bool:
+        """A link that comes back and drops again: restore, wait for the next
+        connection, let it live ``up_s`` seconds, cut for ``down_s``, restore.
+        False if nobody connected within ``timeout`` (the link stays restored)."""
+        self._connected.clear()
+        self.restore()
+        if not self._connected.wait(timeout):
+            return False
+        threading.Event().wait(up_s)
+        self.cut()
+        threading.Event().wait(down_s)
+        self.restore()
+        return True
 
     def close(self) -> None:
         self._running = False
@@ -108,6 +125,9 @@ class ProxyProcess:
     def restore(self) -> None:
         self._say("restore")
 
+    def flap(self, up_s: float, down_s: float) -> None:
+        self._say(f"flap {up_s} {down_s}")
+
     def close(self) -> None:
         if self.proc.poll() is None:
             self.proc.stdin.close()
@@ -120,10 +140,13 @@ def _main() -> None:
     proxy = DropProxy(int(sys.argv[1]))
     print(proxy.endpoint, flush=True)
     for line in sys.stdin:
-        if line.strip() == "cut":
+        words = line.split()
+        if words == ["cut"]:
             proxy.cut()
-        elif line.strip() == "restore":
+        elif words == ["restore"]:
             proxy.restore()
+        elif len(words) == 3 and words[0] == "flap":
+            proxy.flap(float(words[1]), float(words[2]))
         print("ok", flush=True)
     proxy.close()
 

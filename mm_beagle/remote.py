@@ -77,7 +77,8 @@ class RemoteAgent:
         self.link_up = False
         self.ever_up = False
         self.since_wall = time.time()  # when the link last changed
-        self.last_heard = 0.0
+        self.last_heard = 0.0  # monotonic time of the newest batch applied
+        self.last_rx = 0.0  # ... of the newest frame received on the polls key
         self.link_drops = 0
         self.polls_lost = 0
         self.bad_frames = 0
@@ -214,6 +215,8 @@ class RemoteAgent:
 
         def put(kind: str):
             def cb(sample) -> None:
+                if kind == "polls":
+                    self.last_rx = time.monotonic()
                 # a full queue: the feeder is behind; the seq gap is fetched from the agent's ring
                 with contextlib.suppress(queue.Full):
                     q.put_nowait((kind, sample.payload.to_bytes(), time.time_ns()))
@@ -257,8 +260,11 @@ class RemoteAgent:
                     )
             self._watch_link()
 
-    def _watch_link(self) -> None:
-        if self.link_up and time.monotonic() - self.last_heard > LINK_TIMEOUT_S:
+    def _watch_link(self, heard: float | None = None) -> None:
+        """Mark the link down once nothing was heard for LINK_TIMEOUT_S (``heard``:
+        the newest frame's time if newer than the last applied batch)."""
+        heard = self.last_heard if heard is None else max(heard, self.last_heard)
+        if self.link_up and time.monotonic() - heard > LINK_TIMEOUT_S:
             self.link_up = False
             self.link_drops += 1
             self.since_wall = time.time()
@@ -308,15 +314,9 @@ class RemoteAgent:
         if end < expected or (end == expected and count):
             return  # already applied (a history reply overlapping the live stream)
         if first > expected:
-            # Right after a reconnection the agent's queryable may not be routed to us
-            # yet (a query then ends at once with no reply): retry for a while.
-            deadline = time.monotonic() + GAP_RETRY_S
-            while fetch_gaps and self._running:
-                self._fetch(i, expected, first)
+            if fetch_gaps:
+                self._fill_gap(i, expected, first)
                 expected = self.next_agent[i]
-                if first <= expected or time.monotonic() > deadline:
-                    break
-                time.sleep(0.1)
             if first > expected:  # what the agent's ring no longer holds
                 self.polls_lost += first - expected
                 self._emit(
@@ -354,19 +354,62 @@ class RemoteAgent:
             self.next_agent[i] = end
         st[ss.I_VERSION] += 1  # even: consistent
 
-    def _fetch(self, i: int, since: int, until: int) -> None:
-        """Ask the agent for polls since..until of sensor i and apply them in order."""
+    def _fill_gap(self, i: int, since: int, until: int) -> None:
+        """Fetch the missing polls since..until of sensor i from the agent's ring.
+
+        A link that drops again while asking (a flapping Wi-Fi) is waited for
+        as long as the ring can still hold the polls, instead of counting them
+        lost; while it is down the services say so. Only time with the link up
+        spends the ``GAP_RETRY_S`` budget (right after a reconnection the
+        agent's queryable may not be routed to us yet: a query then ends at
+        once with no reply).
+        """
+        budget = GAP_RETRY_S
+        ring_s = self.cfg.ring_size / self.cfg.poll_rate
+        while self._running:
+            t0 = time.monotonic()
+            if self._fetch(i, self.next_agent[i], until) or self.next_agent[i] >= until:
+                return
+            if self._rx_silent():
+                self._watch_link(self.last_rx)
+                if not self._wait_rx(ring_s):
+                    return
+                continue
+            budget -= time.monotonic() - t0
+            if budget <= 0:
+                return
+            time.sleep(0.1)
+
+    def _rx_silent(self) -> bool:
+        """No frame on the polls key for LINK_TIMEOUT_S (the agent sends >= 10/s)."""
+        return time.monotonic() - self.last_rx > LINK_TIMEOUT_S
+
+    def _wait_rx(self, timeout: float) -> bool:
+        """Until frames arrive on the polls key again (True) or ``timeout`` s pass."""
+        deadline = time.monotonic() + timeout
+        while self._running and time.monotonic() < deadline:
+            if not self._rx_silent():
+                return True
+            time.sleep(0.05)
+        return False
+
+    def _fetch(self, i: int, since: int, until: int) -> bool:
+        """Ask the agent for polls since..until of sensor i and apply them in order.
+
+        True when asking again is pointless (the agent restarted meanwhile).
+        """
         while since < until and self._running:
             data = self._history(i, since, min(link.MAX_HISTORY, until - since))
             if data is None:
-                return
+                return False
             batch = link.decode_batch(data, self.n)
             if batch.boot_id != self.boot or not batch.blocks or not batch.blocks[0].count:
                 self.query_error = "the agent restarted meanwhile"
-                return
+                return True
             block = batch.blocks[0]
             self._apply(block, fetch_gaps=False)
             since = block.first_seq + block.count
+        return False
 
     def _history(self, i: int, since: int, most: int) -> bytes | None:
         """One history request and its answer (a batch frame), or None (query_error says why)."""

@@ -130,6 +130,12 @@ def main(argv: list[str] | None = None) -> int:
     if headless:
         os.environ["QT_QPA_PLATFORM"] = "offscreen"
         _quiet_qt_messages()
+    else:
+        from mm_pc.monitor.qt_platform import check
+
+        if missing := check():  # Qt would abort with no window and a vague message
+            print(f"mm-monitor: {missing}", file=sys.stderr)
+            return 2
     return _run(args, headless)
 
 

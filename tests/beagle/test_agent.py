@@ -343,10 +343,9 @@ def test_link_drops_lose_no_poll_and_an_agent_restart_keeps_totals_monotone(tmp_
                 # the totals are exact whatever happened to single polls
                 assert int(diag[dev]["sim_generated_y_counts"]) == int(diag[dev]["y_total_counts"])
                 assert int(diag[dev]["sim_generated_x_counts"]) == int(diag[dev]["x_total_counts"])
-                if dropped == 0:  # every poll of the outages came from the agent's ring
-                    assert (sx, sy) == (x1 - x0, y1 - y0)
-                else:  # known bug (docs/beagle-node.md §9): reported, never made up
-                    assert lost[dev] > 0 and dropped <= seq1 - seq0
+                # every poll of the outages came from the agent's ring
+                assert (sx, sy, dropped) == (x1 - x0, y1 - y0, 0), node_log.read_text()[-3000:]
+                assert lost[dev] == 0
             # the agent restarts: the node's totals and seq continue, never go back
             agent.send_signal(2)
             agent.wait(10)
@@ -360,6 +359,48 @@ def test_link_drops_lose_no_poll_and_an_agent_restart_keeps_totals_monotone(tmp_
                     assert after[dev][2] > end[dev][2]  # meander drives forward
                 d = client.diagnostics(time.monotonic())
                 assert d[S0]["agent_restarts"] == "1"
+    finally:
+        client.close()
+        proxy.close()
+
+
+@pytest.mark.ros
+def test_a_link_that_drops_again_while_the_gap_is_fetched_loses_no_poll(tmp_path):
+    """A flapping link: back for 50 ms (the node sees a batch and starts asking
+    for the gap), then down again for 2 s. The node waits for the link instead of
+    counting the gap lost, and says the agent is unreachable meanwhile."""
+    port = free_port()
+    proxy = ProxyProcess(port)
+    client = BeagleClient("mm_agent_flap_test")
+    opts = {"backend": "sim", "listen": [f"tcp/127.0.0.1:{port}"], "sim_trajectory": "meander"}
+    node_log = tmp_path / "node.log"
+    try:
+        with (
+            agent_process(opts, str(tmp_path / "agent.log")),
+            beagle_process(
+                {"backend": "remote", "agent": proxy.endpoint, "diagnostics_period": 0.5},
+                env=dict(os.environ),
+                log_path=str(node_log),
+            ),
+        ):
+            assert client.wait(30), node_log.read_text()
+            wait_link(client, up=True)
+            start = node_totals(client)
+            for _ in range(2):
+                proxy.cut()
+                wait_link(client, up=False)
+                time.sleep(1.0)
+                proxy.flap(0.05, 2.0)
+                wait_link(client, up=True)
+            time.sleep(0.5)
+            end = node_totals(client)
+            diag = client.diagnostics(time.monotonic())
+            for dev in (S0, S1):
+                seq0, x0, y0 = start[dev]
+                seq1, x1, y1 = end[dev]
+                assert sample_sums(client, dev, seq0, seq1) == (x1 - x0, y1 - y0, 0)
+                assert diag[dev]["link_polls_lost"] == "0", node_log.read_text()[-3000:]
+                assert int(diag[dev]["sim_generated_y_counts"]) == int(diag[dev]["y_total_counts"])
     finally:
         client.close()
         proxy.close()
