@@ -445,3 +445,37 @@ def test_agent_command_line_builder_round_trips():
         "--listen",
         "tcp/[::1]:2",
     ]
+
+
+def test_applying_a_block_never_puts_the_agents_lock_word_into_the_node_state():
+    """The agent's I_VERSION (odd while it was writing, or just another number) must
+    not reach the node's seqlock even for a moment: only the node's own +1/+1."""
+    import numpy as np
+
+    from mm_beagle import link
+    from mm_beagle import shared_state as ss
+    from mm_beagle.poller import PollerConfig
+    from mm_beagle.remote import RemoteAgent
+
+    remote = RemoteAgent(PollerConfig(devices=[S0, S1], ring_size=1024))
+    seen: list[int] = []
+
+    class Watched(np.ndarray):
+        """The node's int fields of sensor 0, recording every lock word written."""
+
+        def __setitem__(self, key, value):
+            super().__setitem__(key, value)
+            seen.append(int(np.asarray(self)[ss.I_VERSION]))
+
+    st = remote.state.ints[0].view(Watched)
+    remote.state.ints = [st, remote.state.ints[1]]  # what _apply writes through
+    ints = np.zeros(ss.N_INT, np.int64)
+    ints[ss.I_VERSION] = 12345  # odd: the agent's own lock word mid-write
+    ints[ss.I_SEQ], ints[ss.I_Y_TOTAL] = 3, 7
+    arrays = tuple(np.zeros(3, dt).tobytes() for dt in ("<i8", "<i2", "<i2", "<u2", "<u2", "u1"))
+    block = link.Block(0, 0, 3, ints.tobytes(), np.zeros(ss.N_FLOAT).tobytes(), arrays)
+    before = int(st[ss.I_VERSION])
+    remote._apply(block, fetch_gaps=False)
+    assert int(st[ss.I_VERSION]) == before + 2
+    assert 12345 not in seen and all(v in (before, before + 1, before + 2) for v in seen)
+    assert int(st[ss.I_Y_TOTAL]) == 7 and int(st[ss.I_SEQ]) == 3
