@@ -28,6 +28,7 @@ ROS = (
     "sensor_msgs",
     "diagnostic_msgs",
     "mm_interfaces",
+    "tf2_msgs",
     "ament_index_python",
 )
 QT = ("PySide6", "shiboken6", "pyqtgraph")

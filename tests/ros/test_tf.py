@@ -1,0 +1,69 @@
+"""TF as ROS tools see it: the TFMessage type built here is Jazzy's, and what the
+nodes' TfPublisher sends arrives on /tf and (latched) /tf_static."""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+tf2_msgs = pytest.importorskip("tf2_msgs.msg")
+
+
+def test_tfmessage_has_the_jazzy_type_hash():
+    from rosbags.typesys import Stores, get_typestore
+
+    jazzy = get_typestore(Stores.ROS2_JAZZY).hash_rihs01("tf2_msgs/msg/TFMessage")
+    share = Path(tf2_msgs.__file__).resolve().parents[5] / "share" / "tf2_msgs" / "msg"
+    if not (share / "TFMessage.json").exists():  # a system ROS install: its own package
+        pytest.skip(f"tf2_msgs comes from {share.parent}, not this project's build")
+    ours = json.loads((share / "TFMessage.json").read_text())["type_hashes"][0]
+    assert ours == {"type_name": "tf2_msgs/msg/TFMessage", "hash_string": jazzy}
+
+
+@pytest.mark.ros
+def test_transforms_arrive_on_tf_and_the_mounts_stay_latched_on_tf_static():
+    from rclpy.executors import SingleThreadedExecutor
+    from tf2_msgs.msg import TFMessage
+
+    from mm_pc.core.geometry import DEFAULT_MOUNTS
+    from mm_pc.ros.tf import STATIC_QOS, TfPublisher, mount_transforms, planar_transform
+
+    ctx = rclpy.Context()  # its own: other tests may hold the default context
+    rclpy.init(context=ctx)
+    try:
+        node = rclpy.create_node("mm_tf_test", context=ctx)
+        tf = TfPublisher(node)
+        stamp = node.get_clock().now().to_msg()
+        tf.send_static(mount_transforms(stamp, "base_link", ["s0", "s1"], DEFAULT_MOUNTS))
+        got: dict[str, list] = {"/tf": [], "/tf_static": []}
+        # subscribed after the static transforms were sent: transient-local still delivers
+        node.create_subscription(TFMessage, "/tf_static", got["/tf_static"].append, STATIC_QOS)
+        node.create_subscription(TFMessage, "/tf", got["/tf"].append, 10)
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(node)
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline and not (got["/tf"] and got["/tf_static"]):
+            tf.send(planar_transform(stamp, "odom", "base_link", 1.5, -2.0, math.pi / 2))
+            ex.spin_once(timeout_sec=0.1)
+        assert got["/tf_static"], "no /tf_static for a late subscriber"
+        t = got["/tf"][0].transforms[0]
+        assert (t.header.frame_id, t.child_frame_id) == ("odom", "base_link")
+        assert (t.transform.translation.x, t.transform.translation.y) == (1.5, -2.0)
+        assert t.transform.rotation.z == pytest.approx(math.sqrt(0.5))
+        mounts = got["/tf_static"][0].transforms
+        assert [m.child_frame_id for m in mounts] == ["s0", "s1"]
+        for m, mount in zip(mounts, DEFAULT_MOUNTS, strict=True):
+            assert m.header.frame_id == "base_link"
+            assert m.transform.translation.x == pytest.approx(mount.x)
+            assert m.transform.translation.y == pytest.approx(mount.y)
+        with pytest.raises(ValueError, match="give one each"):
+            mount_transforms(stamp, "base_link", ["only_one"], DEFAULT_MOUNTS)
+        ex.shutdown()
+        node.destroy_node()
+    finally:
+        rclpy.shutdown(context=ctx)
