@@ -194,6 +194,10 @@ class BeagleClient:
         self.clients = {
             n: self.node.create_client(t, f"{namespace}/{n}") for n, t in self.types.items()
         }
+        from rcl_interfaces.srv import GetParameters, SetParameters
+
+        self._params_set = self.node.create_client(SetParameters, f"{namespace}/set_parameters")
+        self._params_get = self.node.create_client(GetParameters, f"{namespace}/get_parameters")
         self._diag_lock = threading.Lock()
         self._diag: list[tuple[float, object]] = []
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, 10)
@@ -222,15 +226,39 @@ class BeagleClient:
         return True
 
     def call(self, name: str, timeout: float = 5.0, **fields):
+        return self._wait_future(
+            self.clients[name], self.types[name].Request(**fields), name, timeout
+        )
+
+    def _wait_future(self, client, request, what: str, timeout: float):
         import threading
 
         done = threading.Event()
-        future = self.clients[name].call_async(self.types[name].Request(**fields))
+        future = client.call_async(request)
         future.add_done_callback(lambda _f: done.set())
         if not done.wait(timeout):
-            self.clients[name].remove_pending_request(future)
-            raise TimeoutError(f"{name} did not answer within {timeout} s")
+            client.remove_pending_request(future)
+            raise TimeoutError(f"{what} did not answer within {timeout} s")
         return future.result()
+
+    def set_parameters(self, timeout: float = 5.0, **values) -> list:
+        """``ros2 param set`` for each name=value: the node's SetParametersResult per name."""
+        from rcl_interfaces.srv import SetParameters
+        from rclpy.parameter import Parameter
+
+        req = SetParameters.Request(
+            parameters=[Parameter(k, value=v).to_parameter_msg() for k, v in values.items()]
+        )
+        return self._wait_future(self._params_set, req, "set_parameters", timeout).results
+
+    def get_parameters(self, *names: str, timeout: float = 5.0) -> list:
+        """The node's current values of ``names`` (Python values)."""
+        from rcl_interfaces.srv import GetParameters
+        from rclpy.parameter import parameter_value_to_python
+
+        req = GetParameters.Request(names=list(names))
+        res = self._wait_future(self._params_get, req, "get_parameters", timeout)
+        return [parameter_value_to_python(v) for v in res.values]
 
     def diagnostics(
         self, newer_than: float = 0.0, timeout: float = 5.0

@@ -15,12 +15,14 @@ Topics: ~/sensor_data (SensorData, sensor-data QoS, `publish_rate` Hz) and
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import threading
 import time
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
@@ -86,11 +88,14 @@ class BeagleNode(Node):
             event_callbacks=PublisherEventCallbacks(matched=self._on_matched),
         )
         self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self.create_timer(self.settings.diagnostics_period, self.publish_diagnostics)
+        self._diag_timer = self.create_timer(
+            self.settings.diagnostics_period, self.publish_diagnostics
+        )
         self.onboard = None
         if self.settings.odometry.rate > 0:
             self._start_onboard_odometry()
         self.create_timer(0.2, self.relay_poller_events)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
         where = (
             f"read from the agent at {self.settings.remote.agent}"
             if cfg.backend == "remote"
@@ -153,6 +158,69 @@ class BeagleNode(Node):
     def _down_message(self, i: int) -> str:
         why = self._last_errors[i] or "starting up"
         return f"sensor {self.devices[i]} is down ({why})"
+
+    # --- live parameters (params.LIVE) ----------------------------------------------------
+
+    def _on_set_parameters(self, params) -> SetParametersResult:
+        """Apply ``ros2 param set`` on a live parameter, or refuse it and keep the old value.
+
+        rclpy has already checked read-only flags and ranges. A new ``cpi`` goes to
+        every sensor like ``set_resolution`` (same checks, counts drained at the old
+        CPI); it is refused as a whole if a sensor is down or refuses it.
+        """
+        changes = {p.name: p.value for p in params}
+        for frame in ("odom_frame", "base_frame"):
+            if frame in changes and not str(changes[frame]).strip():
+                return SetParametersResult(successful=False, reason=f"'{frame}' must not be empty")
+        if "cpi" in changes:
+            problem = self._set_cpi_everywhere(int(changes["cpi"]))
+            if problem:
+                self.get_logger().warning(f"parameter cpi not changed: {problem}")
+                return SetParametersResult(successful=False, reason=problem)
+        if "publish_rate" in changes:
+            self.settings.publish_rate = float(changes["publish_rate"])
+            if self._data_timer is not None:  # restart it at the new rate (or stop it at 0)
+                self.destroy_timer(self._data_timer)
+                self._data_timer = None
+                if self.settings.publish_rate > 0:
+                    self._data_timer = self.create_timer(
+                        1.0 / self.settings.publish_rate, self.publish_data
+                    )
+        if "diagnostics_period" in changes:
+            self.settings.diagnostics_period = float(changes["diagnostics_period"])
+            self.destroy_timer(self._diag_timer)
+            self._diag_timer = self.create_timer(
+                self.settings.diagnostics_period, self.publish_diagnostics
+            )
+        for frame in ("odom_frame", "base_frame"):
+            if frame in changes:
+                setattr(self.settings.odometry, frame, str(changes[frame]))
+        for name, value in changes.items():
+            if name != "cpi":  # set_cpi logs its own line per sensor
+                self.get_logger().info(f"parameter {name} set to {value}")
+        return SetParametersResult(successful=True)
+
+    def _set_cpi_everywhere(self, cpi: int) -> str:
+        """Set every sensor to ``cpi``; '' on success, else why nothing changed."""
+        problem = self.poller.unavailable()
+        if problem:
+            return problem
+        down = [self._down_message(i) for i in range(len(self.devices)) if not self._is_up(i)]
+        if down:
+            return "; ".join(down)
+        before = [int(self.poller.state.ints[i][ss.I_CPI_Y]) for i in range(len(self.devices))]
+        for i, dev in enumerate(self.devices):
+            try:
+                status, payload = self.poller.command("set_cpi", i, cpi)
+            except PollerError as exc:
+                status, payload = "error", str(exc)
+            if status != "ok":
+                for k in range(i):  # put back the sensors already changed
+                    with contextlib.suppress(PollerError):
+                        self.poller.command("set_cpi", k, before[k])
+                return f"{dev}: {payload}"
+            self.get_logger().info(f"{dev} set to {cpi} CPI (parameter cpi)")
+        return ""
 
     # --- services ------------------------------------------------------------------------
 

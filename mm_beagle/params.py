@@ -14,6 +14,10 @@ from .sim_backend import SimConfig, parse_fail_windows
 BACKENDS = ("spidev", "sim", "remote")
 
 
+#: parameters that may change while the node runs (``ros2 param set``); the rest are read-only
+LIVE = ("cpi", "publish_rate", "diagnostics_period", "odom_frame", "base_frame")
+
+
 def _int(desc: str, lo: int, hi: int, step: int = 0) -> ParameterDescriptor:
     return ParameterDescriptor(
         description=desc,
@@ -60,7 +64,7 @@ PARAMETERS = {
         True,
         _plain("remote backend: move the agent's stamps to this clock (false if both run NTP)"),
     ),
-    "cpi": (1600, _int("resolution at start, counts per inch (X and Y)", 100, 6400, 100)),
+    "cpi": (1600, _int("resolution of every sensor, counts per inch (X and Y)", 100, 6400, 100)),
     "poll_rate": (1000.0, _float("sensor polls per second (Hz)", 10.0, 2000.0)),
     "spi_speed_hz": (3_000_000, _int("SPI clock (Hz)", 100_000, 8_000_000)),
     "register_map": ("", _plain("YAML file overriding the assumed register map ('' = defaults)")),
@@ -119,6 +123,10 @@ PARAMETERS = {
         _plain("sim backend: 'DEVICE@START-END' (s) windows in which a sensor fails"),
     ),
 }
+
+for _name in LIVE:
+    PARAMETERS[_name][1].read_only = False
+    PARAMETERS[_name][1].description += " (live: ros2 param set)"
 
 
 @dataclass

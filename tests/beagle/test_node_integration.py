@@ -97,6 +97,11 @@ def test_failed_sensor_is_reported_and_the_other_keeps_working(node, client):
     assert both.success
     assert [d.id for d in both.data] == [S0]
     assert S1 in both.message
+    # a live CPI for every sensor is refused as a whole while one is down
+    (r,) = client.set_parameters(cpi=800)
+    assert not r.successful and S1 in r.reason and "down" in r.reason
+    assert client.get_parameters("cpi") == [1600]
+    assert client.call("get_sensor_settings", id=S0).settings.cpi == 1600
 
 
 def test_failed_sensor_recovers(node, client):
@@ -194,6 +199,51 @@ def test_settings_read_does_not_eat_counts(node, client):
     assert res.success
     assert res.dropped == 0
     assert res.next_seq >= d.seq
+
+
+def wait_both_up(client, timeout: float = 15.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not client.call("get_sensor_data", id=S1).success:
+        assert time.monotonic() < deadline, "sensor 2 never came up"
+        time.sleep(0.2)
+
+
+def test_cpi_parameter_is_live_validated_and_read_back(node, client):
+    wait_both_up(client)
+    (r,) = client.set_parameters(cpi=3200)
+    assert r.successful, r.reason
+    try:
+        assert client.get_parameters("cpi") == [3200]
+        for dev in (S0, S1):
+            assert client.call("get_sensor_settings", id=dev).settings.cpi == 3200
+        # refused by the declared range/step or type: the old value stays everywhere
+        for bad in (150, 99999, 0, "fast", 3200.5):
+            (r,) = client.set_parameters(cpi=bad)
+            assert not r.successful and r.reason, bad
+        assert client.get_parameters("cpi") == [3200]
+        assert client.call("get_sensor_settings", id=S1).settings.cpi == 3200
+    finally:
+        (r,) = client.set_parameters(cpi=1600)
+        assert r.successful, r.reason
+    assert client.call("get_sensor_settings", id=S0).settings.cpi == 1600
+
+
+def test_only_live_parameters_change_and_bad_values_change_nothing(node, client):
+    (r,) = client.set_parameters(poll_rate=500.0)
+    assert not r.successful and "read-only" in r.reason.lower()
+    (r,) = client.set_parameters(odom_frame="")
+    assert not r.successful and "odom_frame" in r.reason
+    (r,) = client.set_parameters(publish_rate=-1.0)
+    assert not r.successful
+    assert client.get_parameters("poll_rate", "odom_frame", "publish_rate") == [
+        1000.0, "odom", 20.0
+    ]
+    r1, r2 = client.set_parameters(publish_rate=40.0, odom_frame="odom_mouse")
+    assert r1.successful and r2.successful, (r1.reason, r2.reason)
+    try:
+        assert client.get_parameters("publish_rate", "odom_frame") == [40.0, "odom_mouse"]
+    finally:
+        client.set_parameters(publish_rate=20.0, odom_frame="odom")
 
 
 def test_get_samples_chain_covers_every_poll_once(node, client):
