@@ -61,20 +61,24 @@ def test_demo_runs_and_shows_both_sensors():
 @pytest.mark.ros
 def test_watch_command_ends_cleanly_after_its_duration(tmp_path):
     """mm-watch --duration used to abort at exit (rc 134, a daemon thread inside spin)."""
-    from mm_beagle.harness import beagle_process
+    from mm_beagle.harness import BeagleClient, beagle_process
 
-    with beagle_process({"backend": "sim"}, env=dict(os.environ), log_path=str(tmp_path / "n.log")):
+    client = BeagleClient("mm_watch_test_client")
+    params = {"backend": "sim", "diagnostics_period": 0.3}
+    with beagle_process(params, env=dict(os.environ), log_path=str(tmp_path / "n.log")):
+        assert client.wait(30), (tmp_path / "n.log").read_text()
+        client.close()
         runs = [
             subprocess.run(
-                [sys.executable, "-m", "mm_beagle.watch", "--duration", "3"],
+                [sys.executable, "-m", "mm_beagle.watch", "--duration", "6"],
                 capture_output=True, text=True, timeout=60, env=dict(os.environ),
             )
-            for _ in range(2)
+            for _ in range(1)
         ]
     for out in runs:
         assert out.returncode == 0, out.stdout + out.stderr
         assert "terminate called" not in out.stderr
-    assert "/dev/spidev1.0       up" in runs[-1].stdout
+    assert "/dev/spidev1.0 " in runs[-1].stdout and "/dev/spidev1.1 " in runs[-1].stdout
 
 
 def test_bench_rejects_bad_arguments():
