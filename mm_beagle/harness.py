@@ -76,10 +76,13 @@ def _stop_with_parent() -> None:
 
 @contextmanager
 def beagle_process(
-    params: dict[str, object], env: dict[str, str] | None = None, log_path: str | None = None
+    params: dict[str, object],
+    env: dict[str, str] | None = None,
+    log_path: str | None = None,
+    namespace: str = "",
 ) -> Iterator[subprocess.Popen]:
-    """mm-beagle in a subprocess; stopped with SIGINT (then SIGKILL) on exit."""
-    with _child(node_command(params), env or isolated_ros_env(), log_path) as proc:
+    """mm-beagle in a subprocess (in ``namespace``); stopped with SIGINT (then SIGKILL) on exit."""
+    with _child(node_command(params, namespace), env or isolated_ros_env(), log_path) as proc:
         yield proc
 
 

@@ -460,7 +460,7 @@ class BeagleNode(Node):
             else:
                 level, text = DiagnosticStatus.OK, "up"
             self._diag_errors[i] = (t.spi_errors, t.overflows)
-            name = f"{self.get_name()}: {dev}"
+            name = f"{self.get_fully_qualified_name()}: {dev}"  # unique per robot namespace
             arr.status.append(messages.diagnostic(name, dev, level, text, values))
         self.diag_pub.publish(arr)
 

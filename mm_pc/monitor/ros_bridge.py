@@ -365,7 +365,7 @@ class RosBridge(QObject):
         self.stats_updated.emit(self.stats())
 
     def _on_diagnostics(self, msg) -> None:
-        prefix = self.beagle.rsplit("/", 1)[-1] + ":"
+        prefix = self.beagle + ": "  # only the node watched (status names are its full name)
         out = {}
         for status in msg.status:
             if not status.name.startswith(prefix):

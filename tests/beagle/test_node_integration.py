@@ -331,6 +331,39 @@ def _start(params: dict, namespace: str = "/standalone") -> subprocess.Popen:
     )
 
 
+def test_two_robots_in_two_namespaces_stay_apart(tmp_path):
+    """Services, parameters and /diagnostics of /robot1 and /robot2 never mix."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    clients = {ns: BeagleClient(f"ns_client{ns.replace('/', '_')}", f"{ns}/mm_beagle")
+               for ns in ("/robot1", "/robot2")}
+    names: set[str] = set()
+    listener = clients["/robot1"].node.create_subscription(
+        DiagnosticArray, "/diagnostics", lambda m: names.update(s.name for s in m.status), 10
+    )
+    params = {"backend": "sim", "diagnostics_period": 0.3}
+    try:
+        with (
+            beagle_process(params, dict(os.environ), str(tmp_path / "r1.log"), "/robot1"),
+            beagle_process(params, dict(os.environ), str(tmp_path / "r2.log"), "/robot2"),
+        ):
+            for c in clients.values():
+                assert c.wait(30)
+            (r,) = clients["/robot1"].set_parameters(cpi=800)
+            assert r.successful, r.reason
+            assert clients["/robot1"].call("get_sensor_settings", id=S0).settings.cpi == 800
+            assert clients["/robot2"].call("get_sensor_settings", id=S0).settings.cpi == 1600
+            deadline = time.monotonic() + 10
+            want = {f"/robot{k}/mm_beagle: {d}" for k in (1, 2) for d in (S0, S1)}
+            while not want <= names and time.monotonic() < deadline:
+                time.sleep(0.1)
+            assert want <= names, names
+    finally:
+        clients["/robot1"].node.destroy_subscription(listener)
+        for c in clients.values():
+            c.close()
+
+
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_clean_shutdown_stops_the_poller(sig):
     proc = _start({"backend": "sim", "devices": [S0]}, namespace=f"/shutdown{int(sig)}")
