@@ -277,3 +277,25 @@ def test_a_call_without_answer_fails_once_and_its_late_reply_is_ignored(qtbot):
         spin.join(3.0)
         server.destroy_node()
         ctx.try_shutdown()
+
+
+def test_the_bridge_takes_diagnostics_only_of_the_node_it_watches(qtbot):
+    """Two robots publish the same device ids on /diagnostics; --beagle picks one."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+    from mm_pc.monitor.ros_bridge import RosBridge
+
+    bridge = RosBridge("/robot2/mm_beagle")  # constructed, never started: no ROS traffic
+    got: list[dict] = []
+    bridge.diagnostics_received.connect(got.append)
+
+    def status(node: str, y: str) -> DiagnosticStatus:
+        return DiagnosticStatus(
+            name=f"{node}: /dev/spidev1.0", hardware_id="/dev/spidev1.0", message="up",
+            values=[KeyValue(key="y_total_counts", value=y)],
+        )
+
+    bridge._on_diagnostics(DiagnosticArray(status=[status("/robot1/mm_beagle", "111")]))
+    bridge._on_diagnostics(DiagnosticArray(status=[status("/robot2/mm_beagle", "222")]))
+    bridge._on_diagnostics(DiagnosticArray(status=[status("/robot2/mm_beagle_x", "333")]))
+    assert [d["/dev/spidev1.0"]["y_total_counts"] for d in got] == ["222"]
