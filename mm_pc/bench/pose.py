@@ -125,9 +125,12 @@ def speed(method: str, n_update: int = 20_000, n_integrate: int = 1_000_000) -> 
 
 def bench_pose() -> dict:
     """The whole benchmark as one JSON-ready dict."""
+    from mm_pc.bench.pose_polls import bench_polls_and_lifts
+
     cal, cal_note = calibration_error_deg()
     by_method = {m: speed(m) for m in METHODS}
     return {
+        **bench_polls_and_lifts(),
         "runs": accuracy(),
         "calibration_error_deg": cal,
         "update_samples_per_s": by_method[DEFAULT_METHOD]["update"],
