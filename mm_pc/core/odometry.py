@@ -194,6 +194,15 @@ class _OneSensor(_Method):
         a = dy + (self.sx / self.sy) * dx
         return a, c
 
+    def body_map(self, lifted=None) -> np.ndarray:
+        """(3, 2n): the linear map from counts (dX1, dY1, ...) to (a, b, c) (a lift changes
+        nothing: a one-sensor method uses its sensor's data as given)."""
+        out = np.zeros((3, 2 * len(self.mounts)))
+        i = self.sensor
+        out[0, 2 * i], out[0, 2 * i + 1] = self.sx / self.sy, 1.0
+        out[2, 2 * i] = -1.0 / self.sy
+        return out
+
     def split1(self, d) -> tuple[float, float]:
         """:meth:`split` for one sample of plain floats."""
         dx, dy = d[self.sensor]
@@ -298,6 +307,11 @@ class _TwoSensor(_Method):
     def poses(self, start, dt, d):
         abc, resid = self.solve(d)
         return arc_poses(start, abc[:, 0], abc[:, 1], abc[:, 2]), resid
+
+    def body_map(self, lifted=None) -> np.ndarray:
+        """(3, 2n): the least-squares map, without the lifted sensors' equations."""
+        m = None if lifted is None else self.lifted_map(tuple(lifted))
+        return self.pinv if m is None else m
 
     def lifted_map(self, lifted: tuple[bool, ...]) -> np.ndarray | None:
         """(3, 2n) map measurements -> (a, b, c) without the lifted sensors' equations.
@@ -415,6 +429,16 @@ class Odometry:
         self.lifted_samples = 0
         self.blind_samples = 0
         self.reset(pose)
+
+    def body_map(self, lifted: Sequence[bool] | None = None) -> np.ndarray:
+        """(3, 2 * n_sensors): how the method turns one sample's ideal-frame counts
+        (dX1, dY1, dX2, dY2, ...) in metres into the body increment (a m, b m, c rad),
+        linearised (exact for ``exact`` and ``two-sensor``; the seed's approaches are
+        given ``exact``'s). ``lifted``: per sensor; ``two-sensor`` drops the lifted ones.
+        For :class:`mm_pc.core.uncertainty.PoseUncertainty`.
+        """
+        flags = None if lifted is None or not any(lifted) else tuple(bool(v) for v in lifted)
+        return self._impl.body_map(flags)
 
     @property
     def n_sensors(self) -> int:
