@@ -8,12 +8,23 @@ from __future__ import annotations
 
 import pytest
 
+from mm_beagle import shared_state as ss
 from mm_beagle.onboard_odometry import OnboardOdometry
 from mm_beagle.params import OdometrySettings
-from pln2033 import INCH_M
-from tests.beagle.test_shared_state import channel, make_state, motion
+from mm_beagle.poller import Channel
+from pln2033 import INCH_M, Motion
 
 MOUNTS = [(0.049, -0.0395, 0.0), (0.049, 0.0395, 0.0)]
+
+
+def channel(state: ss.SharedState, i: int) -> Channel:
+    ch = Channel(i, f"/dev/spidev1.{i}", state, state.ring_size)
+    ch.set_cpi_cache(1600, 1600)
+    return ch
+
+
+def motion(dy: int, lifted: bool = False) -> Motion:
+    return Motion(0, dy, 0x80 if dy else 0, lifted, bool(dy), False)
 
 
 def settings(method: str) -> OdometrySettings:
@@ -21,13 +32,13 @@ def settings(method: str) -> OdometrySettings:
 
 
 def drive(method: str, lift: bool) -> OnboardOdometry:
-    state = make_state(2, 256)
+    state = ss.SharedState(bytearray(ss.SharedState.size(2, 256)), 2, 256)
     chans = [channel(state, 0), channel(state, 1)]
     odo = OnboardOdometry(settings(method), ["/dev/spidev1.0", "/dev/spidev1.1"], state)
     for k in range(100):
         lifted = lift and 40 <= k < 50
-        chans[0].record(1_000_000 * (k + 1), motion(0, 0 if lifted else 10, lifted=lifted))
-        chans[1].record(1_000_000 * (k + 1), motion(0, 10))
+        chans[0].record(1_000_000 * (k + 1), motion(0 if lifted else 10, lifted=lifted))
+        chans[1].record(1_000_000 * (k + 1), motion(10))
     assert odo.step() is not None
     return odo
 
