@@ -46,6 +46,10 @@ def per_poll_error() -> dict:
     cum = np.cumsum(exact_m.d, axis=0) * (CPI / INCH_M)
     rounded = np.diff(np.floor(cum + 0.5), axis=0, prepend=0.0) * (INCH_M / CPI)
     per_poll_rounded = Odometry(DEFAULT_MOUNTS, "exact").integrate(polls.dt, rounded)[ends]
+    # and without any quantisation: what per-poll integration alone removes
+    exact_req = sim.request_samples(v, w, DEFAULT_MOUNTS, REQUEST_HZ)
+    unq_req = Odometry(DEFAULT_MOUNTS, "exact").integrate(exact_req.dt, exact_req.d)
+    unq_poll = Odometry(DEFAULT_MOUNTS, "exact").integrate(exact_m.dt, exact_m.d)[ends]
     out = {}
     for method in ("exact", "two-sensor"):
         per_poll = Odometry(DEFAULT_MOUNTS, method).integrate(polls.dt, polls.d)[ends]
@@ -61,6 +65,10 @@ def per_poll_error() -> dict:
         "per_poll_15hz_error_m_per_10m_rounded_counts": (
             _final_error(per_poll_rounded, requests.truth) * 10.0 / length
         ),
+        "per_poll_15hz_unquantised_m_per_10m": {
+            "per_poll": _final_error(unq_poll, requests.truth) * 10.0 / length,
+            "per_request": _final_error(unq_req, requests.truth) * 10.0 / length,
+        },
         "per_poll_setup": (
             f"s_curves ({length:.2f} m), counts whole at {CPI:g} CPI per 1 ms poll with the "
             f"remainder carried, no noise; pose read at {REQUEST_HZ:g} Hz requests; "
