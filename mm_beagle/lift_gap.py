@@ -14,6 +14,7 @@ No numpy: this runs in the board's poller.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Iterable
 
@@ -83,19 +84,7 @@ class LiftGapEstimator:
 
     def _fills(self) -> tuple[GapFill, GapFill]:
         b, a = self._before, self._after
-        sums = (
-            sum(p[0] for p in b),
-            sum(p[1] for p in b),
-            sum(p[0] for p in a),
-            sum(p[1] for p in a),
-        )
-        fx = fill_gap(sums[0], len(b), self.gap, sums[2], len(a), self.unit)
-        fy = fill_gap(sums[1], len(b), self.gap, sums[3], len(a), self.unit)
+        bx, by, ax, ay = (math.fsum(p[k] for p in w) for w in (b, a) for k in (0, 1))
+        fx = fill_gap(bx, len(b), self.gap, ax, len(a), self.unit)  # fsum: as fill_sequence
+        fy = fill_gap(by, len(b), self.gap, ay, len(a), self.unit)
         return fx, fy
-
-    def reset(self) -> None:
-        """Forget everything (a sensor re-initialised: its polls before do not count)."""
-        self.busy = False
-        self.gap = 0
-        self._before.clear()
-        self._after = []

@@ -172,6 +172,16 @@ class _Method:
         raise NotImplementedError
 
 
+def _no_slip_map(mounts, i: int) -> np.ndarray:
+    """(3, 2n): equation (2) of sensor ``i`` as a linear map from all counts
+    (dX1, dY1, ...) to (a, b, c): a = dY + (sx/sy)*dX, b = 0, c = -dX/sy."""
+    sx, sy = mounts[i].right, mounts[i].forward
+    out = np.zeros((3, 2 * len(mounts)))
+    out[0, 2 * i], out[0, 2 * i + 1] = sx / sy, 1.0
+    out[2, 2 * i] = -1.0 / sy
+    return out
+
+
 class _OneSensor(_Method):
     """Shared set-up of the one-sensor methods: the seed's sx, sy, yaw observable."""
 
@@ -195,13 +205,9 @@ class _OneSensor(_Method):
         return a, c
 
     def body_map(self, lifted=None) -> np.ndarray:
-        """(3, 2n): the linear map from counts (dX1, dY1, ...) to (a, b, c) (a lift changes
-        nothing: a one-sensor method uses its sensor's data as given)."""
-        out = np.zeros((3, 2 * len(self.mounts)))
-        i = self.sensor
-        out[0, 2 * i], out[0, 2 * i + 1] = self.sx / self.sy, 1.0
-        out[2, 2 * i] = -1.0 / self.sy
-        return out
+        """(3, 2n): :func:`_no_slip_map` of the sensor (a lift changes nothing: a
+        one-sensor method uses its sensor's data as given)."""
+        return _no_slip_map(self.mounts, self.sensor)
 
     def split1(self, d) -> tuple[float, float]:
         """:meth:`split` for one sample of plain floats."""
@@ -332,13 +338,8 @@ class _TwoSensor(_Method):
             if np.linalg.matrix_rank(a_red) == 3:
                 out = np.zeros((3, self.a_mat.shape[0]))
                 out[:, rows] = np.linalg.pinv(a_red)
-        if out is None and keep:
-            i = keep[0] if len(keep) == 1 else None
-            if i is not None and self.mounts[i].forward != 0:
-                sx, sy = self.mounts[i].right, self.mounts[i].forward
-                out = np.zeros((3, self.a_mat.shape[0]))
-                out[0, 2 * i], out[0, 2 * i + 1] = sx / sy, 1.0  # a
-                out[2, 2 * i] = -1.0 / sy  # c
+        if len(keep) == 1 and self.mounts[keep[0]].forward != 0:
+            out = _no_slip_map(self.mounts, keep[0])
         self._lift_maps[key] = out
         return out
 
