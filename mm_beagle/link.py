@@ -36,7 +36,7 @@ from pathlib import Path
 from . import shared_state as ss
 
 MAGIC = b"MMB1"
-VERSION = 1
+VERSION = 2  # 2: four lift-estimate variances more per sensor (N_FLOAT 10)
 HEADER = struct.Struct("<4sBBHQQ")
 BLOCK = struct.Struct("<BxxxIQ")
 GLOB_BYTES = 8 * ss.N_GLOBAL

@@ -434,6 +434,11 @@ class BeagleNode(Node):
                 "overruns": int(glob[ss.G_OVERRUNS]),
                 "spi_errors": t.spi_errors,
                 "lift_events": t.lift_total,
+                # counts lost to lifts, estimated (pln2033.lift_fill), and its 1 sigma
+                "lift_est_x_counts": f"{t.x_est_counts:.1f}",
+                "lift_est_y_counts": f"{t.y_est_counts:.1f}",
+                "lift_est_sigma_x_counts": f"{t.x_est_var_counts**0.5:.1f}",
+                "lift_est_sigma_y_counts": f"{t.y_est_var_counts**0.5:.1f}",
                 "overflows": t.overflows,
                 "cpi": t.cpi_y,
                 "x_total_counts": t.x_total,

@@ -4,7 +4,8 @@ The seed's improvement "move more to the BBB": instead of the PC's request
 rate, the pose is integrated over the single polls in the ring buffer with
 the same pose math (:mod:`mm_pc.core.odometry`, vectorised) and published as the
 same nav_msgs/Odometry as mm-odometry's. Counts lost to lifts are not added
-here (the gap estimate is a sum, not per poll).
+here (the gap estimate is a sum, not per poll), but the polls' lift flags go
+to the odometry: ``two-sensor`` drops a lifted sensor's equations for them.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from mm_pc.core.odometry import Odometry, Pose2D
 from pln2033 import INCH_M
 
 from .params import OdometrySettings
-from .shared_state import SharedState
+from .shared_state import FLAG_LIFT, SharedState
 
 
 class OnboardOdometry:
@@ -47,7 +48,9 @@ class OnboardOdometry:
         if n == 0:
             return None
         d = np.empty((n, len(self.devices), 2))
+        lifted = np.empty((n, len(self.devices)), dtype=bool)
         for i, (first, _next, _dropped, arr) in enumerate(batches):
+            lifted[:, i] = (arr["flags"][:n] & FLAG_LIFT) != 0
             scale = INCH_M / np.maximum(arr["cpi"][:n].astype(float), 1.0)
             dx = arr["dx"][:n] * scale
             dy = arr["dy"][:n] * scale
@@ -60,7 +63,7 @@ class OnboardOdometry:
         dt = np.maximum(dt, 1e-6)  # a command's read shares its poll's stamp
         self.last_stamp[self.sensor] = int(stamps[-1])
         before = self.odometry.pose
-        self.odometry.integrate(dt, d)  # advances the pose
+        self.odometry.integrate(dt, d, lifted=lifted)  # advances the pose
         after = self.odometry.pose
         cpi = int(batches[self.sensor][3]["cpi"][n - 1])
         return before, after, float(dt.sum()), int(stamps[-1]), cpi

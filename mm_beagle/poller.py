@@ -97,7 +97,6 @@ class Channel:
         self.last_error = ""
         self.gap = LiftGapEstimator()  # in counts
         self.gap_m = LiftGapEstimator()  # in metres: right across a CPI change
-        self.last: tuple[int, int] | None = None  # counts of the newest hot-path poll
         self.sim_stats = None  # the emulator's ground truth, sim backend only
         self.sim_base = (0, 0, 0, 0)
         # the hot path's view of the driver (see attach)
@@ -121,14 +120,16 @@ class Channel:
     def poll(self, stamp_ns: int) -> None:
         """One motion burst, recorded: the 1 kHz hot path. Raises Pln2033Error.
 
-        The common poll (no lift, no overflow, no lift gap open) is recorded
-        here with as few Python operations as possible (field indices are
-        literals: see shared_state); anything else goes through :meth:`record`,
-        the one general implementation.
+        The common poll (no lift, no overflow, no lift gap open or waiting for
+        its after-window) is recorded here with as few Python operations as
+        possible (field indices are literals: see shared_state); anything else
+        goes through :meth:`record`, the one general implementation. The lift
+        gap costs the hot path nothing but the ``busy`` check: the polls before
+        a gap are read back from the ring when it starts.
         """
         rx = self._xfer(self._tx)
         status = (rx[1] << 8) | rx[2] if len(rx) == 9 else 0xFFFF
-        if status & self._unusual or self.gap.gap:
+        if status & self._unusual or self.gap.busy:
             self.record(stamp_ns, self.driver.decode_motion(rx))
             return
         dx = (((rx[4] << 8) | rx[5]) ^ 0x8000) - 0x8000  # signed 16 bit
@@ -144,7 +145,6 @@ class Channel:
         stamps[slot] = stamp_ns
         rcpi[slot] = self.cpi_y
         rflags[slot] = 2 if status & self._motion_bit else 0  # FLAG_MOTION
-        self.last = (dx, dy)
         if dx:
             ints[2] += dx  # I_X_TOTAL
             self.floats[0] += dx * self.scale_x  # F_X_TOTAL_M
@@ -213,12 +213,9 @@ class Channel:
         ints[ss.I_LIFT_LOST_Y] = stats.lift_cleared_y + round(stats.lift_motion_y) - base[3]
 
     def _update_lift_gap(self, dx: int, dy: int, lifted: bool) -> None:
-        """Feed one poll to the estimators; add their estimate when a gap closes."""
-        last = self.last
-        if last is not None:  # the newest hot-path poll, at the scale still in force
-            self.last = None
-            self.gap.last_x, self.gap.last_y = last
-            self.gap_m.last_x, self.gap_m.last_y = last[0] * self.scale_x, last[1] * self.scale_y
+        """Feed one poll to the estimators; add their estimate when it is complete."""
+        if lifted and not self.gap.busy:
+            self._prime_lift_gap()
         est = self.gap.update(dx, dy, lifted)
         est_m = self.gap_m.update(dx * self.scale_x, dy * self.scale_y, lifted)
         if est is not None and est_m is not None:
@@ -227,12 +224,42 @@ class Channel:
             floats[ss.F_Y_EST_COUNTS] += est[1]
             floats[ss.F_X_EST_M] += est_m[0]
             floats[ss.F_Y_EST_M] += est_m[1]
+            floats[ss.F_X_EST_VAR_COUNTS] += est[2] * est[2]
+            floats[ss.F_Y_EST_VAR_COUNTS] += est[3] * est[3]
+            floats[ss.F_X_EST_VAR_M] += est_m[2] * est_m[2]
+            floats[ss.F_Y_EST_VAR_M] += est_m[3] * est_m[3]
+
+    def _prime_lift_gap(self) -> None:
+        """A gap starts: hand the estimators the good polls right before it, from the ring.
+
+        Back from the newest recorded poll to the window's length, the ring's
+        oldest slot or the previous lifted poll, whichever comes first; each
+        poll in metres at the CPI it was counted with.
+        """
+        _, rdx, rdy, _, rcpi, rflags = self.ring
+        n, seq = self.n, self.seq
+        ratio = self.scale_x / self.scale_y if self.scale_y else 1.0  # X's CPI next to Y's
+        counts, metres = [], []
+        for s in range(seq - 1, max(seq - 1 - self.gap.window, seq - n, -1), -1):
+            slot = s % n
+            if rflags[slot] & ss.FLAG_LIFT:
+                break
+            dx, dy = rdx[slot], rdy[slot]
+            cpi = rcpi[slot]
+            scale = INCH_M / cpi if cpi else self.scale_y
+            counts.append((dx, dy))
+            metres.append((dx * scale * ratio, dy * scale))
+        counts.reverse()
+        metres.reverse()
+        self.gap.prime(counts)
+        self.gap_m.prime(metres)
 
     def set_cpi_cache(self, x: int, y: int) -> None:
         """The CPI now in force on the chip: later counts are scaled by it."""
         self.cpi_x, self.cpi_y = x, y
         self.scale_x = INCH_M / x if x else 0.0
         self.scale_y = INCH_M / y if y else 0.0
+        self.gap_m.unit = self.scale_y
         self.ints[ss.I_CPI_X] = x
         self.ints[ss.I_CPI_Y] = y
 

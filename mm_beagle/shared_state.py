@@ -62,7 +62,11 @@ F_X_EST_COUNTS = 2  # lift-gap estimates, counts (not in the measured totals)
 F_Y_EST_COUNTS = 3
 F_X_EST_M = 4
 F_Y_EST_M = 5
-N_FLOAT = 6
+F_X_EST_VAR_COUNTS = 6  # variance of those estimates (count^2, m^2): gaps add up independently
+F_Y_EST_VAR_COUNTS = 7
+F_X_EST_VAR_M = 8
+F_Y_EST_VAR_M = 9
+N_FLOAT = 10
 
 # poller-wide int64 fields
 G_POLLS = 0
@@ -114,10 +118,14 @@ class Totals:
     y_est_counts: float
     x_est_m: float
     y_est_m: float
+    x_est_var_counts: float  # 1-sigma^2 of x_est_counts (count^2), see pln2033.lift_fill
+    y_est_var_counts: float
+    x_est_var_m: float  # m^2
+    y_est_var_m: float
 
     @classmethod
     def zero(cls, stamp_ns: int = 0) -> Totals:
-        return cls(*([0] * 9), stamp_ns, *([0] * 5), *([0.0] * 6))
+        return cls(*([0] * 9), stamp_ns, *([0] * 5), *([0.0] * N_FLOAT))
 
 
 class SharedState:

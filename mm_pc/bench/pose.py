@@ -90,6 +90,31 @@ def calibration_error_deg() -> tuple[float | None, str]:
     )
 
 
+def two_sensor_noise_gain(seeds: int = 100) -> dict:
+    """How much better ``two-sensor`` is than ``exact`` under noise, over ``seeds`` seeds.
+
+    Per run: the RMS over seeds of the final position error of ``exact`` divided by
+    that of ``two-sensor`` (the noisy setting of :func:`accuracy`, 15 Hz requests).
+    ``theory``: the ratio of their heading noise per count, sqrt(sum of the squared
+    yaw row of each method's counts -> (a, b, c) map), which is what dominates.
+    """
+    out: dict = {}
+    for run_name, (v, w) in runs().items():
+        sq = {"exact": 0.0, "two-sensor": 0.0}
+        for seed in range(seeds):
+            r = sim.request_samples(
+                v, w, DEFAULT_MOUNTS, 15.0, cpi=NOISY_CPI, noise_counts=NOISE_COUNTS, rng=seed
+            )
+            for method in sq:
+                p = Odometry(DEFAULT_MOUNTS, method).integrate(r.dt, r.d)[-1]
+                sq[method] += float(np.hypot(*(p[:2] - r.truth[-1, :2]))) ** 2
+        out[run_name] = math.sqrt(sq["exact"] / sq["two-sensor"])
+    yaw = {m: Odometry(DEFAULT_MOUNTS, m).body_map()[2] for m in ("exact", "two-sensor")}
+    out["theory"] = float(np.sqrt(np.sum(yaw["exact"] ** 2) / np.sum(yaw["two-sensor"] ** 2)))
+    out["seeds"] = seeds
+    return out
+
+
 def _best_rate(fn, n: int, repeats: int) -> float:
     best = math.inf
     for _ in range(repeats):
@@ -125,10 +150,14 @@ def speed(method: str, n_update: int = 20_000, n_integrate: int = 1_000_000) -> 
 
 def bench_pose() -> dict:
     """The whole benchmark as one JSON-ready dict."""
+    from mm_pc.bench.pose_polls import bench_polls_and_lifts
+
     cal, cal_note = calibration_error_deg()
     by_method = {m: speed(m) for m in METHODS}
     return {
+        **bench_polls_and_lifts(),
         "runs": accuracy(),
+        "two_sensor_noise_gain": two_sensor_noise_gain(),
         "calibration_error_deg": cal,
         "update_samples_per_s": by_method[DEFAULT_METHOD]["update"],
         "integrate_samples_per_s": by_method[DEFAULT_METHOD]["integrate"],

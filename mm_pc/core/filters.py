@@ -28,12 +28,14 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from mm_pc.core.checks import finite
+from pln2033 import lift_fill
 
 __all__ = [
     "MAX_WINDOW",
     "MIN_WINDOW",
     "MedianFilter",
     "SensorMedianFilter",
+    "fill_lift_gaps",
     "interpolate_lift_gaps",
     "median_filter",
     "validate_window",
@@ -207,22 +209,26 @@ def median_filter(values, window: int, *, chunk: int = 1 << 22) -> np.ndarray:
     return out
 
 
-def interpolate_lift_gaps(counts, lifted) -> np.ndarray:
-    """Fill the polls taken while the sensor was lifted.
+def fill_lift_gaps(counts, lifted, *, unit: float = 1.0):
+    """Fill the polls taken while the sensor was lifted, and say how sure each fill is.
+
+    The rule is :mod:`pln2033.lift_fill` (the one the board's poller uses): the
+    mean of up to ``WINDOW`` (20) good polls on each side of a gap, a straight
+    line between the two window centres; a gap with good polls on one side only
+    holds that side's rate; if every poll is lifted the result is zeros.
 
     Args:
-        counts: per-poll displacement, shape (n,) or (n, k) (e.g. k = 2 for
-            X and Y), counts or metres. Values at lifted polls are ignored.
-        lifted: bool array of shape (n,), True where the poll had the lift
-            bit set.
+        counts: per-poll displacement, shape (n,) or (n, k) (e.g. k = 2 for X
+            and Y), counts or metres. Values at lifted polls are ignored.
+        lifted: bool array of shape (n,), True where the poll had the lift bit set.
+        unit: one count in the unit of ``counts`` (1 for counts, metres per count
+            for metres): sets the rounding term of the uncertainty.
 
     Returns:
-        A float copy of ``counts`` in which every lifted poll is replaced by
-        linear interpolation between the good polls on either side: poll k
-        (1..G) of a gap of G between good values a and b becomes
-        a + (b - a) * k / (G + 1), so the gap sums to G * (a + b) / 2, as
-        :mod:`mm_beagle.lift_gap` estimates it. A gap at either end holds
-        the nearest good value; if every poll is lifted the result is zeros.
+        (filled, gaps): a float copy of ``counts`` with every lifted poll replaced
+        by its estimate, and per gap ``(start, stop, sigma)``: its index range and
+        the 1-sigma uncertainty of its summed estimate per column, shape (k,)
+        (inf where no good poll was there to estimate from).
     """
     c = np.array(counts, dtype=float)  # a copy
     m = np.asarray(lifted)
@@ -233,14 +239,31 @@ def interpolate_lift_gaps(counts, lifted) -> np.ndarray:
             f"lifted must have one flag per poll: counts shape {c.shape}, lifted shape {m.shape}"
         )
     if not m.any():
-        return c
-    good = ~m
-    if not good.any():
-        return np.zeros_like(c)
-    idx = np.arange(c.shape[0])
-    gi = idx[good]
-    bad = idx[m]
+        return c, []
     flat = c.reshape(c.shape[0], -1)
-    for j in range(flat.shape[1]):
-        flat[bad, j] = np.interp(bad, gi, flat[good, j])
-    return flat.reshape(c.shape)
+    flags = m.tolist()
+    columns = [
+        lift_fill.fill_sequence(flat[:, j].tolist(), flags, unit=unit) for j in range(flat.shape[1])
+    ]
+    for j, (filled, _) in enumerate(columns):
+        flat[:, j] = filled
+    gaps = [
+        (start, start + fill.polls, np.array([col[1][g][1].sigma for col in columns]))
+        for g, (start, fill) in enumerate(columns[0][1])
+    ]
+    return flat.reshape(c.shape), gaps
+
+
+def interpolate_lift_gaps(counts, lifted) -> np.ndarray:
+    """Fill the polls taken while the sensor was lifted (:func:`fill_lift_gaps`, values only).
+
+    Args:
+        counts: per-poll displacement, shape (n,) or (n, k), counts or metres.
+        lifted: bool array of shape (n,), True where the poll had the lift bit set.
+
+    Returns:
+        A float copy of ``counts`` in which every lifted poll is replaced by the
+        window estimate of :mod:`pln2033.lift_fill`, as :mod:`mm_beagle.lift_gap`
+        estimates it on the board.
+    """
+    return fill_lift_gaps(counts, lifted)[0]

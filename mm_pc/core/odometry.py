@@ -56,15 +56,25 @@ class Sample:
     ``dt``: length of the interval in seconds (> 0).
     ``d``: per sensor, in mount order, the sensor-frame displacement
     (dX right, dY forward) in metres counted during the interval.
+    ``lifted``: per sensor, True if it was lifted during the interval (its
+    ``d`` is then not a measurement: what it counted, or a gap-filled estimate);
+    None = nobody lifted.
     """
 
     dt: float
     d: tuple[tuple[float, float], ...]
+    lifted: tuple[bool, ...] | None = None
 
     @classmethod
-    def of(cls, dt: float, *displacements: Sequence[float]) -> Sample:
-        """``Sample.of(0.01, (dx1, dy1), (dx2, dy2))``."""
-        return cls(float(dt), tuple((float(p[0]), float(p[1])) for p in displacements))
+    def of(
+        cls, dt: float, *displacements: Sequence[float], lifted: Sequence[bool] | None = None
+    ) -> Sample:
+        """``Sample.of(0.01, (dx1, dy1), (dx2, dy2))``, optionally ``lifted=(False, True)``."""
+        return cls(
+            float(dt),
+            tuple((float(p[0]), float(p[1])) for p in displacements),
+            None if lifted is None else tuple(bool(v) for v in lifted),
+        )
 
 
 # --- shared kinematics ---------------------------------------------------------------
@@ -162,6 +172,16 @@ class _Method:
         raise NotImplementedError
 
 
+def _no_slip_map(mounts, i: int) -> np.ndarray:
+    """(3, 2n): equation (2) of sensor ``i`` as a linear map from all counts
+    (dX1, dY1, ...) to (a, b, c): a = dY + (sx/sy)*dX, b = 0, c = -dX/sy."""
+    sx, sy = mounts[i].right, mounts[i].forward
+    out = np.zeros((3, 2 * len(mounts)))
+    out[0, 2 * i], out[0, 2 * i + 1] = sx / sy, 1.0
+    out[2, 2 * i] = -1.0 / sy
+    return out
+
+
 class _OneSensor(_Method):
     """Shared set-up of the one-sensor methods: the seed's sx, sy, yaw observable."""
 
@@ -183,6 +203,11 @@ class _OneSensor(_Method):
         c = -dx / self.sy
         a = dy + (self.sx / self.sy) * dx
         return a, c
+
+    def body_map(self, lifted=None) -> np.ndarray:
+        """(3, 2n): :func:`_no_slip_map` of the sensor (a lift changes nothing: a
+        one-sensor method uses its sensor's data as given)."""
+        return _no_slip_map(self.mounts, self.sensor)
 
     def split1(self, d) -> tuple[float, float]:
         """:meth:`split` for one sample of plain floats."""
@@ -276,6 +301,7 @@ class _TwoSensor(_Method):
         self.pinv = np.linalg.pinv(a_mat)  # (3, 2n)
         self._pinv_l = self.pinv.tolist()
         self._a_l = a_mat.tolist()
+        self._lift_maps: dict[tuple[bool, ...], np.ndarray | None] = {}
 
     def solve(self, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Least-squares body increments (N, 3) = (a, b, c) and residual norms (N,) in m."""
@@ -287,6 +313,59 @@ class _TwoSensor(_Method):
     def poses(self, start, dt, d):
         abc, resid = self.solve(d)
         return arc_poses(start, abc[:, 0], abc[:, 1], abc[:, 2]), resid
+
+    def body_map(self, lifted=None) -> np.ndarray:
+        """(3, 2n): the least-squares map, without the lifted sensors' equations."""
+        m = None if lifted is None else self.lifted_map(tuple(lifted))
+        return self.pinv if m is None else m
+
+    def lifted_map(self, lifted: tuple[bool, ...]) -> np.ndarray | None:
+        """(3, 2n) map measurements -> (a, b, c) without the lifted sensors' equations.
+
+        Two or more sensors left: least squares over them (if they still determine
+        the twist); one left: its no-slip split (``exact``: b = 0, c = -dX/sy,
+        a = dY + (sx/sy)*dX); none (or a sensor on the axle line left alone):
+        None, the caller keeps the full map on the data as given.
+        """
+        key = tuple(lifted)
+        if key in self._lift_maps:
+            return self._lift_maps[key]
+        keep = [i for i, f in enumerate(key) if not f]
+        out = None
+        if len(keep) >= 2:
+            rows = [r for i in keep for r in (2 * i, 2 * i + 1)]
+            a_red = self.a_mat[rows]
+            if np.linalg.matrix_rank(a_red) == 3:
+                out = np.zeros((3, self.a_mat.shape[0]))
+                out[:, rows] = np.linalg.pinv(a_red)
+        if len(keep) == 1 and self.mounts[keep[0]].forward != 0:
+            out = _no_slip_map(self.mounts, keep[0])
+        self._lift_maps[key] = out
+        return out
+
+    def poses_lifted(self, start, dt, d, lifted: np.ndarray):
+        """:meth:`poses` with the lifted sensors' equations dropped per sample."""
+        meas = d.reshape(d.shape[0], -1)
+        abc, resid = self.solve(d)
+        any_lift = lifted.any(axis=1)
+        for pattern in np.unique(lifted[any_lift], axis=0):
+            rows = np.all(lifted == pattern, axis=1)
+            m = self.lifted_map(tuple(bool(v) for v in pattern))
+            if m is not None:
+                abc[rows] = meas[rows] @ m.T
+        resid = resid.copy()
+        resid[any_lift] = np.nan  # no redundancy left to check
+        return arc_poses(start, abc[:, 0], abc[:, 1], abc[:, 2]), resid
+
+    def step_lifted(self, pose, dt, d, lifted: tuple[bool, ...]):
+        """:meth:`step` with the lifted sensors' equations dropped."""
+        m = self.lifted_map(lifted)
+        if m is None:
+            x, y, yaw, _ = self.step(pose, dt, d)
+            return x, y, yaw, math.nan
+        meas = [v for pair in d for v in pair]
+        a, b, c = (sum(p * v for p, v in zip(row, meas, strict=True)) for row in m.tolist())
+        return (*_arc_step(pose, a, b, c), math.nan)
 
     def step(self, pose, dt, d):
         meas = [v for pair in d for v in pair]
@@ -342,9 +421,25 @@ class Odometry:
         self._has_yaw = bool(np.any(yaws != 0))
         self._cos_l, self._sin_l = [float(v) for v in self._cos], [float(v) for v in self._sin]
         self._pose = np.zeros(3)
-        #: residual norm (m) of the last update; None for one-sensor methods.
+        #: residual norm (m) of the last update; None for one-sensor methods, NaN when
+        #: a lifted sensor was dropped (nothing left to check the others against).
         self.residual: float | None = None
+        #: samples so far in which some / every sensor was lifted (for the last
+        #: group, every method could only use the data as given: a gap-filled
+        #: estimate, or nothing, so the pose held)
+        self.lifted_samples = 0
+        self.blind_samples = 0
         self.reset(pose)
+
+    def body_map(self, lifted: Sequence[bool] | None = None) -> np.ndarray:
+        """(3, 2 * n_sensors): how the method turns one sample's ideal-frame counts
+        (dX1, dY1, dX2, dY2, ...) in metres into the body increment (a m, b m, c rad),
+        linearised (exact for ``exact`` and ``two-sensor``; the seed's approaches are
+        given ``exact``'s). ``lifted``: per sensor; ``two-sensor`` drops the lifted ones.
+        For :class:`mm_pc.core.uncertainty.PoseUncertainty`.
+        """
+        flags = None if lifted is None or not any(lifted) else tuple(bool(v) for v in lifted)
+        return self._impl.body_map(flags)
 
     @property
     def n_sensors(self) -> int:
@@ -356,12 +451,13 @@ class Odometry:
         return Pose2D(*(float(v) for v in self._pose))
 
     def reset(self, pose: Pose2D | None = None) -> None:
-        """Back to ``pose`` (default: the origin), residual cleared."""
+        """Back to ``pose`` (default: the origin), residual and lift counters cleared."""
         p = np.zeros(3) if pose is None else np.array([pose.x, pose.y, pose.yaw], dtype=float)
         if not np.all(np.isfinite(p)):
             raise ValueError(f"reset pose must be finite, got {pose}")
         self._pose = p
         self.residual = None
+        self.lifted_samples = self.blind_samples = 0
 
     # -- input checks and the mount-yaw undo ------------------------------------------
 
@@ -404,12 +500,21 @@ class Odometry:
         the wrong number of sensors.
         """
         dt, d = self._check_one(sample)
+        lifted = self._check_lifted_one(getattr(sample, "lifted", None))
         if self._has_yaw:
             d = [
                 (c * x - s * y, s * x + c * y)
                 for (x, y), c, s in zip(d, self._cos_l, self._sin_l, strict=True)
             ]
-        x, y, yaw, resid = self._impl.step(self._pose_t, dt, d)
+        if lifted is None:
+            x, y, yaw, resid = self._impl.step(self._pose_t, dt, d)
+        else:
+            self.lifted_samples += 1
+            self.blind_samples += all(lifted)
+            if isinstance(self._impl, _TwoSensor):
+                x, y, yaw, resid = self._impl.step_lifted(self._pose_t, dt, d, lifted)
+            else:
+                x, y, yaw, resid = self._impl.step(self._pose_t, dt, d)
         self._pose = np.array([x, y, yaw])
         self.residual = resid
         return Pose2D(x, y, yaw)
@@ -456,13 +561,47 @@ class Odometry:
                     )
         return dt, d
 
-    def integrate(self, dt, d, return_residual: bool = False):
+    def _check_lifted_one(self, lifted) -> tuple[bool, ...] | None:
+        """A sample's lift flags as a tuple, None when nobody was lifted."""
+        if lifted is None:
+            return None
+        try:
+            flags = tuple(bool(v) for v in lifted)
+        except TypeError:
+            flags = ()
+        if len(flags) != self.n_sensors:
+            raise ValueError(
+                f"a sample's lifted flags must be one bool per sensor ({self.n_sensors}), "
+                f"got {lifted!r}"
+            )
+        return flags if any(flags) else None
+
+    def _check_lifted(self, lifted, n: int) -> np.ndarray | None:
+        if lifted is None:
+            return None
+        m = np.asarray(lifted)
+        if m.dtype != bool or m.shape != (n, self.n_sensors):
+            raise ValueError(
+                f"lifted must be a bool array of shape ({n}, {self.n_sensors}) (one flag per "
+                f"sample and sensor), got {m.dtype} of shape {m.shape}"
+            )
+        return m if m.any() else None
+
+    def integrate(self, dt, d, return_residual: bool = False, *, lifted=None):
         """Vectorised :meth:`update` over N intervals; advances the state the same way.
 
         ``dt``: seconds, scalar or shape (N,). ``d``: metres, shape
         (N, n_sensors, 2), sensor frame as reported. Returns the (N, 3) poses
         (x m, y m, yaw rad) after each interval; with ``return_residual`` also
-        the (N,) residual norms in metres (NaN for one-sensor methods).
+        the (N,) residual norms in metres (NaN for one-sensor methods, and for
+        samples in which a sensor was lifted).
+
+        ``lifted``: optional bool (N, n_sensors), True where a sensor was lifted
+        in that interval (its ``d`` is then what it counted, or a gap-filled
+        estimate). ``two-sensor`` drops those sensors' equations (one sensor left:
+        its no-slip split, as ``exact``); the one-sensor methods use ``d`` as
+        given, so fill the gaps first (:func:`mm_pc.core.filters.fill_lift_gaps`).
+        Every sensor lifted: the data as given, and :attr:`blind_samples` counts it.
         """
         d = np.asarray(d, dtype=float)
         if d.ndim != 3:
@@ -475,10 +614,17 @@ class Odometry:
             else np.asarray(dt, dtype=float)
         )
         self._check(dt, d)
+        mask = self._check_lifted(lifted, d.shape[0])
         if d.shape[0] == 0:
             poses, resid = np.empty((0, 3)), np.empty(0)
         else:
-            poses, resid = self._impl.poses(self._pose, dt, self._unturn(d))
+            if mask is not None:
+                self.lifted_samples += int(np.count_nonzero(mask.any(axis=1)))
+                self.blind_samples += int(np.count_nonzero(mask.all(axis=1)))
+            if mask is not None and isinstance(self._impl, _TwoSensor):
+                poses, resid = self._impl.poses_lifted(self._pose, dt, self._unturn(d), mask)
+            else:
+                poses, resid = self._impl.poses(self._pose, dt, self._unturn(d))
             self._pose = poses[-1].copy()
             self.residual = None if resid is None else float(resid[-1])
         if return_residual:

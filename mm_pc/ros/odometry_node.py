@@ -98,7 +98,8 @@ def odometry_message(
     ddx, ddy = after.x - before.x, after.y - before.y
     fwd, left = c * ddx + s * ddy, -s * ddx + c * ddy
     turned = after.yaw - before.yaw
-    uncertainty.add(math.hypot(fwd, left), turned)
+    uncertainty.cpi = max(cpi, 1)  # the quantisation floor at the CPI in force
+    uncertainty.add(fwd, turned, lateral=left, heading=before.yaw)
     msg = OdometryMsg()
     msg.header.stamp = stamp
     msg.header.frame_id = odom_frame

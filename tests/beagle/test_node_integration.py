@@ -316,6 +316,7 @@ def test_diagnostics_per_sensor(node, client):
         assert float(values["achieved_rate_hz"]) > 500
         for key in ("period_p99_us", "late_polls", "spi_errors", "lift_events", "cpi"):
             assert key in values
+        assert float(values["lift_est_sigma_y_counts"]) >= 0.0
     assert int(diag[S1]["reinits"]) == 1  # came up after its fail window
     assert "down" not in diag[S0]["last_error"]
 

@@ -33,7 +33,6 @@ PERIOD = 1e-3
 TEN_PER_MS = 0.254 * 1.00001
 
 
-
 class Rig:
     """A Poller with emulated sensors on a fake clock, polled by hand."""
 
@@ -322,6 +321,24 @@ def test_lift_estimate_within_20_percent_at_constant_speed(lift_ms):
     assert t.y_est_m == pytest.approx(t.y_est_counts * INCH_M / 1600)
     # still: the measured totals hold only what the sensor counted
     assert (t.x_total, t.y_total) == measured(rig.emus[0])
+
+
+def test_lift_estimate_from_windows_of_polls_is_within_its_sigma():
+    """0.3 m/s at 1600 CPI, three 40 ms lifts: each gap is estimated from 20 polls each
+    side; the estimate's variance is served with it, and the poller leaves the gap
+    (busy False: the hot path again) once the after-window is in."""
+    v = (0.05, 0.3)
+    lifts = [(T0 + a, T0 + a + 0.04) for a in (0.5, 1.2, 2.0)]
+    rig = Rig([{"motion": ConstantVelocity(*v), "lift_windows": lifts}], cpi=1600)
+    rig.run(3000)
+    t = rig.snap(0)
+    true_y = v[1] * (rig.clock.t - rig.t_init) * 1600 / INCH_M
+    lost_y = true_y - t.y_total
+    sigma_y = t.y_est_var_counts**0.5
+    assert 0 < sigma_y < 0.02 * lost_y
+    assert abs(t.y_est_counts - lost_y) < 3 * sigma_y + 2  # + the totals' own rounding
+    assert t.y_est_var_m == pytest.approx(t.y_est_var_counts * (INCH_M / 1600) ** 2)
+    assert not rig.channels[0].gap.busy and not rig.channels[0].gap_m.busy
 
 
 def test_sim_lift_lost_ground_truth_counts_what_a_lift_ate():

@@ -11,11 +11,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mm_beagle.lift_gap import LiftGapEstimator
+from mm_beagle.lift_gap import WINDOW, LiftGapEstimator
 from mm_pc.core.filters import (
     MAX_WINDOW,
     MedianFilter,
     SensorMedianFilter,
+    fill_lift_gaps,
     interpolate_lift_gaps,
     median_filter,
     validate_window,
@@ -237,23 +238,46 @@ def test_offline_rejects_scalar_and_nan():
 # --- lift gaps --------------------------------------------------------------------------------
 
 
-def test_interior_gap_is_linear():
+def test_interior_gap_is_the_window_line():
     counts = np.array([2, 0, 0, 0, 10, 10])
     lifted = np.array([0, 1, 1, 1, 0, 0], dtype=bool)
     out = interpolate_lift_gaps(counts, lifted)
-    np.testing.assert_allclose(out, [2, 4, 6, 8, 10, 10])
-    assert out[1:4].sum() == 3 * (2 + 10) / 2
+    # windows: [2] centred at 0, [10, 10] at 4.5 (gap polls 1..3): slope 8 / 4.5 per poll
+    np.testing.assert_allclose(out, [2, 2 + 8 / 4.5, 2 + 16 / 4.5, 2 + 24 / 4.5, 10, 10])
     # The input is not modified, and lifted-poll values are ignored.
     assert counts[1] == 0
     np.testing.assert_allclose(interpolate_lift_gaps([2, 99, 99, 99, 10, 10], lifted), out)
 
 
-def test_edges_hold_nearest_good_value_and_all_lifted_is_zero():
+def test_edges_hold_the_window_rate_and_all_lifted_is_zero():
     out = interpolate_lift_gaps([0, 0, 5, 7, 0], np.array([1, 1, 0, 0, 1], dtype=bool))
-    np.testing.assert_allclose(out, [5, 5, 5, 7, 7])
+    np.testing.assert_allclose(out, [6, 6, 5, 7, 6])
     out = interpolate_lift_gaps([4, 4, 4], np.ones(3, dtype=bool))
     np.testing.assert_array_equal(out, [0, 0, 0])
     assert out.dtype == float
+
+
+def test_fill_is_the_boards_rule_with_its_sigma():
+    """The same polls through the board's streaming estimator give the same totals."""
+    rng = np.random.default_rng(3)
+    n = 400
+    pos = np.cumsum(rng.uniform(0.0, 0.8, (n, 2)), axis=0)
+    counts = np.diff(np.floor(np.vstack([[0, 0], pos])), axis=0)
+    lifted = np.zeros(n, dtype=bool)
+    lifted[50:130] = lifted[140:150] = lifted[300:330] = True
+    filled, gaps = fill_lift_gaps(counts, lifted)
+    est = LiftGapEstimator()
+    board = [
+        r
+        for (x, y), f in zip(counts.tolist(), lifted.tolist(), strict=True)
+        if (r := est.update(x, y, f)) is not None
+    ]
+    assert [(a, b) for a, b, _ in gaps] == [(50, 130), (140, 150), (300, 330)]
+    for (a, b, sigma), r in zip(gaps, board, strict=True):
+        np.testing.assert_allclose(filled[a:b].sum(axis=0), r[:2])
+        np.testing.assert_allclose(sigma, r[2:])
+        assert np.all(sigma > 0)
+    np.testing.assert_array_equal(filled[~lifted], counts[~lifted])
 
 
 def test_no_lift_returns_a_float_copy():
@@ -291,7 +315,9 @@ def polls_with_interior_gaps(draw):
         st.lists(st.tuples(st.integers(-50, 50), st.integers(-50, 50)), min_size=n, max_size=n)
     )
     lifted = draw(st.lists(st.booleans(), min_size=n, max_size=n))
-    lifted[0] = lifted[-1] = False  # gaps are closed on both sides
+    lifted[0] = False
+    counts += [(1, -1)] * WINDOW  # every gap's after-window is complete on the board
+    lifted += [False] * WINDOW
     return np.array(counts), np.array(lifted)
 
 
@@ -305,7 +331,7 @@ def test_sums_agree_with_the_beagle_lift_gap_estimator(data):
     for (dx, dy), lift in zip(counts.tolist(), lifted.tolist(), strict=True):
         gap = est.update(dx, dy, lift)
         if gap is not None:
-            total += gap
+            total += gap[:2]
         if not lift:
             total += (dx, dy)
     filled = interpolate_lift_gaps(counts, lifted)

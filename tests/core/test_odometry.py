@@ -366,3 +366,87 @@ def test_a_subnormal_turn_is_a_straight_step_not_a_division_by_zero():
     from mm_pc.core.odometry import _arc_step
 
     assert _arc_step((0.0, 0.0, 0.0), 1.0, 0.0, 5e-324) == (1.0, 5e-324, 5e-324)
+
+
+# --- lifted sensors -----------------------------------------------------------------------------
+
+
+def test_issue_example_a_lifted_sensor_is_invisible_to_the_residual_but_dropped_by_its_flag():
+    """Sensor 0 lifted (reads 0) while the robot drives 2 cm straight: without the flag
+    two-sensor turns 14.5 deg with a residual of ~1e-17; with it, sensor 0 is dropped and
+    sensor 1's no-slip split gives the straight 2 cm."""
+    odo = Odometry(DEFAULT_MOUNTS, "two-sensor")
+    p = odo.update(Sample.of(1 / 15, (0, 0), (0, 0.02)))
+    assert math.degrees(p.yaw) == pytest.approx(-14.5, abs=0.05)
+    assert odo.residual < 1e-15
+    odo = Odometry(DEFAULT_MOUNTS, "two-sensor")
+    p = odo.update(Sample.of(1 / 15, (0, 0), (0, 0.02), lifted=(True, False)))
+    assert (p.x, p.y, p.yaw) == (0.02, 0.0, 0.0)
+    assert math.isnan(odo.residual) and odo.lifted_samples == 1 and odo.blind_samples == 0
+
+
+def _lifted_tour(lift_sensor: int = 0):
+    v, w = sim.trajectory("mixed_tour")
+    lift = np.zeros((v.size, 2), dtype=bool)
+    lift[:, lift_sensor] = sim.lift_mask(v.size, [(3.0, 1.5), (22.0, 2.0), (41.0, 1.0), (55, 0.7)])
+    r = sim.request_samples(v, w, DEFAULT_MOUNTS, 15.0, lifted=lift)
+    return r, r.lifted_steps > 0
+
+
+@pytest.mark.parametrize("lift_sensor", [0, 1])
+def test_two_sensor_drops_a_lifted_sensor_and_stays_on_the_tour(lift_sensor):
+    r, mask = _lifted_tour(lift_sensor)
+    assert mask[:, lift_sensor].sum() > 50 and not mask[:, 1 - lift_sensor].any()
+    blind = Odometry(DEFAULT_MOUNTS, "two-sensor").integrate(r.dt, r.d)
+    odo = Odometry(DEFAULT_MOUNTS, "two-sensor")
+    poses, resid = odo.integrate(r.dt, r.d, True, lifted=mask)
+    # noise-free, no slip: the remaining sensor's no-slip split is exact per interval
+    err = np.hypot(*(poses[-1, :2] - r.truth[-1, :2]))
+    assert err < 1e-3
+    assert np.hypot(*(blind[-1, :2] - r.truth[-1, :2])) > 0.5  # lifts unflagged: lost
+    assert np.all(np.isnan(resid[mask.any(axis=1)])) and np.all(resid[~mask.any(axis=1)] < 1e-9)
+    assert odo.lifted_samples == int(mask.any(axis=1).sum())
+
+
+def test_update_and_integrate_agree_with_a_lift_mask():
+    r, mask = _lifted_tour(0)
+    n = 300
+    vec = Odometry(DEFAULT_MOUNTS, "two-sensor").integrate(r.dt[:n], r.d[:n], lifted=mask[:n])
+    odo = Odometry(DEFAULT_MOUNTS, "two-sensor")
+    loop = np.array(
+        [odo.update(Sample.of(r.dt[i], *r.d[i], lifted=mask[i])).as_array() for i in range(n)]
+    )
+    np.testing.assert_allclose(loop, vec, atol=1e-12)
+
+
+def test_every_sensor_lifted_holds_the_pose_or_moves_by_the_filled_data():
+    odo = Odometry(DEFAULT_MOUNTS, "two-sensor")
+    odo.update(Sample.of(0.1, (0, 0.01), (0, 0.01)))
+    p = odo.update(Sample.of(0.1, (0, 0), (0, 0), lifted=(True, True)))
+    assert (p.x, p.y, p.yaw) == pytest.approx((0.01, 0.0, 0.0))
+    p = odo.update(Sample.of(0.1, (0, 0.02), (0, 0.02), lifted=(True, True)))  # filled
+    assert (p.x, p.y, p.yaw) == pytest.approx((0.03, 0.0, 0.0))
+    assert odo.blind_samples == 2 and odo.lifted_samples == 2
+
+
+@pytest.mark.parametrize("method", ["exact", "seed-approach1", "seed-approach2"])
+def test_one_sensor_methods_use_the_data_as_given_under_a_mask(method):
+    r, mask = _lifted_tour(0)
+    plain = Odometry(DEFAULT_MOUNTS, method).integrate(r.dt, r.d)
+    odo = Odometry(DEFAULT_MOUNTS, method)
+    masked = odo.integrate(r.dt, r.d, lifted=mask)
+    np.testing.assert_array_equal(plain, masked)
+    assert odo.lifted_samples == int(mask[:, 0].sum())
+
+
+@pytest.mark.parametrize(
+    "lifted",
+    [np.ones((2, 3), dtype=bool), np.ones((3, 2), dtype=bool), np.ones((2, 2), dtype=int)],
+)
+def test_bad_lift_mask_is_refused_and_changes_nothing(lifted):
+    odo = Odometry(DEFAULT_MOUNTS, "two-sensor")
+    with pytest.raises(ValueError, match="lifted must be a bool array of shape"):
+        odo.integrate(0.1, np.zeros((2, 2, 2)), lifted=lifted)
+    assert odo.pose == Pose2D() and odo.lifted_samples == 0
+    with pytest.raises(ValueError, match="one bool per sensor"):
+        odo.update(Sample.of(0.1, (0, 0), (0, 0), lifted=(True,)))

@@ -100,12 +100,16 @@ def test_bad_method_exits_with_a_message(ros_command):
 
 def test_uncertainty_grows_with_distance_and_turn():
     u = PoseUncertainty()
+    floor_yaw = u.pose_covariance()[35]  # quantisation at 1600 CPI: never 0
+    assert floor_yaw > 0 and u.pose_covariance()[0] > 0
     u.add(1.0, 0.0)
     assert u.pose_covariance()[0] == pytest.approx(0.015**2)
-    assert u.pose_covariance()[35] == pytest.approx(0.01**2)
+    assert u.pose_covariance()[35] == pytest.approx(0.01**2 + floor_yaw)
     u.add(-1.0, -math.pi)
-    assert u.pose_covariance()[0] == pytest.approx(2 * 0.015**2)
-    assert u.pose_covariance()[35] == pytest.approx(2 * 0.01**2 + math.pi * 0.01**2)
+    # the yaw random walk adds; position also takes the heading error over the step
+    assert u.pose_covariance()[35] == pytest.approx(2 * 0.01**2 + math.pi * 0.01**2 + floor_yaw)
+    assert u.pose_covariance()[0] > 2 * 0.015**2
+    assert (u.var_along, u.var_yaw) == pytest.approx((2 * 0.015**2, (2 + math.pi) * 0.01**2))
     with pytest.raises(ValueError, match="q_pos"):
         PoseUncertainty(q_pos=-1.0)
     with pytest.raises(ValueError, match="cpi and dt"):
