@@ -373,6 +373,24 @@ def fit_mounts(
         )
     signs = _signs(steps, nominal)
     straight_run = straight_run_calibration(steps, devices, true_distance, min_distance)
+    # straights that disagree in direction (raw, the same correction applies to all):
+    # one of them went sideways or turned
+    for i in range(n):
+        dirs = [
+            (k, math.atan2(signs[k] * s.totals[i, 0], signs[k] * s.totals[i, 1]))
+            for k, s in enumerate(steps)
+            if s.kind == "straight"
+        ]
+        for k1, a1 in dirs:
+            for k2, a2 in dirs:
+                off = abs(math.remainder(a1 - a2, 2 * math.pi))
+                if k1 < k2 and off > MAX_STRAIGHT_ANGLE:
+                    raise CalibrationRefusedError(
+                        f"steps {k1 + 1} and {k2 + 1} (straights): {devices[i]} went "
+                        f"{math.degrees(off):.2f} deg apart (at most "
+                        f"{math.degrees(MAX_STRAIGHT_ANGLE):.1f} deg): the robot moved sideways "
+                        "or turned; push it along the same straight edge and record them again"
+                    )
     i_str = [k for k, s in enumerate(steps) if s.kind == "straight"]
     i_spin = [k for k, s in enumerate(steps) if s.kind == "spin"]
     sums = np.array([s.totals for s in steps])  # (S, n, 2)
@@ -458,14 +476,6 @@ def fit_mounts(
         for j, k in enumerate(i_str):
             v = g @ sums[k, i]
             step_res[k, i] = math.hypot(v[0], v[1] - theta[5 * n + j])
-            ang = abs(math.atan2(v[0], abs(v[1])))
-            if ang > MAX_STRAIGHT_ANGLE:
-                raise CalibrationRefusedError(
-                    f"step {k + 1} (straight): {devices[i]} went {math.degrees(ang):.2f} deg "
-                    f"off the direction of the other straights (at most "
-                    f"{math.degrees(MAX_STRAIGHT_ANGLE):.1f} deg): the robot moved sideways or "
-                    "turned; push it along the same straight edge and record the step again"
-                )
         for j, k in enumerate(i_spin):
             step_res[k, i] = float(np.hypot(*(g @ sums[k, i] + theta[5 * n + n_str + j] * q[3:5])))
     # a spin far from the entered angle: the mount radius tells how far it turned
