@@ -94,7 +94,7 @@ class MonitorContext(QObject):
         try:
             cal = Calibration.load(path)
         except (OSError, ValueError) as e:
-            self.calibration_error = f"calibration {path} not loaded: {e}"
+            self.calibration_error = f"calibration not loaded: {e}"  # e names the file
             self.status_message.emit(self.calibration_error)
             return False
         self.set_calibration(cal, str(path))

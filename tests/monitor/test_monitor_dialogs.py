@@ -748,3 +748,18 @@ def test_manual_request_against_the_node_loses_no_counts(qtbot, beagle_node, tmp
     finally:
         bridge.stop()
         time.sleep(0.05)
+
+
+def test_a_bad_calibration_file_is_one_message_naming_it_and_changes_nothing(qtbot, ctx, tmp_path):
+    old = Calibration({D0: SensorCalibration(0.01, 0.5, 1.0)})
+    ctx.set_calibration(old, "before.yaml")
+    panel = CalibrationPanel(ctx)
+    qtbot.addWidget(panel)
+    shown = panel.label.text()
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("version: 2\nsensors: {/dev/spidev1.0: {angle_offset_rad: x}}\n")
+    assert not ctx.load_calibration(bad)
+    assert ctx.calibration_error.startswith(f"calibration not loaded: calibration file {bad}: ")
+    assert ctx.calibration_error.count(str(bad)) == 1
+    assert ctx.session.calibration is old and ctx.calibration_source == "before.yaml"
+    assert panel.label.text() == shown and "before.yaml" in shown
