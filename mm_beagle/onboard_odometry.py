@@ -3,9 +3,12 @@
 The seed's improvement "move more to the BBB": instead of the PC's request
 rate, the pose is integrated over the single polls in the ring buffer with
 the same pose math (:mod:`mm_pc.core.odometry`, vectorised) and published as the
-same nav_msgs/Odometry as mm-odometry's. Counts lost to lifts are not added
-here (the gap estimate is a sum, not per poll), but the polls' lift flags go
-to the odometry: ``two-sensor`` drops a lifted sensor's equations for them.
+same nav_msgs/Odometry as mm-odometry's. ``calibration_file`` is the wizard's
+file (:mod:`mm_pc.core.calibration`, version 1 or 2): its angles and scales
+correct every poll, its fitted sensor positions replace the configured mounts.
+Counts lost to lifts are not added here (the gap estimate is a sum, not per
+poll), but the polls' lift flags go to the odometry: ``two-sensor`` drops a
+lifted sensor's equations for them.
 """
 
 from __future__ import annotations
@@ -31,12 +34,14 @@ class OnboardOdometry:
         if not 0 <= settings.sensor < len(devices):
             raise ValueError(f"'odometry_sensor' must be 0..{len(devices) - 1}")
         mounts = [SensorMount(*m) for m in settings.mounts]
-        self.odometry = Odometry(mounts, method=settings.method, sensor=settings.sensor)
+        # a bad file: OSError/ValueError naming it (the node exits 2)
         self.calibration = (
             Calibration.load(settings.calibration_file)
             if settings.calibration_file
             else Calibration()
         )
+        mounts = self.calibration.mounts(devices, mounts)  # the fitted sensor positions
+        self.odometry = Odometry(mounts, method=settings.method, sensor=settings.sensor)
         # start from now: the past is not integrated
         self.next_seq = [int(state.snapshot(i).seq) for i in range(len(devices))]
         self.last_stamp = [0] * len(devices)

@@ -9,8 +9,8 @@ section "mm_pc.core.calibration in detail".
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, replace
 from functools import cached_property
 from pathlib import Path
 
@@ -19,8 +19,10 @@ import yaml
 
 from mm_pc.core.angles import wrap_pi
 from mm_pc.core.checks import finite
+from mm_pc.core.geometry import SensorMount
 
 __all__ = [
+    "CALIBRATION_METHODS",
     "DEFAULT_MIN_DISTANCE_M",
     "Calibration",
     "SensorCalibration",
@@ -31,13 +33,31 @@ __all__ = [
 #: angle is dominated by count quantisation and noise.
 DEFAULT_MIN_DISTANCE_M = 0.05
 
-#: Version written into and required from the YAML file.
-YAML_VERSION = 1
+#: Version written into the YAML file; version 1 files (one scale, no
+#: position) still load.
+YAML_VERSION = 2
+READABLE_VERSIONS = (1, 2)
+
+#: Names of the ways a calibration was made (the file's ``method``).
+CALIBRATION_METHODS = ("straight-run", "fit")
 
 
 def _finite_number(name: str, value) -> float:
     """``value`` as a float, or ValueError if it is not a finite real number."""
     return finite(name, value, real=True)
+
+
+#: Optional per-sensor keys of a version-2 file (value None = not estimated):
+#: YAML key -> attribute.
+_OPTIONAL_KEYS = {
+    "angle_offset_se_rad": "angle_offset_se",
+    "scale_x_se": "scale_x_se",
+    "scale_y_se": "scale_y_se",
+    "x_m": "x",
+    "y_m": "y",
+    "x_se_m": "x_se",
+    "y_se_m": "y_se",
+}
 
 
 @dataclass(frozen=True)
@@ -47,15 +67,34 @@ class SensorCalibration:
     Attributes:
         angle_offset: correction angle in rad, (-pi, pi]; equals the
             sensor's mounting yaw error (see the module docstring).
-        distance: length |(X, Y)| of the raw summed calibration run in m
+        distance: length |(X, Y)| of the raw summed straight run(s) in m
             (0 for the identity calibration: no run).
-        scale: factor applied to every corrected sample, > 0 (true distance /
-            measured distance; 1 when no true distance was entered).
+        scale: the forward (sensor Y) scale; the one scale of a version-1
+            file. With ``scale_y`` given it is set to ``scale_y``.
+        scale_x, scale_y: factors applied to the sensor's own X and Y
+            counts before the rotation, > 0 (true / measured); None = ``scale``.
+        x, y: the sensor's position in base_link (m) relative to the turning
+            centre, as fitted from spins; None = use the configured mount.
+        angle_offset_se, scale_x_se, scale_y_se, x_se, y_se: standard errors
+            of the fitted values (rad, 1, 1, m, m); None = not estimated.
+
+    Correction (sensor frame, X right, Y forward)::
+
+        (x', y') = R(angle_offset) @ (scale_x * x, scale_y * y)
     """
 
     angle_offset: float = 0.0
     distance: float = 0.0
     scale: float = 1.0
+    scale_x: float | None = None
+    scale_y: float | None = None
+    x: float | None = None
+    y: float | None = None
+    angle_offset_se: float | None = None
+    scale_x_se: float | None = None
+    scale_y_se: float | None = None
+    x_se: float | None = None
+    y_se: float | None = None
 
     def __post_init__(self) -> None:
         a = _finite_number("angle_offset", self.angle_offset)
@@ -67,14 +106,31 @@ class SensorCalibration:
             raise ValueError(f"distance must be >= 0 m, got {d}")
         if s <= 0:
             raise ValueError(f"scale must be > 0, got {s}")
+        sx = s if self.scale_x is None else _finite_number("scale_x", self.scale_x)
+        sy = s if self.scale_y is None else _finite_number("scale_y", self.scale_y)
+        for name, v in (("scale_x", sx), ("scale_y", sy)):
+            if v <= 0:
+                raise ValueError(f"{name} must be > 0, got {v}")
+        if (self.x is None) != (self.y is None):
+            raise ValueError("a position needs both x and y (m), or neither")
         object.__setattr__(self, "angle_offset", a)
         object.__setattr__(self, "distance", d)
-        object.__setattr__(self, "scale", s)
+        object.__setattr__(self, "scale", sy)
+        object.__setattr__(self, "scale_x", sx)
+        object.__setattr__(self, "scale_y", sy)
+        for attr in _OPTIONAL_KEYS.values():
+            v = getattr(self, attr)
+            if v is not None:
+                v = _finite_number(attr, v)
+                if attr.endswith("_se") and v < 0:
+                    raise ValueError(f"{attr} must be >= 0, got {v}")
+                object.__setattr__(self, attr, v)
 
     @cached_property
-    def _cs(self) -> tuple[float, float]:
-        """(scale * cos, scale * sin) of the offset, computed once."""
-        return self.scale * math.cos(self.angle_offset), self.scale * math.sin(self.angle_offset)
+    def _m(self) -> tuple[float, float, float, float]:
+        """The correction matrix R(offset) @ diag(scale_x, scale_y), row major, computed once."""
+        c, s = math.cos(self.angle_offset), math.sin(self.angle_offset)
+        return c * self.scale_x, -s * self.scale_y, s * self.scale_x, c * self.scale_y
 
     @classmethod
     def identity(cls) -> SensorCalibration:
@@ -86,47 +142,74 @@ class SensorCalibration:
         """The correction angle in degrees (for display)."""
         return math.degrees(self.angle_offset)
 
+    @property
+    def position(self) -> tuple[float, float] | None:
+        """The fitted base_link position (x, y) in m, or None."""
+        return None if self.x is None else (self.x, self.y)
+
     def apply(self, dx, dy):
         """Correct raw sensor-frame displacement(s) (m, or counts: linear).
 
         ``dx``, ``dy``: scalars or numpy arrays of the same shape (sensor X
         right, Y forward). Returns ``(dx', dy')`` as floats / float arrays:
-        rotated by ``+angle_offset``, both from the unrotated input, times
-        ``scale``.
+        scaled per axis, then rotated by ``+angle_offset``, both components
+        from the unrotated input.
         """
         x = np.asarray(dx, dtype=float)
         y = np.asarray(dy, dtype=float)
-        c, s = self._cs
-        xr = c * x - s * y
-        yr = s * x + c * y
+        a, b, c, d = self._m
+        xr = a * x + b * y
+        yr = c * x + d * y
         if xr.ndim == 0:
             return float(xr), float(yr)
         return xr, yr
 
     def to_dict(self) -> dict[str, float]:
-        """Plain dict with unit-suffixed keys (the YAML layout of one sensor)."""
-        return {
+        """Plain dict with unit-suffixed keys (the version-2 YAML layout of one sensor)."""
+        out = {
             "angle_offset_rad": self.angle_offset,
             "distance_m": self.distance,
-            "scale": self.scale,
+            "scale_x": self.scale_x,
+            "scale_y": self.scale_y,
         }
+        for key, attr in _OPTIONAL_KEYS.items():
+            if getattr(self, attr) is not None:
+                out[key] = getattr(self, attr)
+        return out
 
     @classmethod
-    def from_dict(cls, data, where: str = "sensor") -> SensorCalibration:
-        """Inverse of :meth:`to_dict`; ValueError naming ``where`` on bad input."""
+    def from_dict(
+        cls, data, where: str = "sensor", version: int = YAML_VERSION
+    ) -> SensorCalibration:
+        """Inverse of :meth:`to_dict` (``version`` 1: the old layout with one
+        ``scale``); ValueError naming ``where`` on bad input."""
         if not isinstance(data, Mapping):
             raise ValueError(f"{where}: expected a mapping, got {type(data).__name__}")
         keys = set(data)
-        allowed = {"angle_offset_rad", "distance_m", "scale"}
+        if version == 1:
+            required = {"angle_offset_rad", "distance_m", "scale"}
+            allowed = set(required)
+        else:
+            required = {"angle_offset_rad", "distance_m", "scale_x", "scale_y"}
+            allowed = required | set(_OPTIONAL_KEYS)
         if keys - allowed:
             raise ValueError(
                 f"{where}: unknown key(s) {sorted(map(str, keys - allowed))}; "
                 f"allowed: {sorted(allowed)}"
             )
-        if allowed - keys:
-            raise ValueError(f"{where}: missing key(s) {sorted(allowed - keys)}")
+        if required - keys:
+            raise ValueError(f"{where}: missing key(s) {sorted(required - keys)}")
         try:
-            return cls(data["angle_offset_rad"], data["distance_m"], data["scale"])
+            if version == 1:
+                return cls(data["angle_offset_rad"], data["distance_m"], data["scale"])
+            extra = {attr: data[key] for key, attr in _OPTIONAL_KEYS.items() if key in data}
+            return cls(
+                data["angle_offset_rad"],
+                data["distance_m"],
+                scale_x=data["scale_x"],
+                scale_y=data["scale_y"],
+                **extra,
+            )
         except ValueError as e:
             raise ValueError(f"{where}: {e}") from None
 
@@ -189,14 +272,36 @@ class Calibration:
     """One :class:`SensorCalibration` per sensor id (the SPI device path).
 
     Sensors without an entry are treated as identity by :meth:`get` and
-    :meth:`apply`. Serialises to YAML::
+    :meth:`apply`. ``method``: how it was made (one of
+    :data:`CALIBRATION_METHODS`, or "" for none/hand-made); ``date``: when
+    (ISO 8601 text, "" = unknown). Serialises to YAML (version 2)::
 
-        version: 1
+        version: 2
+        method: fit
+        date: '2026-12-01T19:30:00+00:00'
         sensors:
-          /dev/spidev1.0: {angle_offset_rad: 0.087, distance_m: 1.0, scale: 1.0}
+          /dev/spidev1.0: {angle_offset_rad: 0.087, distance_m: 1.0, scale_x: 1.0,
+                           scale_y: 1.0, x_m: 0.049, y_m: -0.0395, ...}
+
+    Version-1 files (``version: 1``, ``sensors`` with one ``scale`` each)
+    still load.
     """
 
-    def __init__(self, sensors: Mapping[str, SensorCalibration] | None = None) -> None:
+    def __init__(
+        self,
+        sensors: Mapping[str, SensorCalibration] | None = None,
+        method: str = "",
+        date: str = "",
+    ) -> None:
+        if method not in ("", *CALIBRATION_METHODS):
+            raise ValueError(
+                f"calibration method must be one of {list(CALIBRATION_METHODS)} or empty, "
+                f"got {method!r}"
+            )
+        if not isinstance(date, str):
+            raise ValueError(f"calibration date must be text (ISO 8601), got {date!r}")
+        self.method = method
+        self.date = date
         self._sensors: dict[str, SensorCalibration] = {}
         for sid, cal in (sensors or {}).items():
             self[sid] = cal
@@ -223,15 +328,25 @@ class Calibration:
         return len(self._sensors)
 
     def __eq__(self, other: object) -> bool:
-        return isinstance(other, Calibration) and self._sensors == other._sensors
+        return (
+            isinstance(other, Calibration)
+            and self._sensors == other._sensors
+            and (self.method, self.date) == (other.method, other.date)
+        )
 
     def __repr__(self) -> str:
-        return f"Calibration({self._sensors!r})"
+        return f"Calibration({self._sensors!r}, method={self.method!r}, date={self.date!r})"
 
     @property
     def sensors(self) -> dict[str, SensorCalibration]:
         """A copy of the per-sensor calibrations."""
         return dict(self._sensors)
+
+    @property
+    def is_identity(self) -> bool:
+        """True when applying it changes nothing (no sensor, or all identity)."""
+        ident = SensorCalibration.identity()
+        return all(c == ident for c in self._sensors.values())
 
     def get(self, sensor_id: str) -> SensorCalibration:
         """The sensor's calibration, identity if it has none."""
@@ -240,6 +355,25 @@ class Calibration:
     def apply(self, sensor_id: str, dx, dy):
         """Correct raw displacement(s) of ``sensor_id``; see :meth:`SensorCalibration.apply`."""
         return self.get(sensor_id).apply(dx, dy)
+
+    def mounts(self, devices: Sequence[str], default_mounts: Sequence[SensorMount]):
+        """The mounts the odometry uses with this calibration in force.
+
+        One :class:`SensorMount` per device (``devices`` in mount order): the
+        fitted position (x, y) where this calibration has one, else the
+        default mount's; the yaw is the default mount's (the calibration's
+        angle is applied to the samples, not to the mount).
+        """
+        devices, default_mounts = list(devices), tuple(default_mounts)
+        if len(default_mounts) < len(devices):
+            raise ValueError(
+                f"{len(devices)} sensors need {len(devices)} mounts, got {len(default_mounts)}"
+            )
+        out = []
+        for dev, m in zip(devices, default_mounts, strict=False):
+            pos = self.get(dev).position
+            out.append(m if pos is None else replace(m, x=pos[0], y=pos[1]))
+        return tuple(out)
 
     @classmethod
     def identity(cls, sensor_ids: Iterable[str] = ()) -> Calibration:
@@ -251,6 +385,8 @@ class Calibration:
     def to_dict(self) -> dict:
         return {
             "version": YAML_VERSION,
+            "method": self.method,
+            "date": self.date,
             "sensors": {sid: cal.to_dict() for sid, cal in self._sensors.items()},
         }
 
@@ -261,20 +397,26 @@ class Calibration:
                 "calibration: expected a mapping with 'version' and 'sensors', "
                 f"got {type(data).__name__}"
             )
-        allowed = {"version", "sensors"}
+        version = data.get("version")
+        if "version" in data and (isinstance(version, bool) or version not in READABLE_VERSIONS):
+            raise ValueError(
+                f"calibration: unsupported version {version!r}, expected one of "
+                f"{list(READABLE_VERSIONS)}"
+            )
+        required = {"version", "sensors"}
+        allowed = required | ({"method", "date"} if version == 2 else set())
         keys = set(data)
         if keys - allowed:
             raise ValueError(
                 f"calibration: unknown key(s) {sorted(map(str, keys - allowed))}; "
                 f"allowed: {sorted(allowed)}"
             )
-        if allowed - keys:
-            raise ValueError(f"calibration: missing key(s) {sorted(allowed - keys)}")
-        version = data["version"]
-        if isinstance(version, bool) or version != YAML_VERSION:
-            raise ValueError(
-                f"calibration: unsupported version {version!r}, expected {YAML_VERSION}"
-            )
+        if required - keys:
+            raise ValueError(f"calibration: missing key(s) {sorted(required - keys)}")
+        method = data.get("method") or ""
+        date = data.get("date") or ""
+        if not isinstance(date, str):
+            date = str(date)  # YAML reads an unquoted ISO date as a datetime
         sensors = data["sensors"]
         if sensors is None:
             sensors = {}
@@ -283,11 +425,16 @@ class Calibration:
                 f"calibration: 'sensors' must be a mapping of sensor id to calibration, "
                 f"got {type(sensors).__name__}"
             )
-        out = cls()
+        try:
+            out = cls(method=method, date=date)
+        except ValueError as e:
+            raise ValueError(f"calibration: {e}") from None
         for sid, entry in sensors.items():
             if not isinstance(sid, str) or not sid:
                 raise ValueError(f"calibration: sensor id must be a non-empty string, got {sid!r}")
-            out[sid] = SensorCalibration.from_dict(entry, where=f"calibration of {sid}")
+            out[sid] = SensorCalibration.from_dict(
+                entry, where=f"calibration of {sid}", version=version
+            )
         return out
 
     def to_yaml(self) -> str:
@@ -312,5 +459,18 @@ class Calibration:
 
     @classmethod
     def load(cls, path: str | Path) -> Calibration:
-        """Read a file written by :meth:`save`. OSError if unreadable, ValueError if bad."""
-        return cls.from_yaml(Path(path).read_text(encoding="utf-8"))
+        """Read a file written by :meth:`save` (or a version-1 file).
+
+        OSError if unreadable, ValueError if bad; both messages name the file.
+        """
+        path = Path(path)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except UnicodeDecodeError as e:
+            raise ValueError(f"calibration file {path}: not a text file ({e})") from None
+        except OSError as e:
+            raise OSError(f"calibration file {path}: {e.strerror or e}") from None
+        try:
+            return cls.from_yaml(text)
+        except ValueError as e:
+            raise ValueError(f"calibration file {path}: {e}") from None

@@ -62,6 +62,8 @@ class MonitorContext(QObject):
         #: object with ``write_reply(reply)``; set by the recorder while recording
         self.recorder = None
         self.calibration_error = ""
+        #: where the calibration in force came from (a file path, the wizard), "" = none
+        self.calibration_source = ""
         #: the robot's mounts and axis length as edited in the geometry dialog
         self.robot_geometry: RobotGeometry = DEFAULT_GEOMETRY
 
@@ -92,13 +94,25 @@ class MonitorContext(QObject):
         try:
             cal = Calibration.load(path)
         except (OSError, ValueError) as e:
-            self.calibration_error = f"calibration {path} not loaded: {e}"
+            self.calibration_error = f"calibration not loaded: {e}"  # e names the file
             self.status_message.emit(self.calibration_error)
             return False
-        self.set_calibration(cal)
+        self.set_calibration(cal, str(path))
         self.status_message.emit(f"calibration loaded from {path}")
         return True
 
-    def set_calibration(self, cal: Calibration) -> None:
+    def set_calibration(self, cal: Calibration, source: str = "") -> None:
+        """Put ``cal`` in force; ``source``: where it came from (shown in the Pose panel)."""
         self.session.calibration = cal
+        self.calibration_source = source
         self.calibration_changed.emit()
+
+    def clear_calibration(self) -> str:
+        """Back to the identity calibration (files are not touched); the status line said."""
+        was = self.calibration_source
+        self.set_calibration(Calibration(), "")
+        msg = "calibration cleared: identity in force" + (
+            f" ({was} is unchanged; it loads again at the next start)" if was else ""
+        )
+        self.status_message.emit(msg)
+        return msg

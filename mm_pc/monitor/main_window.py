@@ -177,6 +177,10 @@ class MainWindow(QMainWindow):
         self.method_error.setWordWrap(True)
         self.method_error.hide()
         pform.addRow(self.method_error)
+        from mm_pc.monitor.widgets.calibration_panel import CalibrationPanel
+
+        self.calibration_panel = CalibrationPanel(self.ctx, self)
+        pform.addRow(self.calibration_panel)
         for text, slot in (
             ("Calibration wizard…", self.open_calibration_wizard),
             ("Median filters…", self.open_filter_dialog),

@@ -129,10 +129,13 @@ class OdometryNode(Node):
             )
         mounts = [SensorMount(*flat[i : i + 3]) for i in range(0, len(flat), 3)]
         self.devices = devices
-        self.odometry = Odometry(mounts, method=p["method"], sensor=p["sensor"])
+        # a bad calibration file: OSError/ValueError naming it, exit 2; its fitted
+        # sensor positions replace the configured mounts
         self.calibration = (
             Calibration.load(p["calibration_file"]) if p["calibration_file"] else Calibration()
         )
+        mounts = self.calibration.mounts(devices, mounts)
+        self.odometry = Odometry(mounts, method=p["method"], sensor=p["sensor"])
         self.uncertainty = PoseUncertainty()
         self.client = self.create_client(GetSensorData, f"{p['beagle']}/get_sensor_data")
         self.odom_pub = self.create_publisher(OdometryMsg, "~/odom", 10)

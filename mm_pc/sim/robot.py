@@ -28,6 +28,8 @@ __all__ = [
     "RequestSamples",
     "SensorMount",
     "cumulative_sensor_path",
+    "guided_calibration_run",
+    "guided_calibration_steps",
     "integrate_pose",
     "lift_mask",
     "request_boundaries",
@@ -180,6 +182,56 @@ def mixed_tour(speed: float = 0.2, dt: float = DT):
     return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
 
 
+def guided_calibration_steps(
+    speed: float = 0.2,
+    distance: float = 0.5,
+    spins: int = 2,
+    turn_rate: float = 1.0,
+    pause: float = 0.5,
+    dt: float = DT,
+    straights: int = 1,
+) -> list[tuple[str, int, int]]:
+    """The steps of :func:`guided_calibration_run`: (kind, first step, end step) each.
+
+    ``kind`` is "straight" or "spin" (the kinds of
+    :mod:`mm_pc.core.calibration_fit`); steps index the 1 ms twist arrays.
+    """
+    out, t = [], round(pause / dt)
+    moves = [("straight", distance / speed)] * (2 * straights)
+    moves += [("spin", 2 * math.pi / turn_rate)] * (2 * spins)
+    for kind, duration in moves:
+        n = round(duration / dt)
+        out.append((kind, t, t + n))
+        t += n + round(pause / dt)
+    return out
+
+
+def guided_calibration_run(
+    speed: float = 0.2,
+    distance: float = 0.5,
+    spins: int = 2,
+    turn_rate: float = 1.0,
+    pause: float = 0.5,
+    dt: float = DT,
+    straights: int = 1,
+):
+    """The calibration wizard's guided run: stand, ``straights`` times straight
+    forward ``distance`` m and back, then ``spins`` full turns on the spot each
+    way (left, right, left, ...), standing ``pause`` s before and after each
+    (where the user presses Stop/Start). Steps: :func:`guided_calibration_steps`."""
+    for name, k in (("spins", spins), ("straights", straights)):
+        if not (isinstance(k, int) and k >= 1):
+            raise ValueError(f"{name} must be an integer >= 1, got {k!r}")
+    parts = [(pause, 0.0, 0.0)]
+    moves = [(distance / speed, speed, 0.0), (distance / speed, -speed, 0.0)] * straights
+    for k in range(2 * spins):
+        w = turn_rate if k % 2 == 0 else -turn_rate
+        moves.append((2 * math.pi / turn_rate, 0.0, w))
+    for move in moves:
+        parts += [move, (pause, 0.0, 0.0)]
+    return _segments(parts, dt)
+
+
 TRAJECTORIES = {
     "still": still,
     "straight": straight,
@@ -189,6 +241,7 @@ TRAJECTORIES = {
     "meander": meander,
     "s_curves": s_curves,
     "mixed_tour": mixed_tour,
+    "calibration_run": guided_calibration_run,
 }
 
 
@@ -266,6 +319,7 @@ def request_samples(
     noise_counts: float = 0.0,
     lifted: np.ndarray | None = None,
     rng: np.random.Generator | int | None = None,
+    gains: np.ndarray | None = None,
 ) -> RequestSamples:
     """Per-request samples from a 1 kHz twist sequence, vectorised.
 
@@ -281,6 +335,8 @@ def request_samples(
     ``lifted``: bool array (n_steps,) or (n_steps, n_sensors); the counts of
     lifted ms are dropped (the sensor reports nothing while lifted).
     ``rng``: numpy Generator or seed for the noise.
+    ``gains``: (n_sensors, 2) factors on each sensor's X and Y counts (a
+    sensor that over- or under-counts per axis); None = 1.
     """
     v = np.asarray(v, dtype=float)
     omega = np.asarray(omega, dtype=float)
@@ -297,6 +353,11 @@ def request_samples(
     step = np.empty((n, k, 2))
     for i, m in enumerate(mounts):
         step[:, i, 0], step[:, i, 1] = sensor_displacements(v, omega, dt, m)
+    if gains is not None:
+        gains = np.asarray(gains, dtype=float)
+        if gains.shape != (k, 2) or not np.all(np.isfinite(gains) & (gains > 0)):
+            raise ValueError(f"gains must be ({k}, 2) finite factors > 0, got {gains.tolist()}")
+        step *= gains[None, :, :]
     if cpi is not None:
         step *= cpi / INCH_M  # metres -> fractional counts
         if noise_counts:

@@ -344,8 +344,9 @@ def test_yaml_layout_and_file_round_trip(tmp_path):
     run = calibrate_straight_run(0.01, 0.5, true_distance=0.49)
     cal = Calibration({S1: run, S2: SensorCalibration()})
     text = cal.to_yaml()
-    assert text.startswith("version: 1\nsensors:\n")
-    assert "angle_offset_rad:" in text and "distance_m:" in text and "scale:" in text
+    assert text.startswith("version: 2\nmethod: ''\ndate: ''\nsensors:\n")
+    assert "angle_offset_rad:" in text and "distance_m:" in text
+    assert "scale_x:" in text and "scale_y:" in text and "x_m" not in text
     path = tmp_path / "calibration.yaml"
     cal.save(path)
     assert Calibration.load(path) == cal
@@ -378,7 +379,23 @@ GOOD_ENTRY = "{angle_offset_rad: 0.1, distance_m: 1.0, scale: 1.0}"
         ("sensors: {}\n", r"missing key\(s\) \['version'\]"),
         ("version: 1\n", r"missing key\(s\) \['sensors'\]"),
         ("version: 1\nsensors: {}\nextra: 3\n", r"unknown key\(s\) \['extra'\]"),
-        ("version: 2\nsensors: {}\n", "unsupported version 2, expected 1"),
+        ("version: 3\nsensors: {}\n", r"unsupported version 3, expected one of \[1, 2\]"),
+        ("version: 1\nmethod: fit\nsensors: {}\n", r"unknown key\(s\) \['method'\]"),
+        ("version: 2\nmethod: guess\nsensors: {}\n", "calibration method must be one of"),
+        (
+            "version: 2\nsensors: {/dev/a: {angle_offset_rad: 0.1, distance_m: 1, scale: 1}}\n",
+            r"calibration of /dev/a: unknown key\(s\) \['scale'\]",
+        ),
+        (
+            "version: 2\nsensors: {/dev/a: {angle_offset_rad: 0.1, distance_m: 1, scale_x: 1, "
+            "scale_y: 1, x_m: 0.05}}\n",
+            "a position needs both x and y",
+        ),
+        (
+            "version: 2\nsensors: {/dev/a: {angle_offset_rad: 0.1, distance_m: 1, scale_x: 1, "
+            "scale_y: 1, x_se_m: -1}}\n",
+            "x_se must be >= 0",
+        ),
         ("version: true\nsensors: {}\n", "unsupported version True"),
         ("version: 1\nsensors: [1, 2]\n", "'sensors' must be a mapping"),
         ("version: 1\nsensors: {/dev/a: 3}\n", "calibration of /dev/a: expected a mapping"),
@@ -429,3 +446,60 @@ def test_bad_file_is_value_error(tmp_path):
     path.write_text("version: 1\nsensors: {/dev/a: {scale: 1}}\n")
     with pytest.raises(ValueError, match="missing key"):
         Calibration.load(path)
+
+
+# --- version 2: per-axis scales, position, standard errors ---------------------------------
+
+
+def test_version_1_files_keep_loading(tmp_path):
+    path = tmp_path / "old.yaml"
+    path.write_text(
+        "version: 1\nsensors:\n  /dev/spidev1.0: {angle_offset_rad: 0.087, distance_m: 1.0, "
+        "scale: 1.25}\n"
+    )
+    cal = Calibration.load(path)
+    c = cal[S1]
+    assert (c.angle_offset, c.scale, c.scale_x, c.scale_y) == (0.087, 1.25, 1.25, 1.25)
+    assert c.position is None and cal.method == "" and cal.date == ""
+    expect = (-1.25 * math.sin(0.087), 1.25 * math.cos(0.087))
+    assert cal.apply(S1, 0.0, 1.0) == pytest.approx(expect)
+    cal.save(path)  # rewritten as version 2, same values
+    assert path.read_text().startswith("version: 2\n")
+    assert Calibration.load(path) == cal
+
+
+def test_version_2_round_trip_and_per_axis_apply(tmp_path):
+    c = SensorCalibration(
+        0.05, 2.0, scale_x=1.1, scale_y=0.9, x=0.05, y=-0.04, angle_offset_se=1e-4,
+        scale_x_se=0.01, scale_y_se=1e-4, x_se=2e-4, y_se=1e-4,
+    )
+    cal = Calibration({S1: c}, method="fit", date="2026-12-01T19:30:00+00:00")
+    path = tmp_path / "cal.yaml"
+    cal.save(path)
+    back = Calibration.load(path)
+    assert back == cal and back.method == "fit" and back[S1].position == (0.05, -0.04)
+    # scale per axis first, then the rotation
+    x, y = c.apply(1.0, 2.0)
+    ca, sa = math.cos(0.05), math.sin(0.05)
+    assert (x, y) == pytest.approx((ca * 1.1 - sa * 1.8, sa * 1.1 + ca * 1.8))
+
+
+def test_mounts_take_the_fitted_positions_and_keep_the_rest():
+    m0, m1 = SensorMount(0.049, -0.0395, 0.01), SensorMount(0.049, 0.0395)
+    cal = Calibration({S2: SensorCalibration(x=0.05, y=0.04)})
+    assert cal.mounts([S1, S2], [m0, m1]) == (m0, SensorMount(0.05, 0.04))
+    assert Calibration().mounts([S1], [m0, m1]) == (m0,)
+    with pytest.raises(ValueError, match="2 sensors need 2 mounts"):
+        cal.mounts([S1, S2], [m0])
+
+
+def test_load_names_the_file(tmp_path):
+    path = tmp_path / "bad.yaml"
+    path.write_text("version: 2\nsensors: 3\n")
+    with pytest.raises(ValueError, match=f"calibration file {path}: calibration: 'sensors'"):
+        Calibration.load(path)
+    path.write_bytes(b"\xff\xfe\x00")
+    with pytest.raises(ValueError, match=f"calibration file {path}: not a text file"):
+        Calibration.load(path)
+    with pytest.raises(OSError, match=f"calibration file {tmp_path / 'nope.yaml'}: No such file"):
+        Calibration.load(tmp_path / "nope.yaml")

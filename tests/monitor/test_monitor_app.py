@@ -299,3 +299,70 @@ def test_the_bridge_takes_diagnostics_only_of_the_node_it_watches(qtbot):
     bridge._on_diagnostics(DiagnosticArray(status=[status("/robot2/mm_beagle", "222")]))
     bridge._on_diagnostics(DiagnosticArray(status=[status("/robot2/mm_beagle_x", "333")]))
     assert [d["/dev/spidev1.0"]["y_total_counts"] for d in got] == ["222"]
+
+
+def test_wizard_calibrates_from_a_real_node_on_the_guided_run(qtbot, tmp_path):
+    """mm-beagle's emulated sensors (mounted +5 / -3 deg) drive the guided run
+    (--sim calibration_run); the wizard records its steps with Start/Stop pressed
+    in the pauses (decided per reply, so a busy machine cannot shift them) and
+    recovers both mounting angles to within 0.1 deg."""
+    import math
+
+    from PySide6.QtCore import Qt
+
+    from mm_pc.monitor.widgets.calibration_wizard import PAGE_RESULTS, CalibrationWizard
+
+    yaw = (math.radians(5.0), math.radians(-3.0))
+    params = {
+        "backend": "sim",
+        "sim_trajectory": "calibration_run",
+        "sim_start_delay": 3.0,
+        "sim_loop": False,
+        "sim_mounts": [0.049, -0.0395, yaw[0], 0.049, 0.0395, yaw[1]],
+    }
+    window, bridge = make_window(qtbot, tmp_path)
+    ctx = window.ctx
+    kinds = ["straight"] * 2 + ["spin"] * 4
+    state = {"moved": False, "done": False}
+
+    def on_reply(_reply) -> None:
+        s = ctx.session
+        if s.recording_step is None or s.history is None or not len(s.history):
+            return
+        still = all(s.history.last(f"s{k}_raw_d{a}") == 0 for k in (0, 1) for a in "xy")
+        if not still:
+            state["moved"] = True
+        elif state["moved"]:
+            qtbot.mouseClick(wiz.drive_page.stop_button, Qt.LeftButton)
+            state["moved"] = False
+            if kinds:
+                wiz.drive_page.start(kinds.pop(0))
+            else:
+                state["done"] = True
+
+    try:
+        with beagle_process(params, env=dict(os.environ), log_path=str(tmp_path / "b.log")):
+            wait_until(qtbot, lambda: bool(ctx.session.devices), 30)
+            wiz = CalibrationWizard(ctx, window)
+            qtbot.addWidget(wiz)
+            wiz.show()
+            wiz.next()
+            assert wiz.drive_page.start(kinds.pop(0))  # in the start delay: standing
+            ctx.reply_processed.connect(on_reply)
+            wait_until(qtbot, lambda: state["done"], 90)
+            ctx.reply_processed.disconnect(on_reply)
+        steps = ctx.session.calibration_steps()
+        assert [s.kind for s, _ in steps] == ["straight"] * 2 + ["spin"] * 4
+        assert all(c.ok for _, c in steps), [c.message for _, c in steps]
+        wiz.next()
+        wiz.next()  # distance not measured, spins of 360 deg
+        assert wiz.currentId() == PAGE_RESULTS, wiz.compute_error
+        cal = wiz.calibration
+        for dev, psi in zip(ctx.session.devices, yaw, strict=True):
+            assert cal[dev].angle_offset == pytest.approx(psi, abs=math.radians(0.1))
+            assert cal[dev].x == pytest.approx(0.049, abs=1e-3)
+        wiz.accept()
+        assert ctx.session.calibration == cal and not ctx.session.calibrating
+    finally:
+        bridge.stop()
+        window.close()

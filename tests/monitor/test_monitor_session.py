@@ -14,7 +14,7 @@ from mm_pc.monitor.model.history import History
 from mm_pc.monitor.model.readings import Reading, Reply
 from mm_pc.monitor.model.session import MonitorSession
 from mm_pc.monitor.model.sim_feed import DEFAULT_DEVICES, sim_replies
-from mm_pc.sim.robot import integrate_pose, trajectory, with_mount_yaw
+from mm_pc.sim.robot import guided_calibration_steps, integrate_pose, trajectory, with_mount_yaw
 
 A, B = DEFAULT_DEVICES
 
@@ -115,34 +115,65 @@ def test_sim_figure_eight_matches_ground_truth():
     assert s.pose.y == pytest.approx(truth[1], abs=2e-3)
 
 
-def test_calibration_run_keeps_the_robot_still_and_recovers_the_angle():
+def test_calibration_run_keeps_the_robot_still_and_fits_the_mount():
     mounts = with_mount_yaw(DEFAULT_MOUNTS, math.radians(5))
     s = MonitorSession()
-    feed = sim_replies("straight", 50, mounts=mounts)
-    s.process(next(feed))
+    replies = list(sim_replies("calibration_run", 50, mounts=mounts))
+    s.process(replies[0])
     s.start_calibration()
-    for r in feed:
-        s.process(r)
-    assert s.calibrating
+    i = 1
+    for kind, a, b in guided_calibration_steps():
+        while replies[i].readings[0].seq < a - 200:
+            s.process(replies[i])
+            i += 1
+        s.start_calibration_step(kind)
+        with pytest.raises(ValueError, match=f"a {kind} step is recording; stop it first"):
+            s.start_calibration_step("spin")
+        while replies[i].readings[0].seq < b + 200:
+            s.process(replies[i])
+            i += 1
+        assert s.calibration_step_check().ok
+        assert s.stop_calibration_step().ok
+    for r in replies[i:]:
+        s.process(r)  # standing after Stop: nothing recorded
+    assert s.calibrating and s.recording_step is None
     assert s.pose == type(s.pose)()  # did not move on uncalibrated data
     assert s.history.column("calibrating").min() == 1.0
-    cal = s.compute_calibration(true_distance=1.0)
-    for dev in DEFAULT_DEVICES:
+    fit = s.compute_calibration(true_distance=0.5)
+    cal = fit.calibration()
+    for dev, m in zip(DEFAULT_DEVICES, DEFAULT_MOUNTS, strict=True):
         assert cal[dev].angle_offset_deg == pytest.approx(5.0, abs=0.05)
-        assert cal[dev].scale == pytest.approx(1.0, abs=1e-3)
+        assert fit.straight_run[dev].angle_offset_deg == pytest.approx(5.0, abs=0.05)
+        assert cal[dev].scale_y == pytest.approx(1.0, abs=1e-3)
+        assert cal[dev].x == pytest.approx(m.x, abs=3e-4)
+        assert cal[dev].y == pytest.approx(m.y, abs=3e-4)
     s.finish_calibration(cal)
     assert not s.calibrating
     assert s.calibration == cal
+    assert s.odometry.mounts == cal.mounts(DEFAULT_DEVICES, DEFAULT_MOUNTS)
 
 
-def test_calibration_errors_name_the_sensor_and_apply_nothing():
+def test_calibration_errors_say_what_to_do_and_apply_nothing():
     s = MonitorSession()
     s.process(reply(0, {A: (0, 0), B: (0, 0)}))
     with pytest.raises(ValueError, match="no calibration run in progress"):
         s.compute_calibration()
+    with pytest.raises(ValueError, match="no calibration run in progress"):
+        s.start_calibration_step("straight")
     s.start_calibration()
+    with pytest.raises(ValueError, match="step kind must be one of"):
+        s.start_calibration_step("wiggle")
+    with pytest.raises(ValueError, match="no calibration step is recording"):
+        s.stop_calibration_step()
+    with pytest.raises(ValueError, match="no recorded calibration step to discard"):
+        s.discard_calibration_step()
+    s.start_calibration_step("straight")
     s.process(reply(10, {A: (0, 0.01), B: (0, 0.01)}))
-    with pytest.raises(ValueError, match=f"{A}: calibration run too short"):
+    with pytest.raises(ValueError, match="still recording; press Stop first"):
+        s.compute_calibration()
+    check = s.stop_calibration_step()
+    assert not check.ok and check.message.startswith("straight too short: 1.0 cm")
+    with pytest.raises(ValueError, match=r"step 1 \(straight\): straight too short"):
         s.compute_calibration()
     s.finish_calibration(None)
     assert s.calibration == Calibration()

@@ -169,3 +169,37 @@ def test_beagle_rejects_bad_odometry_settings():
         assert out.returncode == 2, out.stdout + out.stderr
         assert expect in out.stdout + out.stderr
         assert "Traceback" not in out.stdout + out.stderr
+
+
+def _garbage_calibration(tmp_path):
+    bad = tmp_path / "cal.yaml"
+    bad.write_text("version: 2\nsensors: {/dev/spidev1.0: {scale_x: 0}}\n")
+    return bad
+
+
+def test_bad_calibration_file_exits_2_naming_the_file(ros_command, tmp_path):
+    bad = _garbage_calibration(tmp_path)
+    out = subprocess.run(
+        ros_command("mm_pc.ros.odometry_node", {"calibration_file": str(bad)}, "/odo_badcal"),
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=dict(os.environ),
+    )
+    assert out.returncode == 2, out.stdout + out.stderr
+    assert f"calibration file {bad}: calibration of /dev/spidev1.0: missing key(s)" in out.stderr
+    assert "Traceback" not in out.stdout + out.stderr
+
+
+def test_beagle_bad_calibration_file_exits_2_naming_the_file(tmp_path):
+    from mm_beagle.harness import node_command
+
+    bad = _garbage_calibration(tmp_path)
+    params = {"backend": "sim", "odometry_rate": 10.0, "calibration_file": str(bad)}
+    out = subprocess.run(
+        node_command(params, "/bad_cal"), capture_output=True, text=True, timeout=60,
+        env=dict(os.environ),
+    )
+    assert out.returncode == 2, out.stdout + out.stderr
+    assert f"calibration file {bad}: calibration of /dev/spidev1.0" in out.stderr
+    assert "Traceback" not in out.stdout + out.stderr

@@ -12,9 +12,10 @@ Every reply of mm_beagle (live, or replayed from a recording) goes through
    new baseline (an event is logged; no jump on the map).
 2. **Median filter** per sensor and axis (optional, :mod:`mm_pc.core.filters`).
 3. **Calibration** (mounting angle and scale, :mod:`mm_pc.core.calibration`).
-4. **Pose math** (:mod:`mm_pc.core.odometry`, method selectable) -- unless the
-   calibration wizard is recording a straight run: then the raw sums grow and
-   the robot stays where it is (no pose from uncalibrated data).
+4. **Pose math** (:mod:`mm_pc.core.odometry`, method selectable; the mounts
+   with the calibration's fitted positions) -- unless a calibration run is
+   open: then the raw displacements of a recording step are kept and the
+   robot stays where it is (no pose from uncalibrated data).
 5. One row in the :class:`~.history.History` per reply, read by the views.
 
 Units and frames: metres, seconds, radians. Sensor displacements are in the
@@ -29,7 +30,18 @@ from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from mm_pc.core.calibration import Calibration, calibrate_straight_run
+import numpy as np
+
+from mm_pc.core.calibration import Calibration
+from mm_pc.core.calibration_fit import (
+    MIN_STRAIGHT_M,
+    STEP_KINDS,
+    CalibrationStep,
+    MountFit,
+    StepCheck,
+    check_step,
+    fit_mounts,
+)
 from mm_pc.core.filters import SensorMedianFilter
 from mm_pc.core.geometry import DEFAULT_MOUNTS, SensorMount
 from mm_pc.core.odometry import METHODS, Odometry, Pose2D, Sample
@@ -112,7 +124,7 @@ class MonitorSession:
         self._mounts = tuple(mounts) if mounts is not None else DEFAULT_MOUNTS
         self._method = method
         self._sensor = sensor
-        self.calibration = calibration if calibration is not None else Calibration()
+        self._calibration = calibration if calibration is not None else Calibration()
         self.use_lift_estimates = bool(use_lift_estimates)
         self.max_rows = max_rows
         self.stats = SessionStats()
@@ -120,7 +132,9 @@ class MonitorSession:
         self.filters: dict[str, SensorMedianFilter] = {}
         self._prev: dict[str, Reading] = {}
         self._t0_ns: int | None = None
-        self._cal_sums: dict[str, list[float]] | None = None
+        self._cal_steps: list | None = None  # (CalibrationStep, StepCheck) while a run is open
+        self._cal_kind: str | None = None  # the step kind being recorded
+        self._cal_rec: list = []  # its raw per-interval displacements
         self.devices: tuple[str, ...] = ()
         self.history: History | None = None
         self.odometry: Odometry | None = None
@@ -133,7 +147,11 @@ class MonitorSession:
         if not devices or len(set(devices)) != len(devices) or not all(devices):
             raise ValueError(f"devices must be unique, non-empty sensor ids, got {devices!r}")
         mounts = self._mounts_for(len(devices))
-        odometry = Odometry(mounts, self._method, min(self._sensor, len(devices) - 1))
+        odometry = Odometry(
+            self._calibration.mounts(devices, mounts),
+            self._method,
+            min(self._sensor, len(devices) - 1),
+        )
         self.devices = devices
         self._mounts = mounts
         self.odometry = odometry
@@ -185,50 +203,158 @@ class MonitorSession:
             )
         if self.devices:
             pose = self.odometry.pose if self.odometry else None
-            new = Odometry(mounts_t, method, sensor, pose=pose)  # raises before any change
+            calibrated = self._calibration.mounts(self.devices, mounts_t)
+            new = Odometry(calibrated, method, sensor, pose=pose)  # raises before any change
             self.odometry = new
         else:
             Odometry(mounts_t, method, sensor)  # validate only
         self._method, self._mounts, self._sensor = method, mounts_t, sensor
 
     # -- calibration wizard ----------------------------------------------------------
+    #
+    # A run is a sequence of steps (straight / spin, mm_pc.core.calibration_fit),
+    # each recorded between an explicit start_calibration_step and
+    # stop_calibration_step: the raw (unfiltered, uncalibrated) displacement of
+    # every interval is kept, nothing after Stop. While a run is open the pose
+    # stands still (no pose from uncalibrated data).
+
+    @property
+    def calibration(self) -> Calibration:
+        """The calibration in force (applied to every sample before the pose math)."""
+        return self._calibration
+
+    @calibration.setter
+    def calibration(self, cal: Calibration) -> None:
+        """Put ``cal`` in force; its fitted sensor positions become the odometry's mounts."""
+        if not isinstance(cal, Calibration):
+            raise ValueError(f"expected a Calibration, got {cal!r}")
+        if self.devices and self.odometry is not None:
+            mounts = cal.mounts(self.devices, self._mounts)
+            pose = self.odometry.pose
+            sensor = min(self._sensor, len(self.devices) - 1)
+            self.odometry = Odometry(mounts, self._method, sensor, pose=pose)
+        self._calibration = cal
+
+    @property
+    def odometry_mounts(self) -> tuple[SensorMount, ...]:
+        """The mounts the pose math uses: the geometry with the calibration's positions."""
+        if not self.devices:
+            return self._mounts
+        return self._calibration.mounts(self.devices, self._mounts)
 
     @property
     def calibrating(self) -> bool:
-        """True while the wizard records a straight run (the robot does not move)."""
-        return self._cal_sums is not None
+        """True while a calibration run is open (the robot does not move on the map)."""
+        return self._cal_steps is not None
+
+    @property
+    def recording_step(self) -> str | None:
+        """The kind of the step being recorded, or None."""
+        return self._cal_kind
 
     def start_calibration(self) -> None:
-        """Begin a straight run: zero the raw sums; the pose stops until finished or cancelled."""
-        self._cal_sums = {d: [0.0, 0.0] for d in self.devices}
+        """Open a run (no steps yet); the pose stops until finished or cancelled."""
+        self._cal_steps = []
+        self._cal_kind = None
+        self._cal_rec = []
+
+    def start_calibration_step(self, kind: str) -> None:
+        """Start recording a step ("straight" or "spin"); ValueError (nothing changed) if
+        no run is open, a step is already recording, or the kind is unknown."""
+        if self._cal_steps is None:
+            raise ValueError("no calibration run in progress; start one first")
+        if self._cal_kind is not None:
+            raise ValueError(f"a {self._cal_kind} step is recording; stop it first")
+        if kind not in STEP_KINDS:
+            raise ValueError(f"step kind must be one of {STEP_KINDS}, got {kind!r}")
+        self._cal_kind = kind
+        self._cal_rec = []
+
+    def _record_calibration(self, raw: Sequence[tuple[float, float]]) -> None:
+        """One interval's raw displacements (m, mount order) while a step records."""
+        if self._cal_kind is not None:
+            self._cal_rec.append([tuple(p) for p in raw])
+
+    def _current_step(self) -> CalibrationStep | None:
+        if self._cal_kind is None or not self.devices:
+            return None
+        d = np.array(self._cal_rec, dtype=float).reshape(-1, len(self.devices), 2)
+        if d.shape[0] == 0:
+            d = np.zeros((1, len(self.devices), 2))
+        return CalibrationStep(self._cal_kind, d)
+
+    def calibration_step_check(self) -> StepCheck | None:
+        """The live residuals and pass/fail of the step being recorded (None: none)."""
+        step = self._current_step()
+        return None if step is None else check_step(step, self._mounts)
+
+    def stop_calibration_step(self) -> StepCheck:
+        """Stop recording: the step is kept (passing or not) and its check returned.
+
+        Nothing is recorded after this. ValueError if no step is recording.
+        """
+        step = self._current_step()
+        if step is None:
+            raise ValueError("no calibration step is recording")
+        check = check_step(step, self._mounts)
+        self._cal_steps.append((step, check))
+        self._cal_kind = None
+        self._cal_rec = []
+        return check
+
+    def discard_calibration_step(self, index: int = -1) -> None:
+        """Drop a recorded step (default the last); ValueError if there is none."""
+        if not self._cal_steps:
+            raise ValueError("no recorded calibration step to discard")
+        del self._cal_steps[index]
+
+    def calibration_steps(self) -> list[tuple[CalibrationStep, StepCheck]]:
+        """The recorded steps with their checks, in order."""
+        return list(self._cal_steps or [])
 
     def calibration_sums(self) -> dict[str, tuple[float, float]]:
-        """Raw (unfiltered, uncalibrated) summed X, Y (m) per sensor since the run began."""
-        if self._cal_sums is None:
+        """Raw summed X, Y (m) per sensor of the step being recorded ({} if none)."""
+        step = self._current_step()
+        if step is None:
             return {}
-        return {d: (v[0], v[1]) for d, v in self._cal_sums.items()}
+        tot = step.totals
+        return {d: (float(tot[i, 0]), float(tot[i, 1])) for i, d in enumerate(self.devices)}
 
     def compute_calibration(
-        self, true_distance: float | None = None, min_distance: float = 0.05
-    ) -> Calibration:
-        """The calibration of every sensor from the run so far (does not apply it).
+        self,
+        true_distance: float | None = None,
+        spin_angle: float = 2 * math.pi,
+        min_distance: float = MIN_STRAIGHT_M,
+    ) -> MountFit:
+        """Fit the whole mount from the recorded steps (does not apply it).
 
-        Raises ValueError naming the sensor when a run is too short, sideways
-        or the true distance is bad.
+        ``true_distance``: each straight's measured length (m) or None;
+        ``spin_angle``: what each spin turned (rad). Returns the
+        :class:`MountFit` (``.calibration()`` the fit, ``.straight_run`` the
+        seed's formula on the same straights). Raises ValueError (a
+        :class:`CalibrationRefusedError` for a refused run) with what to do;
+        nothing changes.
         """
-        if self._cal_sums is None:
+        if self._cal_steps is None:
             raise ValueError("no calibration run in progress; start one first")
-        cal = Calibration()
-        for dev, (x, y) in self.calibration_sums().items():
-            try:
-                cal[dev] = calibrate_straight_run(x, y, true_distance, min_distance)
-            except ValueError as e:
-                raise ValueError(f"{dev}: {e}") from None
-        return cal
+        if self._cal_kind is not None:
+            raise ValueError(f"a {self._cal_kind} step is still recording; press Stop first")
+        steps = [s for s, _ in self._cal_steps]
+        return fit_mounts(
+            steps,
+            self.devices,
+            self._mounts,
+            true_distance=true_distance,
+            spin_angle=spin_angle,
+            sensor=min(self._sensor, len(self.devices) - 1),
+            min_distance=min_distance,
+        )
 
     def finish_calibration(self, calibration: Calibration | None) -> None:
         """End the run; apply ``calibration`` if given (None = keep the old one)."""
-        self._cal_sums = None
+        self._cal_steps = None
+        self._cal_kind = None
+        self._cal_rec = []
         if calibration is not None:
             self.calibration = calibration
 
@@ -310,11 +436,8 @@ class MonitorSession:
             raw.append((rx, ry))
             fx, fy = self.filters[r.id].push(rx, ry)
             processed.append(self.calibration.apply(r.id, fx, fy))
-        if self._cal_sums is not None:
-            for dev, (rx, ry) in zip(self.devices, raw, strict=True):
-                s = self._cal_sums.setdefault(dev, [0.0, 0.0])
-                s[0] += rx
-                s[1] += ry
+        if self.calibrating:
+            self._record_calibration(raw)
             pose = self.odometry.pose
         else:
             pose = self.odometry.update(Sample.of(dt, *processed))
@@ -328,7 +451,7 @@ class MonitorSession:
             pose.y,
             pose.yaw,
             math.nan if residual is None else residual,
-            1.0 if self._cal_sums is not None else 0.0,
+            1.0 if self.calibrating else 0.0,
         ]
         c, s = math.cos(pose.yaw), math.sin(pose.yaw)
         for r, (rx, ry), (dx, dy), m in zip(now, raw, processed, self._mounts, strict=True):

@@ -1,0 +1,110 @@
+"""The whole-mount calibration fit (mm_pc.core.calibration_fit) on simulated guided runs."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from mm_pc.core.calibration_fit import (
+    CalibrationRefusedError,
+    CalibrationStep,
+    check_step,
+    fit_mounts,
+)
+from mm_pc.core.geometry import DEFAULT_MOUNTS, SensorMount
+from mm_pc.core.odometry import Odometry
+from mm_pc.sim import robot as sim
+
+DEV = ("/dev/spidev1.0", "/dev/spidev1.1")
+BUILT = (
+    SensorMount(0.0505, -0.0385, math.radians(3.0)),
+    SensorMount(0.0480, 0.0400, math.radians(-2.0)),
+)
+
+
+def guided(gains=None, noise=0.0, seed=1, **run):
+    v, w = sim.guided_calibration_run(**run)
+    r = sim.request_samples(
+        v, w, BUILT, 1000.0, cpi=1600, noise_counts=noise, rng=seed, gains=gains
+    )
+    return [CalibrationStep(k, r.d[a:b]) for k, a, b in sim.guided_calibration_steps(**run)]
+
+
+def test_recovers_yaw_scales_and_positions_from_a_quantised_run():
+    gains = np.array([[1.03, 1.03], [0.98, 0.98]])  # isotropic: the yaw is observable
+    fit = fit_mounts(guided(gains), DEV, DEFAULT_MOUNTS, true_distance=0.5)
+    for c, m, g in zip(fit.sensors, BUILT, gains, strict=True):
+        assert c.angle_offset == pytest.approx(m.yaw, abs=math.radians(0.01))
+        assert c.scale_y * g[1] == pytest.approx(1.0, abs=2e-4)
+        assert c.scale_x * g[0] == pytest.approx(1.0, abs=2e-3)
+        assert (c.x, c.y) == (pytest.approx(m.x, abs=2e-4), pytest.approx(m.y, abs=2e-4))
+        # the yaw shares the X-scale/forward-offset gauge (the anisotropy prior): wider
+        assert 0 < c.angle_offset_se < math.radians(0.1)
+    assert fit.spin_angles == pytest.approx([2 * math.pi, -2 * math.pi] * 2, abs=1e-3)
+    assert fit.straight_lengths == pytest.approx([0.5, -0.5], abs=1e-3)
+    # the seed's formula on the same straights, next to the fit
+    for dev, m in zip(DEV, BUILT, strict=True):
+        assert fit.straight_run[dev].angle_offset == pytest.approx(m.yaw, abs=math.radians(0.01))
+    # with the calibration in force a straight drives straight (both methods)
+    cal = fit.calibration()
+    v, w = sim.straight(distance=2.0)
+    r = sim.request_samples(v, w, BUILT, 1000.0, cpi=1600, gains=gains)
+    d = np.stack([np.stack(cal.apply(dev, r.d[:, i, 0], r.d[:, i, 1]), -1)
+                  for i, dev in enumerate(DEV)], axis=1)
+    for method in ("exact", "two-sensor"):
+        pose = Odometry(cal.mounts(DEV, DEFAULT_MOUNTS), method).integrate(r.dt, d)[-1]
+        assert pose[0] == pytest.approx(2.0, abs=2e-3) and abs(pose[2]) < 1e-3, method
+
+
+def test_predicted_drift_matches_the_drift_of_noisy_calibrations():
+    """Over seeds, the heading drift per metre that exact keeps on a straight has the
+    RMS the fit predicts (within a factor 2), and two-sensor's too."""
+    v, w = sim.straight(distance=1.0)
+    actual = {"exact": [], "two-sensor": []}
+    predicted = {"exact": [], "two-sensor": []}
+    for seed in range(8):
+        fit = fit_mounts(guided(noise=0.2, seed=seed), DEV, DEFAULT_MOUNTS, true_distance=0.5)
+        cal = fit.calibration()
+        r = sim.request_samples(v, w, BUILT, 1000.0)  # exact counts: only the calibration errs
+        d = np.stack([np.stack(cal.apply(dev, r.d[:, i, 0], r.d[:, i, 1]), -1)
+                      for i, dev in enumerate(DEV)], axis=1)
+        for m in actual:
+            yaw = Odometry(cal.mounts(DEV, DEFAULT_MOUNTS), m).integrate(r.dt, d)[-1, 2]
+            actual[m].append(yaw)
+            predicted[m].append(fit.drift_per_m[m])
+    for m in actual:
+        rms_actual = math.sqrt(np.mean(np.square(actual[m])))
+        ratio = rms_actual / math.sqrt(np.mean(np.square(predicted[m])))
+        assert 0.5 < ratio < 2.0, (m, ratio)
+
+
+def test_refuses_a_spin_too_small_or_far_from_the_entered_angle():
+    steps = guided(spins=1, turn_rate=1.0)
+    quarter = CalibrationStep("spin", steps[2].d[: steps[2].d.shape[0] // 5])
+    msg = check_step(quarter, DEFAULT_MOUNTS).message
+    assert msg.startswith("spin too small: about 72 deg, at least 90 deg needed")
+    with pytest.raises(CalibrationRefusedError, match=r"step 3 \(spin\): spin too small"):
+        fit_mounts([*steps[:2], quarter], DEV, DEFAULT_MOUNTS)
+    with pytest.raises(CalibrationRefusedError, match="but each spin must turn 720 deg"):
+        fit_mounts(steps, DEV, DEFAULT_MOUNTS, spin_angle=4 * math.pi)
+
+
+def test_refuses_sideways_motion_a_missing_step_and_a_far_scale():
+    steps = guided(spins=1)
+    # the back run pushed 2 deg sideways: the straights disagree in direction
+    d = steps[1].d.copy()
+    d[:, :, 0] += 0.035 * d[:, :, 1]
+    sideways = [steps[0], CalibrationStep("straight", d), *steps[2:]]
+    apart = r"steps 1 and 2 \(straights\): /dev/spidev1.0 went 2.00 deg apart .* moved sideways"
+    with pytest.raises(CalibrationRefusedError, match=apart):
+        fit_mounts(sideways, DEV, DEFAULT_MOUNTS)
+    with pytest.raises(CalibrationRefusedError, match="needs at least one straight and one spin"):
+        fit_mounts(steps[:2], DEV, DEFAULT_MOUNTS)
+    with pytest.raises(CalibrationRefusedError, match=r"scale 0\.10 is far from 1"):
+        fit_mounts(steps, DEV, DEFAULT_MOUNTS, true_distance=0.05)
+    with pytest.raises(ValueError, match="step kind must be one of"):
+        CalibrationStep("hop", np.zeros((1, 2, 2)))
+    with pytest.raises(ValueError, match="spin angle must be a finite number"):
+        fit_mounts(steps, DEV, DEFAULT_MOUNTS, spin_angle=math.nan)
