@@ -150,12 +150,14 @@ def speed(method: str, n_update: int = 20_000, n_integrate: int = 1_000_000) -> 
 
 def bench_pose() -> dict:
     """The whole benchmark as one JSON-ready dict."""
+    from mm_pc.bench.pose_calibration import bench_pose_calibration
     from mm_pc.bench.pose_polls import bench_polls_and_lifts
 
     cal, cal_note = calibration_error_deg()
     by_method = {m: speed(m) for m in METHODS}
     return {
         **bench_polls_and_lifts(),
+        **bench_pose_calibration(),
         "runs": accuracy(),
         "two_sensor_noise_gain": two_sensor_noise_gain(),
         "calibration_error_deg": cal,
