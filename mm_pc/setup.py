@@ -18,12 +18,12 @@ from setuptools.command.build_py import build_py
 
 NAME = "mm_pc"
 HERE = Path(__file__).resolve().parent
-PYPROJECT = (HERE.parent / "pyproject.toml").read_text()
 
 
 def _section(name: str) -> str:
-    """The body of one ``[name]`` table of pyproject.toml (tomllib is 3.11+ only)."""
-    match = re.search(rf"^\[{re.escape(name)}\]\n(.*?)(?=^\[|\Z)", PYPROJECT, re.M | re.S)
+    """The body of one ``[name]`` table of ../pyproject.toml (tomllib is 3.11+ only)."""
+    text = (HERE.parent / "pyproject.toml").read_text()
+    match = re.search(rf"^\[{re.escape(name)}\]\n(.*?)(?=^\[|\Z)", text, re.M | re.S)
     return match.group(1) if match else ""
 
 
@@ -42,25 +42,28 @@ class BuildPy(build_py):
         return [m for m in found if not (m[0] == NAME and m[1] == "setup")]
 
 
-setup(
-    name=NAME,
-    version=re.search(r'^version = "([^"]+)"', _section("project"), re.M).group(1),
-    packages=[
-        NAME,
-        *(f"{NAME}.{p}" for p in find_packages(".", exclude=["launch*"])),
-        "pln2033",
-        *(f"pln2033.{p}" for p in find_packages("../pln2033")),
-    ],
-    package_dir={NAME: ".", "pln2033": "../pln2033"},
-    package_data={NAME: ["config/*.yaml"], "pln2033": ["*.yaml"]},
-    data_files=[
-        ("share/ament_index/resource_index/packages", [f"resource/{NAME}"]),
-        (f"share/{NAME}", ["package.xml"]),
-        (f"share/{NAME}/launch", sorted(glob("launch/*.launch.py"))),
-        (f"share/{NAME}/config", sorted(glob("config/*.yaml"))),
-    ],
-    install_requires=["setuptools"],
-    zip_safe=True,
-    cmdclass={"build_py": BuildPy},
-    entry_points={"console_scripts": console_scripts(NAME)},
-)
+# pip's wheel (built from ../pyproject.toml) carries this file as the module mm_pc.setup;
+# imported as such it must do nothing. colcon runs it as a script.
+if __name__ != "mm_pc.setup":
+    setup(
+        name=NAME,
+        version=re.search(r'^version = "([^"]+)"', _section("project"), re.M).group(1),
+        packages=[
+            NAME,
+            *(f"{NAME}.{p}" for p in find_packages(".", exclude=["launch*"])),
+            "pln2033",
+            *(f"pln2033.{p}" for p in find_packages("../pln2033")),
+        ],
+        package_dir={NAME: ".", "pln2033": "../pln2033"},
+        package_data={NAME: ["config/*.yaml"], "pln2033": ["*.yaml"]},
+        data_files=[
+            ("share/ament_index/resource_index/packages", [f"resource/{NAME}"]),
+            (f"share/{NAME}", ["package.xml"]),
+            (f"share/{NAME}/launch", sorted(glob("launch/*.launch.py"))),
+            (f"share/{NAME}/config", sorted(glob("config/*.yaml"))),
+        ],
+        install_requires=["setuptools"],
+        zip_safe=True,
+        cmdclass={"build_py": BuildPy},
+        entry_points={"console_scripts": console_scripts(NAME)},
+    )
