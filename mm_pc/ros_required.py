@@ -54,7 +54,7 @@ def message(program: str, missing: str) -> str:
         "  ROS 2 is not a plain PyPI package (rclpy comes as ros-jazzy-* wheels, x86_64 only).\n"
         "  Either run './compile setup' in the repository and 'source install/setup.bash',\n"
         "  or install ROS 2 Jazzy (/opt/ros/jazzy), 'source /opt/ros/jazzy/setup.bash' and run\n"
-        "  './compile mm_b' or './compile mm_p' (docs/hardware-setup.md, \"System ROS\")."
+        "  './compile mm_b' or './compile mm_p' (docs/system-ros.md)."
     )
 
 
