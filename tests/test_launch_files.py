@@ -154,7 +154,10 @@ def test_launch_file_statically(path):
 def check_params_file(path: Path) -> None:
     data = yaml.safe_load(path.read_text())
     assert data, path
-    for node, section in data.items():
+    for key, section in data.items():
+        # /**/NAME: the node in any namespace (a bare NAME would match only /NAME)
+        assert key.startswith("/**/"), f"{path.name}: {key} applies only outside a namespace"
+        node = key.removeprefix("/**/")
         assert node in NODE_MODULES, f"{path.name}: no node is named {node}"
         unknown = set(section["ros__parameters"]) - parameter_names(NODE_MODULES[node])
         assert not unknown, f"{path.name}: {node} has no parameter {unknown}"
@@ -162,8 +165,11 @@ def check_params_file(path: Path) -> None:
 
 def test_the_params_file_check_can_fail(tmp_path):
     bad = tmp_path / "bad.yaml"
-    bad.write_text("mm_odometry:\n  ros__parameters:\n    rate: 15.0\n    rat: 1.0\n")
+    bad.write_text("/**/mm_odometry:\n  ros__parameters:\n    rate: 15.0\n    rat: 1.0\n")
     with pytest.raises(AssertionError, match="rat"):
+        check_params_file(bad)
+    bad.write_text("mm_odometry:\n  ros__parameters:\n    rate: 15.0\n")
+    with pytest.raises(AssertionError, match="only outside a namespace"):
         check_params_file(bad)
 
 
@@ -173,7 +179,7 @@ def test_odometry_params_file_lists_every_parameter_with_its_default():
     from mm_pc.ros.odometry_node import PARAMETERS
 
     data = yaml.safe_load((ROOT / "mm_pc/config/mm_odometry.yaml").read_text())
-    params = data["mm_odometry"]["ros__parameters"]
+    params = data["/**/mm_odometry"]["ros__parameters"]
     assert set(params) == set(PARAMETERS)
     for name, (default, _desc) in PARAMETERS.items():
         assert params[name] == default, name
@@ -242,3 +248,35 @@ def test_launch_file_builds_its_description(path):
     assert isinstance(description, launch.LaunchDescription)
     names = {a.name for a in description.get_launch_arguments()}
     assert declared_arguments(tree_of(path)) <= names
+
+
+CONFIG_FILES = sorted(p for pkg in PACKAGES for p in (ROOT / pkg / "config").glob("*.yaml"))
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize("path", CONFIG_FILES, ids=lambda p: p.name)
+@pytest.mark.parametrize("namespace", ["", "/robot1"])
+def test_params_file_reaches_its_node_in_any_namespace(tmp_path, path, namespace):
+    """rcl matches a bare node name only at the root namespace: launched with namespace:=,
+    a file keyed `mm_beagle:` would be dropped silently (checked with rclpy, not assumed)."""
+    rclpy = pytest.importorskip("rclpy")
+    from rclpy.node import Node
+
+    data = yaml.safe_load(path.read_text())
+    for key, section in data.items():
+        params = section["ros__parameters"]
+        name = next(n for n, v in params.items() if isinstance(v, float))
+        params[name] = params[name] + 1.5  # a value no default has
+        copy = tmp_path / path.name
+        copy.write_text(yaml.safe_dump({key: {"ros__parameters": {name: params[name]}}}))
+        args = ["x", "--ros-args", "--params-file", str(copy)]
+        if namespace:
+            args += ["-r", f"__ns:={namespace}"]
+        context = rclpy.Context()
+        rclpy.init(args=args, context=context)
+        try:
+            node = Node(key.removeprefix("/**/"), context=context)
+            assert node.declare_parameter(name, 0.0).value == params[name], (key, namespace)
+            node.destroy_node()
+        finally:
+            rclpy.shutdown(context=context)
