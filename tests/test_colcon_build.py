@@ -37,9 +37,31 @@ def _scripts() -> dict[str, str]:
     return {n: t.partition(".")[0] for n, t in re.findall(r'^([\w-]+) = "([\w.:]+)"', body, re.M)}
 
 
+def compile_colcon_args(tmp: Path) -> list[str]:
+    """The colcon arguments `./compile mm_b` uses on a system ROS (its MM_COMPILE_PLAN
+    output, with a fake MM_SYSTEM_ROS), with its build, install and log bases moved to tmp."""
+    (tmp / "ros").mkdir()
+    (tmp / "ros" / "setup.bash").write_text("")
+    env = {**os.environ, "MM_SYSTEM_ROS": str(tmp / "ros"), "MM_COMPILE_PLAN": "1"}
+    out = subprocess.run(
+        ["bash", str(ROOT / "compile"), "mm_b"], capture_output=True, text=True, timeout=60,
+        env=env,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    (line,) = [x for x in out.stdout.splitlines() if x.startswith("ros packages: colcon ")]
+    args = line.removeprefix("ros packages: colcon ").split()
+    moved = {"--log-base": "log", "--build-base": "build", "--install-base": "install"}
+    for i, arg in enumerate(args[:-1]):
+        if arg in moved:
+            assert args[i + 1].startswith((f"{ROOT}/build/", f"{ROOT}/install/")), args[i + 1]
+            args[i + 1] = str(tmp / moved[arg])
+    return args
+
+
 @pytest.fixture(scope="module")
 def colcon_install(tmp_path_factory):
-    """One colcon build of the repository into a temporary folder: (install base, log text)."""
+    """One colcon build of the repository into a temporary folder, with the arguments
+    ./compile uses: (install base, log text)."""
     assert (ROOT / "install" / "COLCON_IGNORE").is_file(), (
         "./compile marks install/ COLCON_IGNORE (else colcon crawls the venv): run ./compile setup"
     )
@@ -48,11 +70,7 @@ def colcon_install(tmp_path_factory):
     before = _git_status()
     colcon = shutil.which("colcon")
     assert colcon, "colcon is not on PATH (the test extra installs it)"
-    cmd = [
-        colcon, "--log-base", str(tmp / "log"), "build", "--base-paths", str(ROOT),
-        "--packages-ignore", "mm_interfaces",
-        "--build-base", str(tmp / "build"), "--install-base", str(tmp / "install"),
-    ]  # fmt: skip
+    cmd = [colcon, *compile_colcon_args(tmp)]
     out = subprocess.run(cmd, cwd=tmp, capture_output=True, text=True, timeout=180)
     assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-3000:]
     assert _git_status() == before, "colcon build changed the work tree"
