@@ -8,6 +8,7 @@ tmp_path (build, install and log bases): the work tree is left as it was.
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import re
 import shutil
@@ -173,3 +174,40 @@ def test_setup_py_is_inert_when_imported_from_the_pip_wheel(tmp_path):
             text=True, timeout=60,
         )  # fmt: skip
         assert out.returncode == 0 and out.stdout == "" and out.stderr == "", out
+
+
+HAVE_LAUNCH = all(importlib.util.find_spec(m) for m in ("launch", "launch_ros"))
+RUN_ROBOT = """
+import sys
+import launch
+from ament_index_python.packages import get_package_share_directory
+from launch.actions import IncludeLaunchDescription, Shutdown, TimerAction
+from launch.launch_description_sources import PythonLaunchDescriptionSource
+
+robot = get_package_share_directory("mm_beagle") + "/launch/robot.launch.py"
+service = launch.LaunchService(argv=[])
+service.include_launch_description(launch.LaunchDescription([
+    IncludeLaunchDescription(PythonLaunchDescriptionSource(robot),
+                             launch_arguments={"backend": "sim"}.items()),
+    TimerAction(period=10.0, actions=[Shutdown(reason="test over")]),
+]))
+sys.exit(service.run())
+"""
+
+
+@pytest.mark.skipif(not HAVE_LAUNCH, reason="launch/launch_ros not installed (no PyPI wheel)")
+def test_robot_launch_runs_the_chain_from_the_colcon_install(colcon_install, tmp_path):
+    """What `ros2 launch mm_beagle robot.launch.py backend:=sim` does, for 10 s."""
+    from mm_beagle.harness import isolated_ros_env
+
+    install, _log = colcon_install
+    (tmp_path / "run.py").write_text(RUN_ROBOT)
+    env = " ".join(f"{k}={v}" for k, v in isolated_ros_env().items() if k.startswith("ROS_"))
+    out = _in_colcon_env(install, f"env {env} python run.py", tmp_path)
+    assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-3000:]
+    text = out.stdout + out.stderr
+    for exe in ("mm-beagle", "mm-odometry", "mm-fusion"):
+        assert re.search(rf"\[{exe}-\d+\]: process started", text), exe
+        assert re.search(rf"\[{exe}-\d+\]: process has finished cleanly", text), exe
+    accepted = re.search(r"mouse: accepted (\d+)", text)  # fusion heard odometry from beagle
+    assert accepted and int(accepted.group(1)) > 0, text[-2000:]
