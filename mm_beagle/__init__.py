@@ -1,5 +1,5 @@
 """Mouse Monitor Beagle: the sensor node (1 kHz poller + ROS 2 services)."""
 
-from mm_pc import ros_required
+from mm_pc import prerequisites
 
-ros_required.install()  # started without ROS: a message and exit 2, not a traceback
+prerequisites.install()  # started without ROS or an extra: a message and exit 2

@@ -1,5 +1,5 @@
 """Mouse Monitor PC: pure math (no Qt, no ROS) and, later, the Qt monitor."""
 
-from . import ros_required
+from . import prerequisites
 
-ros_required.install()  # started without ROS: a message and exit 2, not a traceback
+prerequisites.install()  # started without ROS or an extra: a message and exit 2

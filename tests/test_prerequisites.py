@@ -1,4 +1,5 @@
-"""A node started where ROS 2 is missing says how to get it and exits 2, never a traceback.
+"""A program started where ROS 2 (or an extra) is missing says how to get it and exits 2,
+never a traceback.
 
 A pip install without ROS is emulated by a sitecustomize that blocks the ROS modules
 (``sys.modules[name] = None`` makes their import fail as if they were absent), and, for the
@@ -13,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from mm_pc import ros_required
+from mm_pc import prerequisites
 
 ROOT = Path(__file__).resolve().parents[1]
 BLOCKED = ["rclpy", "mm_interfaces", "tf2_msgs", "geometry_msgs", "nav_msgs", "sensor_msgs",
@@ -77,8 +78,21 @@ def test_without_any_site_packages(tmp_path):
 
 
 def test_ros_module_names():
-    assert ros_required.is_ros_module("rclpy.node")
-    assert ros_required.is_ros_module("std_srvs")
-    assert ros_required.is_ros_module("mm_interfaces.msg")
-    assert not ros_required.is_ros_module("numpy")
-    assert not ros_required.is_ros_module(None)
+    assert prerequisites.is_ros_module("rclpy.node")
+    assert prerequisites.is_ros_module("std_srvs")
+    assert prerequisites.is_ros_module("mm_interfaces.msg")
+    assert not prerequisites.is_ros_module("numpy")
+    assert not prerequisites.is_ros_module(None)
+
+
+def test_monitor_without_the_monitor_extra_names_it(tmp_path):
+    out = _run(["-m", "mm_pc.monitor.app", "--headless", "--duration", "1"], tmp_path,
+               ["PySide6", "shiboken6"])  # fmt: skip
+    assert out.returncode == 2, out.stderr
+    assert out.stderr.startswith("mm-monitor: needs PySide6, from the 'monitor' extra")
+    assert "pip install '.[monitor]'" in out.stderr and "Traceback" not in out.stderr
+
+
+def test_messages_for_what_is_neither_ros_nor_an_extra():
+    assert prerequisites.message("x", "numpy") is None
+    assert "'beagle' extra" in prerequisites.message("mm-beagle", "spidev")

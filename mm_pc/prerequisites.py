@@ -1,12 +1,13 @@
-"""A program started without ROS 2 says how to get it (exit 2), instead of a traceback.
+"""A program started without ROS 2 (or without an extra) says how to get it: exit 2, no traceback.
 
 ``pip install .`` gives the mm-* commands but not rclpy: ROS 2 is not on PyPI under its
 own names (the ros-jazzy-* wheels ./compile uses exist for x86_64 only), and the message
-packages mm_interfaces/tf2_msgs are built by ./compile. A node module imports rclpy at
-its top, so the error comes before any ``main`` could catch it; this hook, installed when
-``mm_pc`` or ``mm_beagle`` is imported, turns exactly that uncaught error (a missing ROS
-module) into a message and exit status 2. Anything else goes to the previous hook, and
-code that imports a node module inside ``try`` still gets its ImportError.
+packages mm_interfaces/tf2_msgs are built by ./compile. Likewise mm-monitor needs the
+``monitor`` extra (PySide6, pyqtgraph, mcap). A node module imports rclpy at its top, so
+the error comes before any ``main`` could catch it; this hook, installed when ``mm_pc`` or
+``mm_beagle`` is imported, turns exactly that uncaught error (a missing module of ROS or
+of an extra) into a message and exit status 2. Anything else goes to the previous hook,
+and code that imports such a module inside ``try`` still gets its ImportError.
 """
 
 from __future__ import annotations
@@ -31,8 +32,16 @@ ROS_MODULES = frozenset(
         "tf2_msgs",
     }
 )
+# Top-level names -> the pyproject extra that installs them.
+EXTRA_MODULES = {
+    "PySide6": "monitor",
+    "shiboken6": "monitor",
+    "pyqtgraph": "monitor",
+    "mcap": "monitor",
+    "spidev": "beagle",
+}
 
-EXIT_NO_ROS = 2
+EXIT_MISSING = 2
 
 
 def is_ros_module(name: str | None) -> bool:
@@ -41,8 +50,19 @@ def is_ros_module(name: str | None) -> bool:
     return top in ROS_MODULES or top.endswith(("_msgs", "_srvs"))
 
 
-def message(program: str, missing: str) -> str:
-    """What to tell a user who started ``program`` without the ROS module ``missing``."""
+def message(program: str, missing: str) -> str | None:
+    """What to tell a user who started ``program`` without the module ``missing`` (its
+    top-level name), or None when it is neither ROS nor an extra's."""
+    if missing in EXTRA_MODULES:
+        extra = EXTRA_MODULES[missing]
+        return (
+            f"{program}: needs {missing}, from the '{extra}' extra: "
+            f"pip install 'mouse-monitor[{extra}]' (in a clone: pip install '.[{extra}]'),\n"
+            f"  or set up with './compile {'mm_p' if extra == 'monitor' else 'mm_b'}' "
+            "(or './compile setup' for everything)."
+        )
+    if not is_ros_module(missing):
+        return None
     built_here = missing in ("mm_interfaces", "tf2_msgs")
     what = (
         f"the message package {missing}, which ./compile builds"
@@ -75,19 +95,21 @@ def _program() -> str:
 
 def _hook(previous):
     def hook(exc_type, exc, tb):
-        if issubclass(exc_type, ModuleNotFoundError) and is_ros_module(exc.name):
-            sys.stderr.write(message(_program(), exc.name.partition(".")[0]) + "\n")
-            sys.stderr.flush()
-            sys.stdout.flush()
-            # The interpreter would exit 1 after any hook; nothing has started yet.
-            os._exit(EXIT_NO_ROS)
+        if issubclass(exc_type, ModuleNotFoundError) and exc.name:
+            text = message(_program(), exc.name.partition(".")[0])
+            if text is not None:
+                sys.stderr.write(text + "\n")
+                sys.stderr.flush()
+                sys.stdout.flush()
+                # The interpreter would exit 1 after any hook; nothing has started yet.
+                os._exit(EXIT_MISSING)
         previous(exc_type, exc, tb)
 
-    hook.mm_ros_required = True
+    hook.mm_prerequisites = True
     return hook
 
 
 def install() -> None:
     """Install the hook once (both packages call this on import)."""
-    if not getattr(sys.excepthook, "mm_ros_required", False):
+    if not getattr(sys.excepthook, "mm_prerequisites", False):
         sys.excepthook = _hook(sys.excepthook)
