@@ -19,7 +19,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def test_params_file_lists_every_parameter_with_its_default():
     data = yaml.safe_load((ROOT / "mm_beagle/config/mm_beagle.yaml").read_text())
-    params = data["mm_beagle"]["ros__parameters"]
+    params = data["/**/mm_beagle"]["ros__parameters"]  # any namespace
     assert set(params) == set(PARAMETERS)
     for name, (default, _desc) in PARAMETERS.items():
         assert params[name] == default, name

@@ -468,7 +468,7 @@ def test_params_file_lists_every_parameter_with_its_default(module, node):
     import yaml
 
     parameters = importlib.import_module(module).PARAMETERS
-    params = yaml.safe_load(PARAMS_FILE.read_text())[node]["ros__parameters"]
+    params = yaml.safe_load(PARAMS_FILE.read_text())[f"/**/{node}"]["ros__parameters"]
     assert set(params) == set(parameters)
     for name, (default, _desc) in parameters.items():
         assert params[name] == default, name

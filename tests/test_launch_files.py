@@ -1,0 +1,282 @@
+"""The ROS packages' launch files: they start the executables and parameters the tests run.
+
+``launch``/``launch_ros`` are not among the PyPI ROS wheels, so where they cannot be imported
+each launch file is checked statically (ast): every executable is a console script of its
+package whose entry module the tests run, every parameter name is in the node's parameter
+table, every params file exists and holds only known parameters, every included launch file
+exists and declares the arguments given to it, every LaunchConfiguration is declared. Where
+``launch`` is importable, each file is also imported and its description built.
+"""
+
+from __future__ import annotations
+
+import ast
+import importlib.util
+import re
+from functools import cache
+from pathlib import Path
+
+import pytest
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("mm_beagle", "mm_pc")
+LAUNCH_FILES = sorted(p for pkg in PACKAGES for p in (ROOT / pkg / "launch").glob("*.launch.py"))
+# The node modules whose PARAMETERS table lives elsewhere.
+PARAM_TABLE_FILE = {"mm_beagle.node": "mm_beagle/params.py"}
+
+
+@cache
+def scripts() -> dict[str, str]:
+    """pyproject's console scripts: name -> entry module."""
+    text = (ROOT / "pyproject.toml").read_text()
+    body = re.search(r"^\[project\.scripts\]\n(.*?)(?=^\[)", text, re.M | re.S).group(1)
+    return {n: t.partition(":")[0] for n, t in re.findall(r'^([\w-]+) = "([\w.:]+)"', body, re.M)}
+
+
+def _module_file(module: str) -> Path:
+    return ROOT / (module.replace(".", "/") + ".py")
+
+
+@cache
+def parameter_names(module: str) -> frozenset[str]:
+    """The keys of the PARAMETERS dict literal of a node module (read, not imported)."""
+    path = ROOT / PARAM_TABLE_FILE.get(module, _module_file(module).relative_to(ROOT))
+    for node in ast.parse(path.read_text()).body:
+        if isinstance(node, ast.Assign) and any(
+            isinstance(t, ast.Name) and t.id == "PARAMETERS" for t in node.targets
+        ):
+            return frozenset(k.value for k in node.value.keys)
+    raise AssertionError(f"no PARAMETERS table in {path}")
+
+
+@cache
+def node_name(module: str) -> str:
+    """The name a node module gives its node (NODE_NAME or super().__init__("...")."""
+    text = _module_file(module).read_text()
+    found = re.search(r'^NODE_NAME = "(\w+)"', text, re.M) or re.search(
+        r'super\(\).__init__\("(\w+)"', text
+    )
+    assert found, module
+    return found.group(1)
+
+
+NODE_MODULES = {node_name(m): m for m in {scripts()[s] for s in scripts()} if "node" in m}
+
+
+def _call_name(call: ast.Call) -> str:
+    f = call.func
+    return f.id if isinstance(f, ast.Name) else f.attr if isinstance(f, ast.Attribute) else ""
+
+
+def _kw(call: ast.Call, name: str):
+    return next((k.value for k in call.keywords if k.arg == name), None)
+
+
+def _const(node) -> str:
+    assert isinstance(node, ast.Constant) and isinstance(node.value, str), ast.dump(node)
+    return node.value
+
+
+def calls(tree: ast.AST, name: str) -> list[ast.Call]:
+    return [n for n in ast.walk(tree) if isinstance(n, ast.Call) and _call_name(n) == name]
+
+
+def tree_of(path: Path) -> ast.Module:
+    return ast.parse(path.read_text(), str(path))
+
+
+def declared_arguments(tree: ast.AST) -> set[str]:
+    return {_const(c.args[0]) for c in calls(tree, "DeclareLaunchArgument")}
+
+
+def share_paths(tree: ast.AST) -> list[tuple[str, Path]]:
+    """PathJoinSubstitution([FindPackageShare("pkg"), "a", "b"]) -> (pkg, pkg's source a/b)."""
+    out = []
+    for call in calls(tree, "PathJoinSubstitution"):
+        first, *rest = call.args[0].elts
+        assert isinstance(first, ast.Call) and _call_name(first) == "FindPackageShare"
+        if not isinstance(first.args[0], ast.Constant):
+            continue  # robot.launch.py's include helper: its calls are checked there
+        pkg = _const(first.args[0])
+        out.append((pkg, ROOT / pkg / Path(*(_const(p) for p in rest))))
+    return out
+
+
+def package_of(path: Path) -> str:
+    return path.relative_to(ROOT).parts[0]
+
+
+def test_there_are_the_launch_files_the_issue_names():
+    names = {(package_of(p), p.name) for p in LAUNCH_FILES}
+    assert names == {
+        ("mm_beagle", "beagle.launch.py"),
+        ("mm_beagle", "robot.launch.py"),
+        ("mm_pc", "odometry.launch.py"),
+        ("mm_pc", "fusion.launch.py"),
+        ("mm_pc", "monitor.launch.py"),
+    }
+
+
+@pytest.mark.parametrize("path", LAUNCH_FILES, ids=lambda p: p.name)
+def test_launch_file_statically(path):
+    tree = tree_of(path)
+    assert any(
+        isinstance(n, ast.FunctionDef) and n.name == "generate_launch_description"
+        for n in tree.body
+    )
+    declared = declared_arguments(tree)
+    used = {_const(c.args[0]) for c in calls(tree, "LaunchConfiguration")}
+    assert used <= declared, f"undeclared launch arguments {used - declared}"
+
+    tested = "\n".join(p.read_text() for p in (ROOT / "tests").rglob("*.py"))
+    tested += (ROOT / "mm_beagle/harness.py").read_text()
+    for node in calls(tree, "Node"):
+        pkg, exe = _const(_kw(node, "package")), _const(_kw(node, "executable"))
+        module = scripts().get(exe)
+        assert module and module.startswith(pkg + "."), f"{exe} is no console script of {pkg}"
+        assert f'"{module}"' in tested, f"the tests never run {module}"
+        assert _const(_kw(node, "name")) == node_name(module)
+        for entry in _kw(node, "parameters").elts:
+            if isinstance(entry, ast.Dict):
+                names = {_const(k) for k in entry.keys}
+                unknown = names - parameter_names(module)
+                assert not unknown, f"{exe} declares no parameter {unknown}"
+    for call in calls(tree, "ExecutableInPackage"):
+        exe, pkg = _const(call.args[0]), _const(call.args[1])
+        assert scripts()[exe].startswith(pkg + ".")
+    for pkg, source in share_paths(tree):
+        assert source.is_file(), f"{source} (share/{pkg}/...) does not exist"
+        if source.suffix == ".yaml":
+            check_params_file(source)
+
+
+def check_params_file(path: Path) -> None:
+    data = yaml.safe_load(path.read_text())
+    assert data, path
+    for key, section in data.items():
+        # /**/NAME: the node in any namespace (a bare NAME would match only /NAME)
+        assert key.startswith("/**/"), f"{path.name}: {key} applies only outside a namespace"
+        node = key.removeprefix("/**/")
+        assert node in NODE_MODULES, f"{path.name}: no node is named {node}"
+        unknown = set(section["ros__parameters"]) - parameter_names(NODE_MODULES[node])
+        assert not unknown, f"{path.name}: {node} has no parameter {unknown}"
+
+
+def test_the_params_file_check_can_fail(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("/**/mm_odometry:\n  ros__parameters:\n    rate: 15.0\n    rat: 1.0\n")
+    with pytest.raises(AssertionError, match="rat"):
+        check_params_file(bad)
+    bad.write_text("mm_odometry:\n  ros__parameters:\n    rate: 15.0\n")
+    with pytest.raises(AssertionError, match="only outside a namespace"):
+        check_params_file(bad)
+
+
+def test_odometry_params_file_lists_every_parameter_with_its_default():
+    rclpy = pytest.importorskip("rclpy")
+    assert rclpy
+    from mm_pc.ros.odometry_node import PARAMETERS
+
+    data = yaml.safe_load((ROOT / "mm_pc/config/mm_odometry.yaml").read_text())
+    params = data["/**/mm_odometry"]["ros__parameters"]
+    assert set(params) == set(PARAMETERS)
+    for name, (default, _desc) in PARAMETERS.items():
+        assert params[name] == default, name
+
+
+def _includes(tree: ast.AST) -> list[tuple[str, str, set[str]]]:
+    """robot.launch.py's _include(package, file, {args}) calls."""
+    out = []
+    for call in calls(tree, "_include"):
+        args = {_const(k) for k in call.args[2].keys}
+        out.append((_const(call.args[0]), _const(call.args[1]), args))
+    return out
+
+
+def test_robot_starts_the_usual_set_and_the_monitor_only_on_request():
+    tree = tree_of(ROOT / "mm_beagle/launch/robot.launch.py")
+    included = _includes(tree)
+    assert {(p, f) for p, f, _ in included} == {
+        ("mm_beagle", "beagle.launch.py"),
+        ("mm_pc", "odometry.launch.py"),
+        ("mm_pc", "fusion.launch.py"),
+        ("mm_pc", "monitor.launch.py"),
+    }
+    for pkg, name, args in included:
+        target = tree_of(ROOT / pkg / "launch" / name)
+        assert args <= declared_arguments(target), (name, args)
+    conditional = {
+        _const(c.args[1]) for c in calls(tree, "_include") if _kw(c, "condition") is not None
+    }
+    assert conditional == {"monitor.launch.py"}
+    assert "monitor" in declared_arguments(tree)
+    executables = set()
+    for _pkg, name, _ in included:
+        target = tree_of(ROOT / _pkg / "launch" / name)
+        executables |= {_const(_kw(n, "executable")) for n in calls(target, "Node")}
+        executables |= {_const(c.args[0]) for c in calls(target, "ExecutableInPackage")}
+    assert {"mm-beagle", "mm-odometry", "mm-fusion", "mm-monitor"} <= executables
+
+
+def test_monitor_launch_passes_only_options_mm_monitor_knows():
+    from mm_pc.monitor.app import _parser
+
+    known = {o for a in _parser()._actions for o in a.option_strings}
+    tree = tree_of(ROOT / "mm_pc/launch/monitor.launch.py")
+    (proc,) = calls(tree, "ExecuteProcess")
+    flags = {
+        e.value
+        for e in _kw(proc, "cmd").elts
+        if isinstance(e, ast.Constant) and e.value.startswith("--")
+    }
+    assert flags and flags <= known, flags - known
+
+
+HAVE_LAUNCH = all(importlib.util.find_spec(m) for m in ("launch", "launch_ros"))
+
+
+@pytest.mark.skipif(not HAVE_LAUNCH, reason="launch/launch_ros not installed (no PyPI wheel)")
+@pytest.mark.parametrize("path", LAUNCH_FILES, ids=lambda p: p.name)
+def test_launch_file_builds_its_description(path):
+    import launch
+
+    spec = importlib.util.spec_from_file_location(path.stem.replace(".", "_"), path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    description = module.generate_launch_description()
+    assert isinstance(description, launch.LaunchDescription)
+    names = {a.name for a in description.get_launch_arguments()}
+    assert declared_arguments(tree_of(path)) <= names
+
+
+CONFIG_FILES = sorted(p for pkg in PACKAGES for p in (ROOT / pkg / "config").glob("*.yaml"))
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize("path", CONFIG_FILES, ids=lambda p: p.name)
+@pytest.mark.parametrize("namespace", ["", "/robot1"])
+def test_params_file_reaches_its_node_in_any_namespace(tmp_path, path, namespace):
+    """rcl matches a bare node name only at the root namespace: launched with namespace:=,
+    a file keyed `mm_beagle:` would be dropped silently (checked with rclpy, not assumed)."""
+    rclpy = pytest.importorskip("rclpy")
+    from rclpy.node import Node
+
+    data = yaml.safe_load(path.read_text())
+    for key, section in data.items():
+        params = section["ros__parameters"]
+        name = next(n for n, v in params.items() if isinstance(v, float))
+        params[name] = params[name] + 1.5  # a value no default has
+        copy = tmp_path / path.name
+        copy.write_text(yaml.safe_dump({key: {"ros__parameters": {name: params[name]}}}))
+        args = ["x", "--ros-args", "--params-file", str(copy)]
+        if namespace:
+            args += ["-r", f"__ns:={namespace}"]
+        context = rclpy.Context()
+        rclpy.init(args=args, context=context)
+        try:
+            node = Node(key.removeprefix("/**/"), context=context)
+            assert node.declare_parameter(name, 0.0).value == params[name], (key, namespace)
+            node.destroy_node()
+        finally:
+            rclpy.shutdown(context=context)

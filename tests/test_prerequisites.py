@@ -1,0 +1,98 @@
+"""A program started where ROS 2 (or an extra) is missing says how to get it and exits 2,
+never a traceback.
+
+A pip install without ROS is emulated by a sitecustomize that blocks the ROS modules
+(``sys.modules[name] = None`` makes their import fail as if they were absent), and, for the
+real thing, by ``python -S`` (no site-packages at all) with only the work tree on the path.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from mm_pc import prerequisites
+
+ROOT = Path(__file__).resolve().parents[1]
+BLOCKED = ["rclpy", "mm_interfaces", "tf2_msgs", "geometry_msgs", "nav_msgs", "sensor_msgs",
+           "std_msgs", "diagnostic_msgs", "rcl_interfaces", "builtin_interfaces"]  # fmt: skip
+
+
+def _run(args: list[str], tmp_path: Path, block: list[str]) -> subprocess.CompletedProcess:
+    (tmp_path / "sitecustomize.py").write_text(
+        f"import sys\nsys.modules.update(dict.fromkeys({block!r}))\n"
+    )
+    env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": f"{tmp_path}:{ROOT}", "HOME": str(tmp_path)}
+    return subprocess.run(
+        [sys.executable, *args], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=60
+    )
+
+
+@pytest.mark.parametrize(
+    ("module", "command"),
+    [
+        ("mm_beagle.node", "mm-beagle"),
+        ("mm_pc.ros.odometry_node", "mm-odometry"),
+        ("mm_pc.ros.fusion_node", "mm-fusion"),
+        ("mm_pc.ros.field_sim_node", "mm-field-sim"),
+    ],
+)
+def test_node_without_ros_exits_2_with_the_way_to_get_it(tmp_path, module, command):
+    out = _run(["-m", module], tmp_path, BLOCKED)
+    assert out.returncode == 2, out.stderr
+    assert "Traceback" not in out.stderr
+    assert out.stderr.startswith(f"{command}: needs ROS 2 Jazzy")
+    assert "./compile setup" in out.stderr and "/opt/ros/jazzy" in out.stderr
+
+
+def test_watch_without_ros_fails_the_same_way_from_inside_main(tmp_path):
+    out = _run(["-c", "import sys; from mm_beagle.watch import main; sys.exit(main([]))"],
+               tmp_path, BLOCKED)  # fmt: skip
+    assert out.returncode == 2, out.stderr
+    assert "rclpy is missing" in out.stderr and "Traceback" not in out.stderr
+
+
+def test_missing_message_package_built_here_names_compile(tmp_path):
+    out = _run(["-m", "mm_pc.ros.odometry_node"], tmp_path, ["mm_interfaces"])
+    assert out.returncode == 2, out.stderr
+    assert "the message package mm_interfaces, which ./compile builds" in out.stderr
+
+
+def test_other_missing_modules_keep_their_traceback(tmp_path):
+    out = _run(["-m", "mm_pc.ros.fusion_node"], tmp_path, ["numpy"])
+    assert out.returncode == 1
+    assert "Traceback" in out.stderr and "numpy" in out.stderr
+
+
+def test_without_any_site_packages(tmp_path):
+    env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": str(ROOT), "HOME": str(tmp_path)}
+    out = subprocess.run(
+        [sys.executable, "-S", "-m", "mm_beagle.node"], cwd=tmp_path, env=env,
+        capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    assert out.returncode == 2, out.stderr
+    assert "needs ROS 2 Jazzy (rclpy is missing)" in out.stderr
+
+
+def test_ros_module_names():
+    assert prerequisites.is_ros_module("rclpy.node")
+    assert prerequisites.is_ros_module("std_srvs")
+    assert prerequisites.is_ros_module("mm_interfaces.msg")
+    assert not prerequisites.is_ros_module("numpy")
+    assert not prerequisites.is_ros_module(None)
+
+
+def test_monitor_without_the_monitor_extra_names_it(tmp_path):
+    out = _run(["-m", "mm_pc.monitor.app", "--headless", "--duration", "1"], tmp_path,
+               ["PySide6", "shiboken6"])  # fmt: skip
+    assert out.returncode == 2, out.stderr
+    assert out.stderr.startswith("mm-monitor: needs PySide6, from the 'monitor' extra")
+    assert "pip install '.[monitor]'" in out.stderr and "Traceback" not in out.stderr
+
+
+def test_messages_for_what_is_neither_ros_nor_an_extra():
+    assert prerequisites.message("x", "numpy") is None
+    assert "'beagle' extra" in prerequisites.message("mm-beagle", "spidev")
