@@ -44,30 +44,42 @@ DEFAULT_AXIS_LENGTH = 0.079
 
 
 def sensor_displacements(
-    v: np.ndarray, omega: np.ndarray, dt: float, mount: SensorMount
+    v: np.ndarray, omega: np.ndarray, dt: float, mount: SensorMount, vy=None
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per-step sensor-frame displacement (dX right, dY forward) in metres.
 
     The sensor at base_link (px, py) moves with body velocity
-    (v - omega*py, omega*px); in sensor axes (X = -base_link y, Y = base_link x)
-    that is X = -omega*px, Y = v - omega*py, then turned by the mounting error.
+    (v - omega*py, vy + omega*px); in sensor axes (X = -base_link y, Y = base_link x)
+    that is X = -(vy + omega*px), Y = v - omega*py, then turned by the mounting error.
+    ``vy``: lateral slip (m/s, base_link +y = left), per step or scalar; None = 0.
     """
-    ideal_x = -omega * mount.x * dt
+    lateral = omega * mount.x if vy is None else np.asarray(vy) + omega * mount.x
+    ideal_x = -lateral * dt
     ideal_y = (v - omega * mount.y) * dt
     c, s = math.cos(mount.yaw), math.sin(mount.yaw)
     return c * ideal_x + s * ideal_y, -s * ideal_x + c * ideal_y
 
 
-def integrate_pose(v: np.ndarray, omega: np.ndarray, dt: float) -> np.ndarray:
-    """Exact poses (x, y, yaw) after each step of constant twist, start at 0."""
+def integrate_pose(v: np.ndarray, omega: np.ndarray, dt: float, vy=None) -> np.ndarray:
+    """Exact poses (x, y, yaw) after each step of constant twist, start at 0.
+
+    ``vy``: lateral velocity (m/s, base_link +y), per step or scalar; None = 0.
+    """
     yaw_end = np.cumsum(omega * dt)
     yaw_start = yaw_end - omega * dt
     dtheta = omega * dt
-    # Chord of the arc: length v*dt*sinc(dtheta/2), heading yaw_start + dtheta/2.
-    chord = v * dt * np.sinc(dtheta / (2 * np.pi))
+    # Chord of the arc: the body vector (v, vy)*dt shortened by sinc(dtheta/2),
+    # at the heading yaw_start + dtheta/2.
+    k = dt * np.sinc(dtheta / (2 * np.pi))
     heading = yaw_start + dtheta / 2
-    x = np.cumsum(chord * np.cos(heading))
-    y = np.cumsum(chord * np.sin(heading))
+    c, s = np.cos(heading), np.sin(heading)
+    if vy is None:
+        x = np.cumsum(k * v * c)
+        y = np.cumsum(k * v * s)
+    else:
+        vy = np.broadcast_to(np.asarray(vy, dtype=float), np.shape(v))
+        x = np.cumsum(k * (v * c - vy * s))
+        y = np.cumsum(k * (v * s + vy * c))
     return np.stack([x, y, yaw_end], axis=1)
 
 
@@ -206,10 +218,10 @@ def trajectory(name: str, speed: float = 0.2, dt: float = DT) -> tuple[np.ndarra
 
 
 def cumulative_sensor_path(
-    v: np.ndarray, omega: np.ndarray, dt: float, mount: SensorMount
+    v: np.ndarray, omega: np.ndarray, dt: float, mount: SensorMount, vy=None
 ) -> tuple[np.ndarray, np.ndarray]:
     """Cumulative sensor-frame position (starting at 0) at every step boundary."""
-    dx, dy = sensor_displacements(v, omega, dt, mount)
+    dx, dy = sensor_displacements(v, omega, dt, mount, vy)
     return np.concatenate([[0.0], np.cumsum(dx)]), np.concatenate([[0.0], np.cumsum(dy)])
 
 
