@@ -34,6 +34,7 @@ steps (and the pose) do not depend on where the request boundaries fell.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -150,6 +151,26 @@ class PollBatch:
 
     def __len__(self) -> int:
         return len(self.stamp_ns)
+
+    @classmethod
+    def join(cls, replies: Sequence) -> PollBatch:
+        """Consecutive replies (or batches) of one sensor as one batch; ValueError if they
+        do not follow each other (``next_seq`` of one = ``first_seq`` of the next)."""
+        parts = [r if isinstance(r, PollBatch) else cls.from_reply(r) for r in replies]
+        if not parts:
+            raise ValueError("no get_samples replies to join")
+        if len(parts) == 1:
+            return parts[0]
+        for a, b in itertools.pairwise(parts):
+            if b.first_seq != a.next_seq and len(b):
+                raise ValueError(f"polls up to seq {a.next_seq}, the next from {b.first_seq}")
+        parts = [parts[0], *(p for p in parts[1:] if len(p))]
+        cpi = next((p.cpi for p in reversed(parts) if len(p)), parts[-1].cpi)
+        return cls(
+            parts[0].first_seq, parts[-1].next_seq, sum(p.dropped for p in parts), cpi,
+            *(np.concatenate([getattr(p, f) for p in parts]) for f in ("stamp_ns", "dx", "dy",
+                                                                        "flags")),
+        )  # fmt: skip
 
 
 @dataclass(frozen=True)
