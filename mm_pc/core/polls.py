@@ -408,8 +408,12 @@ class PollTracker:
             np.add.at(counts[:, i, 1], idx, p.dy[:m])
             own = p.stamp[:m] == ticks[idx]
             lifted[idx[own], i] = (p.flags[:m][own] & FLAG_LIFT) != 0
+            # polls this sensor made while another had none -- but not those of a tick
+            # whose other polls fell before the baseline (the totals of the sensors
+            # of one reply are read one after the other, so they may end a tick apart)
             extra = ~own & ((p.flags[:m] & FLAG_COMMAND_READ) == 0)
-            folded[idx[extra]] = True  # polls this sensor made while another had none
+            extra &= p.stamp[:m] > self._last_stamp
+            folded[idx[extra]] = True
             used.append(m)
         cut = self._ready(lifted)
         if cut == 0:
@@ -419,6 +423,12 @@ class PollTracker:
             m = int(np.searchsorted(p.stamp, ticks[cut - 1], side="right")) if cut < k else used[i]
             self.polls_used[i] += m
             p.drop(m)
+        for j in np.flatnonzero(folded[:cut]):
+            self.gaps += 1
+            self.gap_reasons = [
+                *self.gap_reasons[-199:],
+                f"a sensor polled alone (another was down) up to {int(ticks[j])} ns",
+            ]
         filled = self._fill(counts, lifted, cut)
         scale = np.array([INCH_M / max(p.cpi, 1) for p in pend])
         d = filled * scale[None, :, None]

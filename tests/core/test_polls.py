@@ -205,3 +205,23 @@ def test_flags_agree_with_the_node():
     assert (polls.FLAG_LIFT, polls.FLAG_MOTION, polls.FLAG_OVERFLOW, polls.FLAG_SPI_ERROR,
             polls.FLAG_COMMAND_READ) == (ss.FLAG_LIFT, ss.FLAG_MOTION, ss.FLAG_OVERFLOW,
                                          ss.FLAG_SPI_ERROR, ss.FLAG_SETTINGS_READ)
+
+
+def test_totals_of_one_reply_a_tick_apart_are_no_gap(s_curve_ring):
+    """The node reads the sensors' totals one after the other: sensor 1 may be a poll ahead."""
+    ring = FakeRing(s_curve_ring.v[:3000], s_curve_ring.w[:3000])
+    tr = PollTracker(2)
+    base = ring.totals(1000)
+    base[1] = ring.totals(1001)[1]
+    tr.baseline(base)
+    parts = []
+    for k in (2000, 3000):
+        now = ring.totals(k)
+        now[0] = ring.totals(k - 1)[0]  # and the other way round
+        batches = [PollBatch.from_reply(ring.samples(i, tr.cursor(i), now[i].seq - tr.cursor(i),
+                                                     now[i].seq)) for i in range(2)]
+        parts.append(tr.step(now, batches))
+    steps = PollSteps.concat(parts, 2)
+    assert tr.gaps == 0 and not steps.gap.any()
+    got = steps.counts[:, 0].sum(axis=0)
+    assert got.tolist() == (ring.cum[2999, 0] - ring.cum[1000, 0]).tolist()

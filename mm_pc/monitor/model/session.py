@@ -434,9 +434,11 @@ class MonitorSession:
         before = self.odometry.pose
         poses = self.odometry.integrate(steps.dt, d)
         self.stats.polls += int((~steps.gap).sum())
-        for j in np.flatnonzero(steps.gap):
+        gaps = np.flatnonzero(steps.gap)
+        reasons = [*["polls missing"] * len(gaps), *self.tracker.gap_reasons]
+        reasons = reasons[len(reasons) - len(gaps) :]
+        for j, why in zip(gaps, reasons, strict=True):
             start = poses[j - 1] if j > 0 else before.as_array()
-            why = self.tracker.gap_reasons[-1] if self.tracker.gap_reasons else "polls missing"
             if bad:
                 why = f"{why} ({bad})"
             self.stats.gaps += 1
