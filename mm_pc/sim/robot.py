@@ -30,8 +30,10 @@ __all__ = [
     "cumulative_sensor_path",
     "integrate_pose",
     "lift_mask",
+    "load_trajectory_file",
     "request_boundaries",
     "request_samples",
+    "resolve_trajectory",
     "sensor_displacements",
     "trajectory",
     "with_mount_yaw",
@@ -215,6 +217,103 @@ def trajectory(name: str, speed: float = 0.2, dt: float = DT) -> tuple[np.ndarra
     if not speed > 0:
         raise ValueError(f"speed must be > 0 m/s, got {speed}")
     return fn(speed=speed, dt=dt)
+
+
+# --- paths from a file -------------------------------------------------------------------
+
+FILE_PREFIX = "file:"
+#: Longest interval between two rows of a trajectory file (s): at least 100 Hz.
+MAX_FILE_INTERVAL_S = 0.01
+FILE_HEADERS = (("t", "v", "w"), ("t", "vx", "vy", "w"))
+
+
+def load_trajectory_file(
+    path, dt: float = DT
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """A path from a CSV file: per 1 kHz step (v m/s, omega rad/s, vy m/s or None).
+
+    The file: a header ``t,v,w`` or ``t,vx,vy,w`` (s, m/s forward, m/s lateral slip to
+    the left, rad/s CCW), then one row per sample, ``t`` strictly increasing at 100 Hz
+    or faster (no interval over 10 ms); blank lines and lines starting with ``#`` are
+    skipped. Time starts at the first row; each step's twist is the linear
+    interpolation at the step's midpoint. Raises ValueError naming the file and the line.
+    """
+    import csv
+    from pathlib import Path
+
+    name = str(path)
+    try:
+        text = Path(path).read_text()
+    except OSError as e:
+        raise ValueError(f"trajectory file {name}: cannot read it ({e.strerror or e})") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"trajectory file {name}: not a text (CSV) file") from None
+    header = None
+    rows: list[list[float]] = []
+    lines = []
+    for no, raw in enumerate(text.splitlines(), start=1):
+        if raw.strip() and not raw.lstrip().startswith("#"):
+            lines.append((no, raw))
+    if not lines:
+        raise ValueError(f"trajectory file {name}: empty; it needs a header t,v,w or t,vx,vy,w")
+    for no, fields in zip((n for n, _ in lines), csv.reader(r for _, r in lines), strict=True):
+        cells = [c.strip() for c in fields]
+        where = f"trajectory file {name}, line {no}"
+        if header is None:
+            if tuple(c.lower() for c in cells) not in FILE_HEADERS:
+                raise ValueError(
+                    f"{where}: header {','.join(cells)!r}; expected 't,v,w' or 't,vx,vy,w' "
+                    "(s, m/s, [m/s,] rad/s)"
+                )
+            header = tuple(c.lower() for c in cells)
+            continue
+        if len(cells) != len(header):
+            raise ValueError(f"{where}: {len(cells)} values, the header has {len(header)}")
+        try:
+            vals = [float(c) for c in cells]
+        except ValueError:
+            raise ValueError(f"{where}: not a number in {','.join(cells)!r}") from None
+        if not all(math.isfinite(x) for x in vals):
+            raise ValueError(f"{where}: {','.join(cells)!r} is not finite (NaN or inf)")
+        if rows:
+            gap = vals[0] - rows[-1][0]
+            if not gap > 0:
+                raise ValueError(f"{where}: t = {vals[0]:g} s does not increase")
+            if gap > MAX_FILE_INTERVAL_S + 1e-9:
+                raise ValueError(
+                    f"{where}: {gap * 1e3:g} ms after the row before; the rate must be "
+                    f">= {1 / MAX_FILE_INTERVAL_S:g} Hz (at most {MAX_FILE_INTERVAL_S * 1e3:g} ms)"
+                )
+        rows.append(vals)
+    if len(rows) < 2:
+        raise ValueError(f"trajectory file {name}: needs at least two rows after the header")
+    a = np.array(rows)
+    t = a[:, 0] - a[0, 0]
+    n = round(t[-1] / dt)
+    if n < 1:
+        raise ValueError(f"trajectory file {name}: lasts {t[-1]:g} s, less than one step")
+    mid = (np.arange(n) + 0.5) * dt
+    cols = dict(zip(header, a.T, strict=True))
+    v = np.interp(mid, t, cols["v"] if "v" in cols else cols["vx"])
+    w = np.interp(mid, t, cols["w"])
+    vy = np.interp(mid, t, cols["vy"]) if "vy" in cols else None
+    return v, w, vy
+
+
+def resolve_trajectory(
+    spec: str, speed: float = 0.2, dt: float = DT
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """``file:PATH`` (:func:`load_trajectory_file`) or a name of :data:`TRAJECTORIES` at
+    ``speed``: per step (v, omega, vy or None). ValueError with the allowed values."""
+    if spec.startswith(FILE_PREFIX):
+        return load_trajectory_file(spec[len(FILE_PREFIX) :], dt)
+    if spec not in TRAJECTORIES:
+        raise ValueError(
+            f"trajectory '{spec}' is unknown; allowed: {', '.join(TRAJECTORIES)} or file:PATH "
+            "(a CSV t,v,w or t,vx,vy,w)"
+        )
+    v, w = trajectory(spec, speed, dt)
+    return v, w, None
 
 
 def cumulative_sensor_path(
