@@ -91,6 +91,11 @@ def summary(window, seconds: float) -> str:
         parts.append("No sensor data arrived.")
     if s.stats.restarts:
         parts.append(f"The node restarted {s.stats.restarts} time(s); each was re-baselined.")
+    if s.stats.polls or s.stats.gaps:
+        parts.append(
+            f"The pose integrated {s.stats.polls} single polls; {s.stats.gaps} gap(s) without "
+            "them were stepped over with the totals (dashed red on the map)."
+        )
     if window.frame_ms:
         import numpy as np
 
