@@ -34,6 +34,7 @@ steps (and the pose) do not depend on where the request boundaries fell.
 
 from __future__ import annotations
 
+import inspect
 import itertools
 import math
 from collections.abc import Sequence
@@ -55,6 +56,7 @@ __all__ = [
     "PollSteps",
     "PollTracker",
     "SensorTotals",
+    "integrate_steps",
 ]
 
 # the bits of GetSamples' flags (the same as mm_beagle.shared_state's FLAG_*)
@@ -471,3 +473,13 @@ class PollTracker:
                 f = interpolate_lift_gaps(allc[:, i, :], alll[:, i])
                 out[:, i, :] = f[c0 : c0 + cut]
         return out
+
+
+def integrate_steps(odometry, steps: PollSteps, d: np.ndarray | None = None) -> np.ndarray:
+    """``odometry.integrate`` over the steps (``d``: their displacements after calibration,
+    default ``steps.d``); the lift mask goes along where ``integrate`` takes ``lifted``
+    (``two-sensor`` then drops a lifted sensor's equations). Returns the (N, 3) poses."""
+    d = steps.d if d is None else d
+    if steps.lifted.any() and "lifted" in inspect.signature(odometry.integrate).parameters:
+        return odometry.integrate(steps.dt, d, lifted=steps.lifted)
+    return odometry.integrate(steps.dt, d)

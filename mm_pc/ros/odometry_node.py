@@ -39,7 +39,7 @@ from mm_pc.core.angles import yaw_to_quaternion
 from mm_pc.core.calibration import Calibration
 from mm_pc.core.geometry import DEFAULT_MOUNTS, SensorMount
 from mm_pc.core.odometry import METHODS, Odometry, Pose2D, Sample
-from mm_pc.core.polls import PollBatch, PollTracker, SensorTotals
+from mm_pc.core.polls import PollBatch, PollTracker, SensorTotals, integrate_steps
 from mm_pc.core.uncertainty import PoseUncertainty, twist_covariance
 from mm_pc.ros import spin as ros_spin
 
@@ -267,7 +267,7 @@ class OdometryNode(Node):
         for k, dev in enumerate(self.devices):
             d[:, k, 0], d[:, k, 1] = self.calibration.apply(dev, d[:, k, 0], d[:, k, 1])
         before = self.odometry.pose
-        self.odometry.integrate(steps.dt, d)
+        integrate_steps(self.odometry, steps, d)
         after = self.odometry.pose
         self.samples_used += len(steps)
         data = fetch["data"][self.p["sensor"]]

@@ -225,3 +225,22 @@ def test_totals_of_one_reply_a_tick_apart_are_no_gap(s_curve_ring):
     assert tr.gaps == 0 and not steps.gap.any()
     got = steps.counts[:, 0].sum(axis=0)
     assert got.tolist() == (ring.cum[2999, 0] - ring.cum[1000, 0]).tolist()
+
+
+def test_integrate_steps_hands_the_lift_mask_to_an_integrator_that_takes_it():
+    from mm_pc.core.polls import integrate_steps
+
+    steps = PollSteps(np.array([1, 2]), np.array([1e-3, 1e-3]), np.zeros((2, 2, 2)),
+                      np.zeros((2, 2, 2), np.int64), np.array([[False, True], [False, False]]),
+                      np.zeros(2, bool))
+    got = {}
+
+    class WithMask:
+        def integrate(self, dt, d, return_residual=False, *, lifted=None):
+            got["lifted"] = lifted
+            return np.zeros((len(dt), 3))
+
+    integrate_steps(WithMask(), steps)
+    assert got["lifted"] is steps.lifted
+    odo = Odometry(DEFAULT_MOUNTS)  # without the keyword (or without a lift): the plain call
+    assert integrate_steps(odo, steps).shape == (2, 3)

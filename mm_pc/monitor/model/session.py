@@ -43,7 +43,7 @@ from mm_pc.core.calibration import Calibration, calibrate_straight_run
 from mm_pc.core.filters import SensorMedianFilter
 from mm_pc.core.geometry import DEFAULT_MOUNTS, SensorMount
 from mm_pc.core.odometry import METHODS, Odometry, Pose2D, Sample
-from mm_pc.core.polls import PollBatch, PollTracker, SensorTotals
+from mm_pc.core.polls import PollBatch, PollTracker, SensorTotals, integrate_steps
 from mm_pc.monitor.model.history import History
 from mm_pc.monitor.model.readings import Reading, Reply
 
@@ -432,7 +432,7 @@ class MonitorSession:
         if self._cal_sums is not None:
             return self.odometry.pose  # the wizard records: the robot stays put
         before = self.odometry.pose
-        poses = self.odometry.integrate(steps.dt, d)
+        poses = integrate_steps(self.odometry, steps, d)
         self.stats.polls += int((~steps.gap).sum())
         gaps = np.flatnonzero(steps.gap)
         reasons = [*["polls missing"] * len(gaps), *self.tracker.gap_reasons]
