@@ -261,3 +261,60 @@ def test_file_trajectory_at_15_hz_ends_on_the_files_ground_truth(tmp_path, ros_c
         odo.send_signal(signal.SIGINT)
         out, _ = odo.communicate(timeout=15)
     assert odo.returncode == 0, out
+
+
+def test_polls_lost_to_a_ring_overrun_are_a_gap_on_diagnostics(tmp_path, ros_command):
+    """mm-odometry stopped for 3 s (SIGSTOP) while mm-beagle's ring holds ~1 s: the polls
+    are gone, the interval is stepped with the totals (the pose still ends right) and
+    /diagnostics says so."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+
+    beagle = {"backend": "sim", "sim_trajectory": "straight", "sim_start_delay": 3.0,
+              "sim_duration": 5.0, "ring_size": 1024}  # fmt: skip
+    ns = "/odo_gap"
+    params = {"beagle": "/mm_beagle", "rate": 15.0}
+    odo = subprocess.Popen(
+        ros_command("mm_pc.ros.odometry_node", params, ns), env=dict(os.environ),
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    )  # fmt: skip
+    try:
+        with beagle_process(beagle, env=dict(os.environ), log_path=str(tmp_path / "beagle.log")):
+            client = BeagleClient("odo_gap_client")
+            assert client.wait(30)
+            got: list[Odometry] = []
+            diags: list = []
+            client.node.create_subscription(Odometry, f"{ns}/mm_odometry/odom", got.append, 10)
+            client.node.create_subscription(DiagnosticArray, "/diagnostics", diags.append, 10)
+            try:
+                deadline = time.monotonic() + 20
+                while time.monotonic() < deadline and not (got and got[-1].pose.pose.position.x
+                                                           > 0.1):
+                    time.sleep(0.1)
+                assert got, "no odometry"
+                odo.send_signal(signal.SIGSTOP)
+                time.sleep(3.0)
+                odo.send_signal(signal.SIGCONT)
+                deadline = time.monotonic() + 20
+                warn = None
+                while time.monotonic() < deadline and warn is None:
+                    time.sleep(0.2)
+                    for a in list(diags):
+                        for st in a.status:
+                            if st.name == "mm_odometry: pose" and st.level == DiagnosticStatus.WARN:
+                                warn = st
+                assert warn is not None, "no WARN on /diagnostics after the overrun"
+                assert "left the node's ring buffer" in warn.message
+                values = {kv.key: kv.value for kv in warn.values}
+                assert int(values["gaps"]) >= 1
+                # the run (1 m straight) still ends at x = 1 m: the totals covered the gap
+                deadline = time.monotonic() + 20
+                while time.monotonic() < deadline and got[-1].pose.pose.position.x < 0.999:
+                    time.sleep(0.2)
+                assert got[-1].pose.pose.position.x == pytest.approx(1.0, abs=0.002)
+            finally:
+                client.close()
+    finally:
+        odo.send_signal(signal.SIGCONT)
+        odo.send_signal(signal.SIGINT)
+        out, _ = odo.communicate(timeout=15)
+    assert "gap in the single polls" in out
