@@ -10,8 +10,8 @@ Requests of the sample timer: at most one ``get_sensor_data`` is in flight.
 With ``fetch_polls`` (default) each reply is followed by one ``get_samples`` per
 sensor for exactly the polls its totals added since the previous reply, and the
 :class:`Reply` is emitted with them (``Reply.polls``), so the session integrates
-the pose per poll; a fetch that fails or takes longer than ``call_timeout_s``
-leaves that sensor's entry None (the session then steps over the interval with
+the pose per poll; a fetch that fails, takes longer than ``timeout_s`` or whose
+service disappears leaves that sensor's entry None (the session then steps over the interval with
 the totals and marks the gap). The next ``get_sensor_data`` waits for the fetch.
 A tick that finds a request still outstanding is skipped (``skipped_ticks``):
 the next reply's totals cover the gap, so a slow link (WLAN latency) costs
@@ -317,7 +317,9 @@ class RosBridge(QObject):
         if not waiting:
             self._emit_with_polls(reply, polls)
             return
-        self._poll_fetch = [reply, polls, waiting, time.monotonic() + self.call_timeout_s]
+        # as long as a data request may take: a fetch stuck at a node that died must not
+        # hold back the first reply of the node that comes back
+        self._poll_fetch = [reply, polls, waiting, time.monotonic() + self.timeout_s]
         for future in list(waiting):
             future.add_done_callback(self._on_polls)
 
@@ -337,7 +339,7 @@ class RosBridge(QObject):
 
     def _expire_poll_fetch(self, now: float) -> None:
         fetch = self._poll_fetch
-        if fetch is None or now <= fetch[3]:
+        if fetch is None or (now <= fetch[3] and self._clients["get_samples"].service_is_ready()):
             return
         self._poll_fetch = None
         for future, device in fetch[2].items():

@@ -43,6 +43,9 @@ from mm_pc.core.polls import PollBatch, PollTracker, SensorTotals, integrate_ste
 from mm_pc.core.uncertainty import PoseUncertainty, twist_covariance
 from mm_pc.ros import spin as ros_spin
 
+#: a get_samples reply later than this is given up on (the interval is stepped with the totals)
+FETCH_TIMEOUT_S = 2.0
+
 
 def _ro(desc: str, **kw) -> ParameterDescriptor:
     return ParameterDescriptor(description=desc, read_only=True, **kw)
@@ -167,7 +170,9 @@ class OdometryNode(Node):
 
     def request(self) -> None:
         """Ask mm-beagle for new sensor data (timer callback); one call in flight at a time."""
-        if self._fetch is not None and time.monotonic() > self._fetch["deadline"]:
+        if self._fetch is not None and (
+            time.monotonic() > self._fetch["deadline"] or not self.samples_client.service_is_ready()
+        ):
             self._finish_fetch()  # the polls did not come: step over it with the totals
         if self._in_flight or self._fetch is not None or not self.client.service_is_ready():
             return  # a slow reply is never doubled up: the totals cover any gap
@@ -228,7 +233,7 @@ class OdometryNode(Node):
             t.baseline(totals)
             return
         fetch = {"data": data, "totals": totals, "polls": [None] * len(self.devices),
-                 "waiting": 0, "deadline": time.monotonic() + 5.0}  # fmt: skip
+                 "waiting": 0, "deadline": time.monotonic() + FETCH_TIMEOUT_S}  # fmt: skip
         for i, (dev, x) in enumerate(zip(self.devices, totals, strict=True)):
             want = x.seq - t.cursor(i)
             if want == 0:
