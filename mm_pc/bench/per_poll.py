@@ -2,6 +2,7 @@
 section "Per-poll integration".
 
     python -m mm_pc.bench.per_poll [--path s_curves] [--hz 15] [--json]
+    python -m mm_pc.bench.per_poll --session-cost     # the monitor session's time per reply
 
 The run's 1 kHz polls (default robot, method ``exact``) are requested at ``hz``:
 *per request* integrates each request's summed counts as one constant twist (the
@@ -11,6 +12,9 @@ Both against the simulator's exact pose at the end of the run, twice: in exact
 metres (no quantisation: the integration error alone) and quantised at 1600 CPI
 like the emulator (floor of the cumulative counts). Errors are also given per 10 m
 travelled. :func:`per_poll_errors` returns the dict (``mm-bench pose`` may embed it).
+
+``--session-cost``: :func:`session_cost`, the time ``MonitorSession.process`` takes per
+reply with and without the single polls (30 s of s_curves at 1600 CPI, best of 3).
 """
 
 from __future__ import annotations
@@ -27,7 +31,7 @@ from mm_pc.core.polls import PollBatch, PollSteps, PollTracker, SensorTotals
 from mm_pc.sim import robot as sim
 from pln2033 import INCH_M
 
-__all__ = ["per_poll_errors"]
+__all__ = ["per_poll_errors", "session_cost"]
 
 CPI = 1600
 
@@ -99,13 +103,73 @@ def per_poll_errors(path: str = "s_curves", request_hz: float = 15.0) -> dict:
     return out
 
 
+def _replies(counts: np.ndarray, ends: np.ndarray, cpi: int, devices) -> list:
+    """Monitor replies (Reading totals + the polls since the previous reply) at ``ends``."""
+    from types import SimpleNamespace
+
+    from mm_pc.monitor.model.readings import Reading, Reply
+
+    n, k, _ = counts.shape
+    c = counts.astype(np.int64)
+    cum = np.concatenate([np.zeros((1, k, 2), np.int64), np.cumsum(c, axis=0)])
+    scale = INCH_M / cpi
+    stamps = (np.arange(n + 1, dtype=np.int64)) * 1_000_000 + 1_700_000_000_000_000_000
+    out, prev = [], 0
+    for e in (0, *(int(x) for x in ends)):
+        readings = tuple(
+            Reading(id=d, stamp_ns=int(stamps[e]), seq=e, x_total=float(cum[e, i, 0]) * scale,
+                    y_total=float(cum[e, i, 1]) * scale, x_total_counts=int(cum[e, i, 0]),
+                    y_total_counts=int(cum[e, i, 1]), cpi=cpi)
+            for i, d in enumerate(devices)
+        )  # fmt: skip
+        polls = {
+            d: SimpleNamespace(first_seq=prev, next_seq=e, dropped=0, cpi=cpi,
+                               stamp_ns=stamps[prev + 1 : e + 1], dx=c[prev:e, i, 0],
+                               dy=c[prev:e, i, 1], status=np.zeros(e - prev),
+                               flags=np.full(e - prev, 2))
+            for i, d in enumerate(devices)
+        }  # fmt: skip
+        out.append(Reply(readings, polls=polls))
+        prev = e
+    return out
+
+
+def session_cost(rates=(15.0, 100.0, 500.0), seconds: float = 30.0) -> dict:
+    """Microseconds ``MonitorSession.process`` takes per reply, per poll and per reply."""
+    import time
+
+    from mm_pc.monitor.model.readings import Reply
+    from mm_pc.monitor.model.session import MonitorSession
+
+    v, w = sim.trajectory("s_curves")
+    n = round(seconds / sim.DT)
+    devices = ("/dev/spidev1.0", "/dev/spidev1.1")
+    counts = _counts(v[:n], w[:n], DEFAULT_MOUNTS, CPI)
+    out = {}
+    for hz in rates:
+        replies = _replies(counts, sim.request_boundaries(n, hz), CPI, devices)
+        plain = [Reply(r.readings) for r in replies]
+        for label, feed in (("per_poll", replies), ("per_reply", plain)):
+            best = math.inf
+            for _ in range(3):
+                s = MonitorSession(devices=devices)
+                t0 = time.perf_counter()
+                for r in feed:
+                    s.process(r)
+                best = min(best, (time.perf_counter() - t0) / len(feed))
+            out[f"{label}_us_per_reply_{hz:g}hz"] = round(best * 1e6, 1)
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m mm_pc.bench.per_poll", description=__doc__)
     ap.add_argument("--path", default="s_curves", choices=sorted(sim.TRAJECTORIES))
     ap.add_argument("--hz", type=float, default=15.0, help="request rate (Hz)")
     ap.add_argument("--json", action="store_true", help="print the dict as JSON")
+    ap.add_argument("--session-cost", action="store_true",
+                    help="time MonitorSession.process per reply instead")
     args = ap.parse_args(argv)
-    res = per_poll_errors(args.path, args.hz)
+    res = session_cost() if args.session_cost else per_poll_errors(args.path, args.hz)
     if args.json:
         print(json.dumps(res, indent=2))
     else:

@@ -244,3 +244,13 @@ def test_integrate_steps_hands_the_lift_mask_to_an_integrator_that_takes_it():
     assert got["lifted"] is steps.lifted
     odo = Odometry(DEFAULT_MOUNTS)  # without the keyword (or without a lift): the plain call
     assert integrate_steps(odo, steps).shape == (2, 3)
+
+
+def test_the_per_poll_figures_of_the_docs():
+    """python -m mm_pc.bench.per_poll: per poll is exact in exact metres, per request not."""
+    from mm_pc.bench.per_poll import per_poll_errors
+
+    r = per_poll_errors("s_curves", 15.0)
+    assert r["per_poll_error_m_exact_m"] < 1e-9 < 5e-4 < r["per_request_error_m_exact_m"]
+    assert r["per_poll_error_m_1600cpi"] < r["per_request_error_m_1600cpi"]
+    assert r["length_m"] == pytest.approx(10.1, abs=0.05)
