@@ -81,3 +81,35 @@ def test_a_five_second_pause_mid_turn_ends_on_the_same_path(qtbot, tmp_path):
                 b.stop()
             steady.close()
             paused.close()
+
+
+def test_a_link_lost_for_three_seconds_mid_turn_stays_on_the_path(qtbot, tmp_path):
+    """The node stops answering for 3 s (SIGSTOP; its poller keeps polling into the ring):
+    requests time out, then the first reply's polls cover the outage, and the pose ends
+    on the simulator's path (per request it would cut the circle by a chord of 0.6 m)."""
+    import signal
+
+    window, bridge = _window(qtbot, tmp_path, "mm_monitor_link")
+    s = window.ctx.session
+    with beagle_process(CIRCLE, env=dict(os.environ), log_path=str(tmp_path / "b.log")) as node:
+        try:
+            qtbot.waitUntil(lambda: bridge.state == "connected", timeout=30_000)
+            qtbot.waitUntil(lambda: s.stats.used > 0, timeout=10_000)
+            assert abs(s.pose.x) < 1e-9, "the robot moved before the baseline"
+            qtbot.waitUntil(lambda: s.pose.yaw > 0.5, timeout=20_000)
+            node.send_signal(signal.SIGSTOP)
+            qtbot.wait(3000)
+            node.send_signal(signal.SIGCONT)
+            target = robot.integrate_pose(*robot.trajectory("figure_eight"), robot.DT)
+            end = target[round(RUN_S / robot.DT) - 1]
+            qtbot.waitUntil(lambda: abs(s.pose.yaw - end[2]) < 0.01, timeout=30_000)
+            qtbot.wait(1000)
+            p = s.pose.as_array()
+            assert np.hypot(*(p[:2] - end[:2])) < 2e-3, (p, end)
+            assert s.stats.gaps == 0, list(s.gaps)
+            assert bridge.stats().dropped_requests >= 1  # the link was down
+            assert np.max(s.history.column("dt")) > 2.0  # one reply covered the outage
+        finally:
+            node.send_signal(signal.SIGCONT)
+            bridge.stop()
+            window.close()
