@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 from . import link
 from . import shared_state as ss
 from .poller import Poller, PollerConfig, poller_config, tune_process
-from .sim_backend import SimConfig, parse_fail_windows
+from .sim_backend import SimConfig, check_trajectory, parse_fail_windows
 
 EXIT_CONFIG = 2
 HEARTBEAT_S = 0.1  # an empty batch at least this often: the node's link watchdog
@@ -454,6 +454,8 @@ def config_from_args(args: argparse.Namespace) -> AgentConfig:
     if not (0 <= sim.start_delay <= 3600 and 0 <= sim.duration <= 1e6):
         raise ValueError("'sim_start_delay' must be 0..3600 s and 'sim_duration' 0..1e6 s")
     parse_fail_windows(sim.fail_windows, devices)
+    if values["backend"] == "sim":
+        check_trajectory(sim.trajectory)
     ring = round(values["ring_seconds"] * values["poll_rate"])
     cfg = poller_config(values, ring, sim)
     return AgentConfig(cfg, values["name"], values["listen"], values["credentials"])

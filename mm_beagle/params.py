@@ -9,7 +9,7 @@ from rclpy.node import Node
 
 from . import link
 from .poller import PollerConfig, poller_config
-from .sim_backend import SimConfig, parse_fail_windows
+from .sim_backend import SimConfig, check_trajectory, parse_fail_windows
 
 BACKENDS = ("spidev", "sim", "remote")
 
@@ -98,7 +98,10 @@ PARAMETERS = {
     "base_frame": ("base_link", _plain("odometry: child_frame_id")),
     "sim_trajectory": (
         "figure_eight",
-        _plain("sim backend: still | straight | figure_eight | square | round_trip | meander"),
+        _plain(
+            "sim backend: still | straight | figure_eight | square | round_trip | meander | "
+            "s_curves | mixed_tour, or file:PATH (CSV t,v,w or t,vx,vy,w at >= 100 Hz)"
+        ),
     ),
     "sim_speed": (0.2, _float("sim backend: robot speed (m/s)", 0.001, 5.0)),
     "sim_loop": (True, _plain("sim backend: repeat the trajectory; false = stop after one lap")),
@@ -189,12 +192,7 @@ def declare(node: Node) -> NodeSettings:
         fail_windows=fails,
     )
     if p["backend"] == "sim":
-        from mm_pc.sim.robot import TRAJECTORIES
-
-        if sim.trajectory not in TRAJECTORIES:
-            raise ValueError(
-                f"'sim_trajectory' is '{sim.trajectory}'; allowed: {', '.join(TRAJECTORIES)}"
-            )
+        check_trajectory(sim.trajectory)
     cfg = poller_config({**p, "devices": devices}, p["ring_size"], sim)
     flat = list(p["mounts"])
     if p["odometry_rate"] > 0 and len(flat) != 3 * len(devices):

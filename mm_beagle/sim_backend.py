@@ -17,7 +17,7 @@ from pln2033 import RegisterMap
 class SimConfig:
     """The emulated sensors of the sim backend."""
 
-    trajectory: str = "figure_eight"
+    trajectory: str = "figure_eight"  # a name of mm_pc.sim.robot.TRAJECTORIES or file:PATH
     speed: float = 0.2  # m/s
     loop: bool = True  # repeat the path; False = stand still after one lap
     duration: float = 0.0  # s of motion (the path repeated or cut to fit); 0 = as the path is
@@ -28,6 +28,20 @@ class SimConfig:
     noise_counts: float = 0.0  # count noise per sqrt(s)
     fail_windows: list[str] = field(default_factory=list)  # "DEVICE@START-END" (s from start)
     seed: int = 1
+
+
+def check_trajectory(spec: str) -> None:
+    """ValueError (saying what is allowed, or the file's line) unless the sim backend can
+    drive ``spec``: a name of mm_pc.sim.robot.TRAJECTORIES or ``file:PATH``."""
+    from mm_pc.sim import robot as simulator
+
+    if spec.startswith(simulator.FILE_PREFIX):
+        simulator.load_trajectory_file(spec[len(simulator.FILE_PREFIX) :])
+    elif spec not in simulator.TRAJECTORIES:
+        raise ValueError(
+            f"'sim_trajectory' is '{spec}'; allowed: {', '.join(simulator.TRAJECTORIES)} "
+            "or file:PATH (a CSV with header t,v,w or t,vx,vy,w)"
+        )
 
 
 def parse_fail_windows(
@@ -64,21 +78,22 @@ def make_sim_buses(cfg, t0: float) -> dict[str, object]:
 
     sim = cfg.sim
     mounts = [simulator.SensorMount(*m) for m in sim.mounts] or list(simulator.DEFAULT_MOUNTS)
-    v, w = simulator.trajectory(sim.trajectory, sim.speed)
+    v, w, vy = simulator.resolve_trajectory(sim.trajectory, sim.speed)
+    vy = np.zeros_like(v) if vy is None else vy
     loop = sim.loop
     if sim.duration > 0:  # repeat or cut the path to this long, then stand still
         n = max(1, round(sim.duration / simulator.DT))
-        v, w = np.resize(v, n), np.resize(w, n)
+        v, w, vy = np.resize(v, n), np.resize(w, n), np.resize(vy, n)
         loop = False
     if sim.start_delay > 0:
         still = np.zeros(round(sim.start_delay / simulator.DT))
-        v, w = np.concatenate([still, v]), np.concatenate([still, w])
+        v, w, vy = (np.concatenate([still, a]) for a in (v, w, vy))
     fails = parse_fail_windows(sim.fail_windows, cfg.devices)
     regmap = RegisterMap.load(cfg.register_map) if cfg.register_map else None
     buses: dict[str, object] = {}
     for i, dev in enumerate(cfg.devices):
         mount = mounts[i % len(mounts)]
-        cx, cy = simulator.cumulative_sensor_path(v, w, simulator.DT, mount)
+        cx, cy = simulator.cumulative_sensor_path(v, w, simulator.DT, mount, vy)
         path = SampledPath(cx, cy, simulator.DT, t_start=t0, loop=loop)
         lifts = []
         if sim.lift_rate > 0:

@@ -11,3 +11,74 @@ class FakeClock:
 
     def __call__(self) -> float:
         return self.t
+
+
+class FakeRing:
+    """The Beagle node's totals and ring of single polls for a simulated run (no ROS).
+
+    ``v``, ``w`` (and optionally ``vy``): the 1 kHz twist script of
+    :mod:`mm_pc.sim.robot`; each poll's counts are the floor of the cumulative
+    true counts at ``cpi`` (like the emulator), lifted polls count nothing and
+    carry flag 1. Poll k (0-based) of every sensor has stamp ``t0_ns + (k+1) ms``.
+    ``totals(k)`` are the node's totals after k polls; ``samples(i, since, max)``
+    a ``get_samples`` reply (SimpleNamespace) with the ring's ``ring_size``.
+    """
+
+    def __init__(self, v, w, mounts=None, cpi=1600, lifted=None, ring_size=65536,
+                 t0_ns=1_700_000_000_000_000_000, vy=None):
+        import numpy as np
+
+        from mm_pc.sim import robot
+        from pln2033 import INCH_M
+
+        self.mounts = tuple(mounts or robot.DEFAULT_MOUNTS)
+        self.cpi, self.ring_size, self.t0_ns = cpi, ring_size, t0_ns
+        self.v, self.w = np.asarray(v, float), np.asarray(w, float)
+        n, k = len(self.v), len(self.mounts)
+        step = np.empty((n, k, 2))
+        for i, m in enumerate(self.mounts):
+            step[:, i, 0], step[:, i, 1] = robot.sensor_displacements(
+                self.v, self.w, robot.DT, m, vy)
+        step *= cpi / INCH_M
+        self.lifted = np.zeros((n, k), bool)
+        if lifted is not None:
+            lm = np.asarray(lifted, bool)
+            self.lifted[:] = lm[:, None] if lm.ndim == 1 else lm
+        step[self.lifted] = 0.0
+        cum = np.floor(np.concatenate([np.zeros((1, k, 2)), np.cumsum(step, axis=0)]))
+        self.counts = np.diff(cum, axis=0).astype(np.int64)  # (n, k, 2) per poll
+        self.cum = cum.astype(np.int64)
+        self.n_polls = n
+        self.scale = INCH_M / cpi
+
+    def stamp(self, k):
+        """Stamp (ns) of the newest poll after k polls (k = 0: the start)."""
+        return self.t0_ns + k * 1_000_000
+
+    def totals(self, k):
+        from mm_pc.core.polls import SensorTotals
+
+        return [
+            SensorTotals(seq=k, stamp_ns=self.stamp(k), x_counts=int(self.cum[k, i, 0]),
+                         y_counts=int(self.cum[k, i, 1]), x_m=float(self.cum[k, i, 0]) * self.scale,
+                         y_m=float(self.cum[k, i, 1]) * self.scale)
+            for i in range(len(self.mounts))
+        ]
+
+    def samples(self, i, since, max_samples, now):
+        """get_samples of sensor i at the moment ``now`` polls were done."""
+        from types import SimpleNamespace
+
+        import numpy as np
+
+        first = max(since, now - self.ring_size)
+        end = now if max_samples <= 0 else min(now, first + max_samples)
+        sl = slice(first, end)
+        return SimpleNamespace(
+            success=True, message="", first_seq=first, next_seq=end,
+            dropped=max(0, first - since), cpi=self.cpi,
+            stamp_ns=self.stamp(np.arange(first, end) + 1),
+            dx=self.counts[sl, i, 0], dy=self.counts[sl, i, 1],
+            status=np.zeros(end - first, np.int64),
+            flags=np.where(self.lifted[sl, i], 1, 2),
+        )

@@ -201,6 +201,6 @@ def test_the_walk_sees_lazy_and_relative_imports():
     """The checker itself: a function-level relative import is found and resolved."""
     assert "mm_pc.ros.spin" in closure("mm_beagle.node")
     assert "rclpy" in closure("mm_pc.ros.odometry_node")
-    # mm_beagle.params imports the trajectory table inside a function
-    assert "mm_pc.sim.robot" in direct_imports("mm_beagle.params")
+    # mm_beagle.sim_backend imports the simulator inside its functions
+    assert "mm_pc.sim.robot" in direct_imports("mm_beagle.sim_backend")
     assert broken(["mm_pc.ros.odometry_node"], ("rclpy",)) != []

@@ -40,7 +40,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--screenshot", type=Path, default=None, help="PNG of the window at the end")
     p.add_argument(
         "--sim", nargs="?", const="figure_eight", default=None, metavar="TRAJECTORY",
-        help="start mm-beagle on emulated sensors driving TRAJECTORY (default figure_eight)",
+        help="start mm-beagle on emulated sensors driving TRAJECTORY (default figure_eight; "
+        "a name or file:PATH, a CSV t,v,w or t,vx,vy,w)",
     )  # fmt: skip
     p.add_argument(
         "--agent", action="store_true",
@@ -90,6 +91,11 @@ def summary(window, seconds: float) -> str:
         parts.append("No sensor data arrived.")
     if s.stats.restarts:
         parts.append(f"The node restarted {s.stats.restarts} time(s); each was re-baselined.")
+    if s.stats.polls or s.stats.gaps:
+        parts.append(
+            f"The pose integrated {s.stats.polls} single polls; {s.stats.gaps} gap(s) without "
+            "them were stepped over with the totals (dashed red on the map)."
+        )
     if window.frame_ms:
         import numpy as np
 
@@ -117,6 +123,14 @@ def main(argv: list[str] | None = None) -> int:
         print("mm-monitor: --agent goes with --sim (the emulated sensors behind an agent)",
               file=sys.stderr)
         return 2
+    if args.sim:
+        from mm_beagle.sim_backend import check_trajectory
+
+        try:
+            check_trajectory(args.sim)
+        except ValueError as e:
+            print(f"mm-monitor: --sim: {e}", file=sys.stderr)
+            return 2
     headless = args.headless
     if not headless and not _has_display() and os.environ.get("QT_QPA_PLATFORM") != "offscreen":
         duration = args.duration or 20.0

@@ -8,6 +8,12 @@ File layout (MCAP profile ``ros2``, schemas ``ros2msg``, messages ``cdr``):
 ``/mm_monitor/reply_meta`` -- ``std_msgs/msg/Float64MultiArray``
     One message per reply, ``data = [received_s, rtt_s]``: the exact
     monotonic arrival time and round-trip time (s) of the reply.
+``/mm_monitor/reply_polls/<device>`` -- ``mm_interfaces/srv/GetSamples_Response``
+    The single polls each reply's totals cover (``Reply.polls``, fetched by the
+    bridge for the per-poll pose), with the reply's number as ``sequence``; the
+    reply's ``reply_meta`` then has a third value 1.0 ("polls were fetched": a
+    device without a message had a failed fetch). A replay integrates them per
+    poll, as live; a recording without them is integrated per reply.
 ``/mm_monitor/samples/<device>`` -- ``mm_interfaces/srv/GetSamples_Response``
     The single 1 kHz polls, whenever they were fetched while recording (the
     recorder listens to the bridge's ``samples_received``;
@@ -59,6 +65,7 @@ __all__ = [
 SENSOR_TOPIC = "/mm_beagle/sensor_data_replies"
 META_TOPIC = "/mm_monitor/reply_meta"
 SAMPLES_TOPIC = "/mm_monitor/samples"
+REPLY_POLLS_TOPIC = "/mm_monitor/reply_polls"
 SENSOR_TYPE = "mm_interfaces/msg/SensorData"
 META_TYPE = "std_msgs/msg/Float64MultiArray"
 SAMPLES_TYPE = "mm_interfaces/srv/GetSamples_Response"
@@ -179,6 +186,20 @@ _INT_RANGES = {
 }
 
 
+def _samples_msg(res):
+    """A ``GetSamples.Response`` from anything with its fields (the bridge's empty ones)."""
+    ros = _ros()
+    if isinstance(res, ros.GetSamplesResponse):
+        return res
+    return ros.GetSamplesResponse(
+        success=True, message="", first_seq=int(res.first_seq), next_seq=int(res.next_seq),
+        dropped=int(res.dropped), cpi=int(res.cpi),
+        stamp_ns=[int(v) for v in res.stamp_ns], dx=[int(v) for v in res.dx],
+        dy=[int(v) for v in res.dy], status=[int(v) for v in res.status],
+        flags=[int(v) for v in res.flags],
+    )  # fmt: skip
+
+
 def _serialize_reading(r: Reading) -> bytes:
     """CDR bytes of the SensorData of one reading; ValueError when a value does not fit."""
     # checked here: rclpy's serializer mishandles out-of-range integers (SystemError)
@@ -252,6 +273,7 @@ class McapRecorder:
             self._file.close()
             raise
         self._sample_channels: dict[str, int] = {}
+        self._poll_channels: dict[str, int] = {}
         self.started = datetime.now(timezone.utc)
         self.replies = 0
         self.samples_messages = 0
@@ -296,9 +318,10 @@ class McapRecorder:
             return
         ros = _ros()
         msgs = [(r, _serialize_reading(r)) for r in reply.readings]
-        meta = ros.Float64MultiArray(
-            layout=self._meta_layout, data=[float(reply.received_s), float(reply.rtt_s)]
-        )
+        values = [float(reply.received_s), float(reply.rtt_s)]
+        if reply.polls is not None:
+            values.append(1.0)
+        meta = ros.Float64MultiArray(layout=self._meta_layout, data=values)
         log_time = self._log_time(reply.received_s)
         seq = self.replies & 0xFFFFFFFF
         try:
@@ -307,6 +330,12 @@ class McapRecorder:
             )
             for r, data in msgs:
                 self._writer.add_message(self._sensor_channel, log_time, data, r.stamp_ns, seq)
+            for dev, res in (reply.polls or {}).items():
+                if res is not None:
+                    self._writer.add_message(
+                        self._poll_channel(dev), log_time, ros.serialize(_samples_msg(res)),
+                        log_time, seq,
+                    )  # fmt: skip
         except OSError as e:
             self._fail(e)
             return
@@ -314,6 +343,14 @@ class McapRecorder:
         for r in reply.readings:
             if r.id not in self.devices:
                 self.devices.append(r.id)
+
+    def _poll_channel(self, device: str) -> int:
+        if device not in self._poll_channels:
+            suffix = re.sub(r"[^A-Za-z0-9_/]", "_", device).strip("/") or "sensor"
+            self._poll_channels[device] = self._channel(
+                f"{REPLY_POLLS_TOPIC}/{suffix}", SAMPLES_TYPE, {"device": device}
+            )
+        return self._poll_channels[device]
 
     def write_samples(self, device: str, response) -> None:
         """Append a ``GetSamples.Response`` of ``device`` (the debug view's single polls)."""
@@ -436,7 +473,15 @@ def read_replies(path: str | Path) -> list[Reply]:
         metas = {}
         for m in meta:
             values = list(deserialize_message(m.data, Float64MultiArray).data)
-            metas[m.sequence] = (m.log_time, float(values[0]), float(values[1]))
+            fetched = len(values) > 2 and values[2] == 1.0
+            metas[m.sequence] = (m.log_time, float(values[0]), float(values[1]), fetched)
+        polls: dict[int, dict[str, object]] = {}
+        GetSamplesResponse = ros.GetSamplesResponse  # noqa: N806
+        for s, c, m in messages:
+            if c.topic.startswith(REPLY_POLLS_TOPIC + "/") and s is not None:
+                device = c.metadata.get("device", c.topic)
+                res = deserialize_message(m.data, GetSamplesResponse)
+                polls.setdefault(m.sequence, {})[device] = res
     except Exception as e:  # deserialisation of foreign bytes can fail in many ways
         raise ValueError(
             f"{path}: a message could not be decoded ({type(e).__name__}: {e})"
@@ -447,8 +492,11 @@ def read_replies(path: str | Path) -> list[Reply]:
             groups.setdefault(seq, []).append(r)
         out = []
         for seq in sorted(groups):  # the reply number: recorded order
-            _, received, rtt = metas.get(seq, (0, math.nan, 0.0))
-            out.append(Reply(tuple(groups[seq]), received_s=received, rtt_s=rtt))
+            _, received, rtt, fetched = metas.get(seq, (0, math.nan, 0.0, False))
+            got = None
+            if fetched:  # a device without a message: its fetch had failed
+                got = {r.id: polls.get(seq, {}).get(r.id) for r in groups[seq]}
+            out.append(Reply(tuple(groups[seq]), received_s=received, rtt_s=rtt, polls=got))
         return out
     by_time: dict[int, list[Reading]] = {}
     for _, log_time, r in readings:

@@ -36,7 +36,7 @@ from mm_pc.monitor.model.readings import Reply
 from mm_pc.monitor.model.session import MonitorSession
 from mm_pc.monitor.recording import read_replies
 
-__all__ = ["SPEEDS", "Replayer", "open_replay", "parse_speed", "start_replay"]
+__all__ = ["SPEEDS", "Replayer", "open_replay", "parse_speed", "pose_source", "start_replay"]
 
 #: choices of the replay dialog
 SPEEDS = ("1x", "2x", "5x", "10x", "max")
@@ -215,6 +215,19 @@ def _reattach_bridge(ctx, polling: bool, connected: bool) -> None:
 # -- the window's File > Replay -----------------------------------------------------------------
 
 
+def pose_source(replies: list[Reply]) -> str:
+    """How a replay makes the pose: from the recorded single polls, or per reply."""
+    with_polls = sum(1 for r in replies if r.polls is not None)
+    if with_polls == 0:
+        return "pose per reply from the totals (the recording holds no single polls)"
+    if with_polls == len(replies):
+        return "pose per poll (the single polls are in the recording)"
+    return (
+        f"pose per poll for {with_polls} of {len(replies)} replies "
+        "(the others have no single polls: per reply)"
+    )
+
+
 def load_recording(path: str | Path, speed=1.0) -> tuple[float, list]:
     """(speed, replies) of a recording; ValueError saying what is wrong with either."""
     return parse_speed(speed), read_replies(Path(path))
@@ -259,14 +272,19 @@ def begin_replay(window, path: Path, replies: list, speed: float) -> Replayer | 
 
     def ended() -> None:
         _reattach_bridge(ctx, polling, connected)
+        st = ctx.session.stats
         window.statusBar().showMessage(
-            f"replay of {path.name} ended: {replayer.position} of {len(replies)} replies", 10000
+            f"replay of {path.name} ended: {replayer.position} of {len(replies)} replies; "
+            f"pose from {st.polls} single polls, {st.per_reply} replies per reply, "
+            f"{st.gaps} gap(s)",
+            10000,
         )
 
     replayer.on_end = ended
     window.replayer = replayer
     window.statusBar().showMessage(
-        f"replaying {path.name}: {len(replies)} replies, {seconds:.1f} s at {pace}"
+        f"replaying {path.name}: {len(replies)} replies, {seconds:.1f} s at {pace}; "
+        + pose_source(replies)
     )
     replayer.start()
     return replayer

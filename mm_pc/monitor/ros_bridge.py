@@ -7,6 +7,12 @@ runs on the executor thread (where every rclpy object is used), and the
 answer comes back as a Qt signal, which Qt delivers on the GUI thread.
 
 Requests of the sample timer: at most one ``get_sensor_data`` is in flight.
+With ``fetch_polls`` (default) each reply is followed by one ``get_samples`` per
+sensor for exactly the polls its totals added since the previous reply, and the
+:class:`Reply` is emitted with them (``Reply.polls``), so the session integrates
+the pose per poll; a fetch that fails, takes longer than ``timeout_s`` or whose
+service disappears leaves that sensor's entry None (the session then steps over the interval with
+the totals and marks the gap). The next ``get_sensor_data`` waits for the fetch.
 A tick that finds a request still outstanding is skipped (``skipped_ticks``):
 the next reply's totals cover the gap, so a slow link (WLAN latency) costs
 neither double counts nor lost counts. A request without an answer after
@@ -98,6 +104,7 @@ class RosBridge(QObject):
         node_name: str = "mm_monitor",
         timeout_s: float = 2.0,
         parent: QObject | None = None,
+        fetch_polls: bool = True,
     ) -> None:
         super().__init__(parent)
         self.beagle = "/" + beagle.strip("/") if beagle.strip("/") else "/mm_beagle"
@@ -115,6 +122,14 @@ class RosBridge(QObject):
         self._pending: dict[object, tuple[str, str, float]] = {}
         self._rtts: deque[float] = deque(maxlen=200)
         self._reply_times: deque[float] = deque(maxlen=2000)
+        #: fetch the single polls with each reply (the per-poll pose)
+        self.fetch_polls = bool(fetch_polls)
+        #: device -> the seq up to which polls were fetched; executor thread only
+        self._poll_cursor: dict[str, int] = {}
+        #: a reply waiting for its polls: [Reply, {device: response or None}, {future: device},
+        #: deadline]; executor thread only
+        self._poll_fetch: list | None = None
+        self.poll_fetches = self.poll_fetch_failures = 0
         self.requests = self.replies = self.skipped_ticks = 0
         self.dropped_requests = self.failed_replies = 0
         self._consecutive_failures = 0
@@ -237,7 +252,7 @@ class RosBridge(QObject):
 
     def _request_data(self, manual: bool) -> None:
         client = self._clients["get_sensor_data"]
-        if self._in_flight is not None:
+        if self._in_flight is not None or self._poll_fetch is not None:
             if not manual:
                 self.skipped_ticks += 1
             return
@@ -267,7 +282,76 @@ class RosBridge(QObject):
         self._reply_times.append(now)
         self._set_state(CONNECTED)
         readings = tuple(Reading.from_msg(m) for m in res.data)
-        self.data_received.emit(Reply(readings, received_s=now, rtt_s=now - sent))
+        reply = Reply(readings, received_s=now, rtt_s=now - sent)
+        if self.fetch_polls:
+            self._fetch_polls(reply)
+        else:
+            self.data_received.emit(reply)
+
+    # -- the single polls of a reply (executor thread) --------------------------------------
+
+    def _fetch_polls(self, reply: Reply) -> None:
+        """Ask each sensor's polls since its cursor up to this reply's seq; emit when done."""
+        from types import SimpleNamespace
+
+        polls: dict[str, object] = {}
+        waiting: dict[object, str] = {}
+        client = self._clients["get_samples"]
+        request_type = self._types["get_samples"].Request
+        for r in reply.readings:
+            since = self._poll_cursor.get(r.id)
+            self._poll_cursor[r.id] = r.seq
+            if since is None or r.seq <= since:  # first reply, nothing new, or a restart
+                polls[r.id] = SimpleNamespace(
+                    first_seq=r.seq, next_seq=r.seq, dropped=0, cpi=r.cpi, stamp_ns=(),
+                    dx=(), dy=(), status=(), flags=(),
+                )  # fmt: skip
+                continue
+            if not client.service_is_ready():
+                polls[r.id] = None
+                continue
+            req = request_type(id=r.id, since_seq=since, max_samples=r.seq - since)
+            future = client.call_async(req)
+            waiting[future] = r.id
+            self.poll_fetches += 1
+        if not waiting:
+            self._emit_with_polls(reply, polls)
+            return
+        # as long as a data request may take: a fetch stuck at a node that died must not
+        # hold back the first reply of the node that comes back
+        self._poll_fetch = [reply, polls, waiting, time.monotonic() + self.timeout_s]
+        for future in list(waiting):
+            future.add_done_callback(self._on_polls)
+
+    def _on_polls(self, future) -> None:
+        fetch = self._poll_fetch
+        if fetch is None or future not in fetch[2]:
+            return  # abandoned by the watchdog
+        device = fetch[2].pop(future)
+        res = future.result()
+        ok = res is not None and res.success
+        fetch[1][device] = res if ok else None
+        if not ok:
+            self.poll_fetch_failures += 1
+        if not fetch[2]:
+            self._poll_fetch = None
+            self._emit_with_polls(fetch[0], fetch[1])
+
+    def _expire_poll_fetch(self, now: float) -> None:
+        fetch = self._poll_fetch
+        if fetch is None or (now <= fetch[3] and self._clients["get_samples"].service_is_ready()):
+            return
+        self._poll_fetch = None
+        for future, device in fetch[2].items():
+            self._clients["get_samples"].remove_pending_request(future)
+            fetch[1][device] = None
+            self.poll_fetch_failures += 1
+        self._emit_with_polls(fetch[0], fetch[1])
+
+    def _emit_with_polls(self, reply: Reply, polls: dict[str, object]) -> None:
+        self.data_received.emit(
+            Reply(reply.readings, received_s=reply.received_s, rtt_s=reply.rtt_s, polls=polls)
+        )
 
     _SIGNALS: ClassVar[dict[str, tuple[str, str]]] = {
         "get_sensor_settings": ("settings_received", "settings_failed"),
@@ -320,6 +404,7 @@ class RosBridge(QObject):
 
     def _watchdog(self) -> None:
         self._expire_calls(time.monotonic())
+        self._expire_poll_fetch(time.monotonic())
         client = self._clients["get_sensor_data"]
         if self._in_flight is not None:
             future, sent = self._in_flight

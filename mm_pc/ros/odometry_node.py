@@ -1,15 +1,22 @@
 """mm-odometry: mouse odometry out as nav_msgs/Odometry and nav_msgs/Path.
 
 A thin ROS node. At ``rate`` Hz it asks mm_beagle for the data of every
-sensor (one request, asynchronous: the executor never waits), takes the
-displacement since its previous request from the monotone totals (so it
-takes no counts away from other clients), applies the calibration, runs the
-pose math of :mod:`mm_pc.core.odometry` and publishes
+sensor (one request, asynchronous: the executor never waits), then (``per_poll``,
+default) each sensor's single polls since its previous request (``get_samples``),
+and integrates the pose poll by poll (:class:`mm_pc.core.polls.PollTracker`), so
+``rate`` changes only how often the pose is published, never the pose. Polls that
+are missing (ring overrun, a failed fetch) become one step from the monotone totals
+for that interval, counted and reported on /diagnostics. With ``per_poll`` false it
+integrates the totals' displacement per request. Either way it takes no counts away
+from other clients, applies the calibration, runs the pose math of
+:mod:`mm_pc.core.odometry` and publishes
 
-  ~/odom (nav_msgs/Odometry): odom -> base_link pose and body twist, with the
-          covariance of :mod:`mm_pc.core.uncertainty`
+  ~/odom (nav_msgs/Odometry): odom -> base_link pose and body twist (over the
+          request's interval), with the covariance of :mod:`mm_pc.core.uncertainty`
   ~/path (nav_msgs/Path):    the poses so far (at most ``path_length``), at
           ``path_rate`` Hz
+  /diagnostics:              "mm_odometry: pose" once a second: polls integrated,
+          gap steps and the last reason (WARN after a new gap)
 
 Frame ids, rates, method and geometry are parameters.
 """
@@ -18,20 +25,26 @@ from __future__ import annotations
 
 import math
 import sys
+import time
 
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry as OdometryMsg
 from nav_msgs.msg import Path
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.node import Node
 
-from mm_interfaces.srv import GetSensorData
+from mm_interfaces.srv import GetSamples, GetSensorData
 from mm_pc.core.angles import yaw_to_quaternion
 from mm_pc.core.calibration import Calibration
 from mm_pc.core.geometry import DEFAULT_MOUNTS, SensorMount
 from mm_pc.core.odometry import METHODS, Odometry, Pose2D, Sample
+from mm_pc.core.polls import PollBatch, PollTracker, SensorTotals, integrate_steps
 from mm_pc.core.uncertainty import PoseUncertainty, twist_covariance
 from mm_pc.ros import spin as ros_spin
+
+#: a get_samples reply later than this is given up on (the interval is stepped with the totals)
+FETCH_TIMEOUT_S = 2.0
 
 
 def _ro(desc: str, **kw) -> ParameterDescriptor:
@@ -62,6 +75,7 @@ PARAMETERS = {
     ),
     "calibration_file": ("", _ro("YAML calibration to apply ('' = none)")),
     "use_lift_estimates": (True, _ro("add the node's estimates of counts lost to lifts")),
+    "per_poll": (True, _ro("integrate every single poll (get_samples); false = per request")),
     "odom_frame": ("odom", _ro("frame_id of the odometry")),
     "base_frame": ("base_link", _ro("child_frame_id of the odometry")),
     "path_length": (
@@ -138,6 +152,12 @@ class OdometryNode(Node):
         self.odometry = Odometry(mounts, method=p["method"], sensor=p["sensor"])
         self.uncertainty = PoseUncertainty()
         self.client = self.create_client(GetSensorData, f"{p['beagle']}/get_sensor_data")
+        self.samples_client = self.create_client(GetSamples, f"{p['beagle']}/get_samples")
+        self.tracker = PollTracker(len(devices), p["use_lift_estimates"])
+        self._fetch: dict | None = None  # the reply waiting for its polls
+        self._reported_gaps = 0
+        self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.create_timer(1.0, self.publish_diagnostics)
         self.odom_pub = self.create_publisher(OdometryMsg, "~/odom", 10)
         self.path_pub = self.create_publisher(Path, "~/path", 1)
         self.path = Path()
@@ -154,7 +174,11 @@ class OdometryNode(Node):
 
     def request(self) -> None:
         """Ask mm-beagle for new sensor data (timer callback); one call in flight at a time."""
-        if self._in_flight or not self.client.service_is_ready():
+        if self._fetch is not None and (
+            time.monotonic() > self._fetch["deadline"] or not self.samples_client.service_is_ready()
+        ):
+            self._finish_fetch()  # the polls did not come: step over it with the totals
+        if self._in_flight or self._fetch is not None or not self.client.service_is_ready():
             return  # a slow reply is never doubled up: the totals cover any gap
         self._in_flight = True
         future = self.client.call_async(GetSensorData.Request(id=""))
@@ -182,6 +206,9 @@ class OdometryNode(Node):
         by_id = {d.id: d for d in res.data}
         if any(dev not in by_id for dev in self.devices):
             return  # a sensor is down; its totals still cover the gap next time
+        if self.p["per_poll"]:
+            self._start_fetch(by_id)
+            return
         steps = [self._displacement(by_id[dev]) for dev in self.devices]
         if any(s is None for s in steps):
             return
@@ -197,13 +224,103 @@ class OdometryNode(Node):
         self.samples_used += 1
         self.publish_odometry(before, after, dt, by_id[self.devices[self.p["sensor"]]])
 
-    def publish_odometry(self, before: Pose2D, after: Pose2D, dt: float, data) -> None:
+    # -- per poll ---------------------------------------------------------------------------
+
+    def _start_fetch(self, by_id: dict) -> None:
+        """Ask every sensor's polls since the previous reply up to this reply's totals."""
+        data = [by_id[dev] for dev in self.devices]
+        totals = [SensorTotals.from_msg(d) for d in data]
+        t = self.tracker
+        if not t.started or any(x.seq < t.cursor(i) for i, x in enumerate(totals)):
+            if t.started:
+                self.get_logger().warning("mm-beagle restarted (seq went back): new baseline")
+            t.baseline(totals)
+            return
+        fetch = {"data": data, "totals": totals, "polls": [None] * len(self.devices),
+                 "waiting": 0, "deadline": time.monotonic() + FETCH_TIMEOUT_S}  # fmt: skip
+        for i, (dev, x) in enumerate(zip(self.devices, totals, strict=True)):
+            want = x.seq - t.cursor(i)
+            if want == 0:
+                continue
+            if not self.samples_client.service_is_ready():
+                continue
+            req = GetSamples.Request(id=dev, since_seq=t.cursor(i), max_samples=want)
+            future = self.samples_client.call_async(req)
+            fetch["waiting"] += 1
+            future.add_done_callback(lambda f, i=i, fetch=fetch: self._on_polls(fetch, i, f))
+        self._fetch = fetch
+        if fetch["waiting"] == 0:
+            self._finish_fetch()
+
+    def _on_polls(self, fetch: dict, i: int, future) -> None:
+        if fetch is not self._fetch:
+            return  # given up on
+        res = future.result()
+        if res is not None and res.success:
+            try:
+                fetch["polls"][i] = PollBatch.from_reply(res)
+            except ValueError as e:
+                self.get_logger().warning(f"{self.devices[i]}: bad get_samples reply: {e}")
+        fetch["waiting"] -= 1
+        if fetch["waiting"] == 0:
+            self._finish_fetch()
+
+    def _finish_fetch(self) -> None:
+        fetch, self._fetch = self._fetch, None
+        steps = self.tracker.step(fetch["totals"], fetch["polls"])
+        for why in self.tracker.gap_reasons[len(self.tracker.gap_reasons) - int(steps.gap.sum()):]:
+            self.get_logger().warning(f"gap in the single polls: {why}; stepped with the totals")
+        if not len(steps):
+            return
+        d = steps.d.copy()
+        for k, dev in enumerate(self.devices):
+            d[:, k, 0], d[:, k, 1] = self.calibration.apply(dev, d[:, k, 0], d[:, k, 1])
+        before = self.odometry.pose
+        integrate_steps(self.odometry, steps, d)
+        after = self.odometry.pose
+        self.samples_used += len(steps)
+        data = fetch["data"][self.p["sensor"]]
+        stamp = int(steps.stamp_ns[-1])
+        data_stamp = type(data.stamp)(sec=stamp // 1_000_000_000, nanosec=stamp % 1_000_000_000)
+        self.publish_odometry(before, after, float(steps.dt.sum()), data, data_stamp)
+
+    def publish_diagnostics(self) -> None:
+        """/diagnostics: polls integrated and the gaps in them (WARN after a new gap)."""
+        t = self.tracker
+        new = t.gaps - self._reported_gaps
+        self._reported_gaps = t.gaps
+        if not self.p["per_poll"]:
+            level, text = DiagnosticStatus.OK, "per request (per_poll false)"
+        elif new:
+            level = DiagnosticStatus.WARN
+            text = f"{new} gap(s) in the single polls: {t.gap_reasons[-1]}"
+        else:
+            level, text = DiagnosticStatus.OK, "per poll"
+        values = {
+            "polls_integrated": sum(t.polls_used),
+            "gaps": t.gaps,
+            "last_gap": t.gap_reasons[-1] if t.gap_reasons else "",
+            "steps_used": self.samples_used,
+            "method": self.p["method"],
+        }
+        arr = DiagnosticArray()
+        arr.header.stamp = self.get_clock().now().to_msg()
+        arr.status.append(DiagnosticStatus(
+            level=level, name=f"{self.get_name()}: pose", message=text,
+            hardware_id=self.p["beagle"],
+            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()],
+        ))  # fmt: skip
+        self.diag_pub.publish(arr)
+
+    def publish_odometry(
+        self, before: Pose2D, after: Pose2D, dt: float, data, stamp=None
+    ) -> None:
         """Publish nav_msgs/Odometry for the step ``before`` -> ``after`` over ``dt`` s."""
         msg = odometry_message(
             before,
             after,
             dt,
-            data.stamp,
+            data.stamp if stamp is None else stamp,
             data.cpi,
             self.uncertainty,
             self.p["odom_frame"],

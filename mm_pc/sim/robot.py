@@ -32,8 +32,10 @@ __all__ = [
     "guided_calibration_steps",
     "integrate_pose",
     "lift_mask",
+    "load_trajectory_file",
     "request_boundaries",
     "request_samples",
+    "resolve_trajectory",
     "sensor_displacements",
     "trajectory",
     "with_mount_yaw",
@@ -46,30 +48,42 @@ DEFAULT_AXIS_LENGTH = 0.079
 
 
 def sensor_displacements(
-    v: np.ndarray, omega: np.ndarray, dt: float, mount: SensorMount
+    v: np.ndarray, omega: np.ndarray, dt: float, mount: SensorMount, vy=None
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per-step sensor-frame displacement (dX right, dY forward) in metres.
 
     The sensor at base_link (px, py) moves with body velocity
-    (v - omega*py, omega*px); in sensor axes (X = -base_link y, Y = base_link x)
-    that is X = -omega*px, Y = v - omega*py, then turned by the mounting error.
+    (v - omega*py, vy + omega*px); in sensor axes (X = -base_link y, Y = base_link x)
+    that is X = -(vy + omega*px), Y = v - omega*py, then turned by the mounting error.
+    ``vy``: lateral slip (m/s, base_link +y = left), per step or scalar; None = 0.
     """
-    ideal_x = -omega * mount.x * dt
+    lateral = omega * mount.x if vy is None else np.asarray(vy) + omega * mount.x
+    ideal_x = -lateral * dt
     ideal_y = (v - omega * mount.y) * dt
     c, s = math.cos(mount.yaw), math.sin(mount.yaw)
     return c * ideal_x + s * ideal_y, -s * ideal_x + c * ideal_y
 
 
-def integrate_pose(v: np.ndarray, omega: np.ndarray, dt: float) -> np.ndarray:
-    """Exact poses (x, y, yaw) after each step of constant twist, start at 0."""
+def integrate_pose(v: np.ndarray, omega: np.ndarray, dt: float, vy=None) -> np.ndarray:
+    """Exact poses (x, y, yaw) after each step of constant twist, start at 0.
+
+    ``vy``: lateral velocity (m/s, base_link +y), per step or scalar; None = 0.
+    """
     yaw_end = np.cumsum(omega * dt)
     yaw_start = yaw_end - omega * dt
     dtheta = omega * dt
-    # Chord of the arc: length v*dt*sinc(dtheta/2), heading yaw_start + dtheta/2.
-    chord = v * dt * np.sinc(dtheta / (2 * np.pi))
+    # Chord of the arc: the body vector (v, vy)*dt shortened by sinc(dtheta/2),
+    # at the heading yaw_start + dtheta/2.
+    k = dt * np.sinc(dtheta / (2 * np.pi))
     heading = yaw_start + dtheta / 2
-    x = np.cumsum(chord * np.cos(heading))
-    y = np.cumsum(chord * np.sin(heading))
+    c, s = np.cos(heading), np.sin(heading)
+    if vy is None:
+        x = np.cumsum(k * v * c)
+        y = np.cumsum(k * v * s)
+    else:
+        vy = np.broadcast_to(np.asarray(vy, dtype=float), np.shape(v))
+        x = np.cumsum(k * (v * c - vy * s))
+        y = np.cumsum(k * (v * s + vy * c))
     return np.stack([x, y, yaw_end], axis=1)
 
 
@@ -258,11 +272,108 @@ def trajectory(name: str, speed: float = 0.2, dt: float = DT) -> tuple[np.ndarra
     return fn(speed=speed, dt=dt)
 
 
+# --- paths from a file -------------------------------------------------------------------
+
+FILE_PREFIX = "file:"
+#: Longest interval between two rows of a trajectory file (s): at least 100 Hz.
+MAX_FILE_INTERVAL_S = 0.01
+FILE_HEADERS = (("t", "v", "w"), ("t", "vx", "vy", "w"))
+
+
+def load_trajectory_file(
+    path, dt: float = DT
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """A path from a CSV file: per 1 kHz step (v m/s, omega rad/s, vy m/s or None).
+
+    The file: a header ``t,v,w`` or ``t,vx,vy,w`` (s, m/s forward, m/s lateral slip to
+    the left, rad/s CCW), then one row per sample, ``t`` strictly increasing at 100 Hz
+    or faster (no interval over 10 ms); blank lines and lines starting with ``#`` are
+    skipped. Time starts at the first row; each step's twist is the linear
+    interpolation at the step's midpoint. Raises ValueError naming the file and the line.
+    """
+    import csv
+    from pathlib import Path
+
+    name = str(path)
+    try:
+        text = Path(path).read_text()
+    except OSError as e:
+        raise ValueError(f"trajectory file {name}: cannot read it ({e.strerror or e})") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"trajectory file {name}: not a text (CSV) file") from None
+    header = None
+    rows: list[list[float]] = []
+    lines = []
+    for no, raw in enumerate(text.splitlines(), start=1):
+        if raw.strip() and not raw.lstrip().startswith("#"):
+            lines.append((no, raw))
+    if not lines:
+        raise ValueError(f"trajectory file {name}: empty; it needs a header t,v,w or t,vx,vy,w")
+    for no, fields in zip((n for n, _ in lines), csv.reader(r for _, r in lines), strict=True):
+        cells = [c.strip() for c in fields]
+        where = f"trajectory file {name}, line {no}"
+        if header is None:
+            if tuple(c.lower() for c in cells) not in FILE_HEADERS:
+                raise ValueError(
+                    f"{where}: header {','.join(cells)!r}; expected 't,v,w' or 't,vx,vy,w' "
+                    "(s, m/s, [m/s,] rad/s)"
+                )
+            header = tuple(c.lower() for c in cells)
+            continue
+        if len(cells) != len(header):
+            raise ValueError(f"{where}: {len(cells)} values, the header has {len(header)}")
+        try:
+            vals = [float(c) for c in cells]
+        except ValueError:
+            raise ValueError(f"{where}: not a number in {','.join(cells)!r}") from None
+        if not all(math.isfinite(x) for x in vals):
+            raise ValueError(f"{where}: {','.join(cells)!r} is not finite (NaN or inf)")
+        if rows:
+            gap = vals[0] - rows[-1][0]
+            if not gap > 0:
+                raise ValueError(f"{where}: t = {vals[0]:g} s does not increase")
+            if gap > MAX_FILE_INTERVAL_S + 1e-9:
+                raise ValueError(
+                    f"{where}: {gap * 1e3:g} ms after the row before; the rate must be "
+                    f">= {1 / MAX_FILE_INTERVAL_S:g} Hz (at most {MAX_FILE_INTERVAL_S * 1e3:g} ms)"
+                )
+        rows.append(vals)
+    if len(rows) < 2:
+        raise ValueError(f"trajectory file {name}: needs at least two rows after the header")
+    a = np.array(rows)
+    t = a[:, 0] - a[0, 0]
+    n = round(t[-1] / dt)
+    if n < 1:
+        raise ValueError(f"trajectory file {name}: lasts {t[-1]:g} s, less than one step")
+    mid = (np.arange(n) + 0.5) * dt
+    cols = dict(zip(header, a.T, strict=True))
+    v = np.interp(mid, t, cols["v"] if "v" in cols else cols["vx"])
+    w = np.interp(mid, t, cols["w"])
+    vy = np.interp(mid, t, cols["vy"]) if "vy" in cols else None
+    return v, w, vy
+
+
+def resolve_trajectory(
+    spec: str, speed: float = 0.2, dt: float = DT
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """``file:PATH`` (:func:`load_trajectory_file`) or a name of :data:`TRAJECTORIES` at
+    ``speed``: per step (v, omega, vy or None). ValueError with the allowed values."""
+    if spec.startswith(FILE_PREFIX):
+        return load_trajectory_file(spec[len(FILE_PREFIX) :], dt)
+    if spec not in TRAJECTORIES:
+        raise ValueError(
+            f"trajectory '{spec}' is unknown; allowed: {', '.join(TRAJECTORIES)} or file:PATH "
+            "(a CSV t,v,w or t,vx,vy,w)"
+        )
+    v, w = trajectory(spec, speed, dt)
+    return v, w, None
+
+
 def cumulative_sensor_path(
-    v: np.ndarray, omega: np.ndarray, dt: float, mount: SensorMount
+    v: np.ndarray, omega: np.ndarray, dt: float, mount: SensorMount, vy=None
 ) -> tuple[np.ndarray, np.ndarray]:
     """Cumulative sensor-frame position (starting at 0) at every step boundary."""
-    dx, dy = sensor_displacements(v, omega, dt, mount)
+    dx, dy = sensor_displacements(v, omega, dt, mount, vy)
     return np.concatenate([[0.0], np.cumsum(dx)]), np.concatenate([[0.0], np.cumsum(dy)])
 
 

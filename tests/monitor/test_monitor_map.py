@@ -895,3 +895,26 @@ def test_an_hour_of_100hz_data_refreshes_cheaply(qtbot, qapp, capsys):
     assert memory["raster"] <= PathRaster.MAX_PIXELS * 4 / 1e6
     with capsys.disabled():
         print("\n" + "\n".join(report))
+
+
+def test_a_stretch_without_single_polls_is_drawn_dashed_in_the_gap_colour(view, ctx, qtbot):
+    from fakes import FakeRing
+    from test_monitor_session import _poll_replies
+
+    from mm_pc.monitor.widgets.style import GAP_COLOUR
+    from mm_pc.sim.robot import trajectory
+
+    v, w = trajectory("s_curves")
+    ring = FakeRing(v[:6000], w[:6000])
+    for r in _poll_replies(ring, [0, *range(100, 6001, 100)], skip=(3000,)):
+        ctx.on_reply(r)
+    view.refresh()
+    view.fit_paths()
+    view.refresh()
+    (g,) = ctx.session.gaps
+    assert view.gap_segments().tolist() == [[g.x0, g.y0, g.x1, g.y1]]
+    img = view.plot.grab().toImage()
+    assert has_colour(img, GAP_COLOUR)
+    ctx.reset()
+    view.refresh()
+    assert len(view.gap_segments()) == 0

@@ -616,3 +616,37 @@ def test_stop_replay_ends_a_running_replay(qtbot, tmp_path):
     assert 0 < used < 60  # stopped part-way through the 3 s at 20 Hz
     qtbot.wait(300)
     assert window.ctx.session.stats.used == used
+
+
+def test_recorded_polls_replay_to_the_same_per_poll_pose(tmp_path, qtbot):
+    """Replies with their single polls (one fetch failed) are recorded and come back; a
+    replay integrates them per poll to the live pose, and says so."""
+    from fakes import FakeRing
+    from test_monitor_session import DEVS, _poll_replies
+
+    from mm_pc.monitor.replay import pose_source
+    from mm_pc.sim.robot import trajectory
+
+    v, w = trajectory("s_curves")
+    ring = FakeRing(v[:4000], w[:4000])
+    replies = _poll_replies(ring, [0, 700, 1400, 2000, 3000, 4000], skip=(2000,))
+    live = MonitorSession(devices=DEVS)
+    for r in replies:
+        live.process(r)
+    path = tmp_path / "polls.mcap"
+    rec = McapRecorder(path)
+    for r in replies:
+        rec.write_reply(r)
+    rec.close()
+    back = read_replies(path)
+    assert [r.polls is not None for r in back] == [True] * len(replies)
+    assert back[3].polls[DEVS[1]] is None and back[3].polls[DEVS[0]] is not None
+    assert list(back[2].polls[DEVS[0]].dx) == list(replies[2].polls[DEVS[0]].dx)
+    again = MonitorSession(devices=DEVS)
+    for r in back:
+        again.process(r)
+    assert again.pose == live.pose
+    assert (again.stats.polls, again.stats.gaps) == (live.stats.polls, live.stats.gaps) == (3400, 1)
+    assert "pose per poll" in pose_source(back)
+    old = [Reply(r.readings, r.received_s, r.rtt_s) for r in back]
+    assert "no single polls" in pose_source(old)

@@ -273,3 +273,84 @@ def test_reading_from_msg_reads_every_field():
     assert (r.x_disp, r.y_total_counts, r.y_lift_est_counts, r.y_lift_est_disp) == (
         0.001, 12, 1.5, 2e-5,
     )
+
+
+# -- pose from the single polls (Reply.polls) ---------------------------------------------
+
+DEVS = ("/dev/spidev1.0", "/dev/spidev1.1")
+
+
+def _poll_replies(ring, ends, skip=()):
+    """Replies at the given poll counts, each with the polls since the previous one (as the
+    bridge fetches them); ``skip``: poll counts whose fetch of sensor 1 failed."""
+    from fakes import FakeRing  # noqa: F401 - the ring's type
+
+    from mm_pc.monitor.model.readings import Reading, Reply
+
+    out, cursor = [], None
+    for k in ends:
+        tot = ring.totals(k)
+        readings = tuple(
+            Reading(id=d, stamp_ns=t.stamp_ns, seq=t.seq, x_total=t.x_m, y_total=t.y_m,
+                    x_total_counts=t.x_counts, y_total_counts=t.y_counts, cpi=ring.cpi)
+            for d, t in zip(DEVS, tot, strict=True)
+        )
+        since = k if cursor is None else cursor
+        polls = {d: (None if (k in skip and i == 1) else ring.samples(i, since, k - since, k))
+                 for i, d in enumerate(DEVS)}
+        out.append(Reply(readings, polls=polls))
+        cursor = k
+    return out
+
+
+def test_pose_from_polls_is_the_same_with_a_five_second_pause():
+    from fakes import FakeRing
+
+    from mm_pc.sim.robot import request_boundaries
+
+    v, w = trajectory("s_curves")
+    ring = FakeRing(v[:15000], w[:15000])
+    ends = [int(e) for e in request_boundaries(ring.n_polls, 15.0)]
+    paused = [e for e in ends if not 4000 < e < 9000]  # no request for 5 s mid-turn
+    poses, sessions = [], []
+    for e in (ends, paused):
+        s = MonitorSession(devices=DEVS)
+        for r in _poll_replies(ring, [0, *e]):
+            s.process(r)
+        poses.append(s.pose.as_array())
+        sessions.append(s)
+    assert np.allclose(poses[0], poses[1], atol=1e-9)
+    truth = integrate_pose(ring.v, ring.w, 0.001)[-1]
+    assert np.hypot(*(poses[0][:2] - truth[:2])) < 5e-4  # 1600 CPI quantisation only
+    for s in sessions:
+        assert s.stats.polls == ring.n_polls and s.stats.gaps == 0 and s.stats.per_reply == 0
+    # Graphs and Data keep the per-request values: one row per reply, the served sums
+    h = sessions[1].history
+    assert len(h) == len(paused)
+    assert np.sum(h.column("s0_raw_dy")) == pytest.approx(ring.cum[-1, 0, 1] * ring.scale)
+    big = np.argmax(h.column("dt"))
+    assert h.column("dt")[big] == pytest.approx(5.0, abs=0.07)
+    # the same replies without their polls: per-request integration, off by millimetres
+    s = MonitorSession(devices=DEVS)
+    for r in _poll_replies(ring, [0, *paused]):
+        s.process(type(r)(r.readings))
+    assert s.stats.per_reply == len(paused) and s.stats.polls == 0
+    assert np.hypot(*(s.pose.as_array()[:2] - truth[:2])) > 3e-3
+
+
+def test_a_failed_poll_fetch_is_a_marked_gap_from_the_totals():
+    from fakes import FakeRing
+
+    v, w = trajectory("s_curves")
+    ring = FakeRing(v[:3000], w[:3000])
+    s = MonitorSession(devices=DEVS)
+    for r in _poll_replies(ring, [0, 1000, 2000, 3000], skip=(2000,)):
+        s.process(r)
+    assert s.stats.gaps == 1 and len(s.gaps) == 1
+    g = s.gaps[0]
+    assert "no polls" in g.reason and g.t == pytest.approx(2.0)
+    assert math.hypot(g.x1 - g.x0, g.y1 - g.y0) > 0.1  # the drawn stretch of the gap
+    assert any(kind == "gap" for kind, _ in s.stats.events)
+    assert s.stats.polls == 2000
+    truth = integrate_pose(ring.v, ring.w, 0.001)[-1]
+    assert np.hypot(*(s.pose.as_array()[:2] - truth[:2])) < 0.01  # the totals kept it close

@@ -203,3 +203,156 @@ def test_beagle_bad_calibration_file_exits_2_naming_the_file(tmp_path):
     assert out.returncode == 2, out.stdout + out.stderr
     assert f"calibration file {bad}: calibration of /dev/spidev1.0" in out.stderr
     assert "Traceback" not in out.stdout + out.stderr
+
+
+def _write_tour(path, lateral: bool = False):
+    """A 14 s path at 100 Hz: speed changes, left and right turns, a spin; (v, w) rows."""
+    import numpy as np
+
+    t = np.arange(0, 14.0 + 1e-9, 0.01)
+    v = 0.15 + 0.1 * np.sin(2 * np.pi * t / 7.0)
+    w = 0.9 * np.sin(2 * np.pi * t / 5.0)
+    spin = (t > 9.0) & (t < 10.5)
+    v[spin], w[spin] = 0.0, 1.5
+    cols = [t, v, w]
+    header = "t,v,w"
+    if lateral:
+        cols = [t, v, 0.02 * np.sin(2 * np.pi * t / 3.0), w]
+        header = "t,vx,vy,w"
+    with open(path, "w") as f:
+        f.write(header + "\n")
+        for row in zip(*cols, strict=True):
+            f.write(",".join(f"{x:.6f}" for x in row) + "\n")
+
+
+def test_file_trajectory_at_15_hz_ends_on_the_files_ground_truth(tmp_path, ros_command):
+    """mm-beagle drives its emulated sensors along a CSV path (turns, speed changes, a
+    spin); mm-odometry asks at 15 Hz and integrates every poll: the final pose is the
+    simulator's exact integration of the file within 0.5 mm."""
+    import numpy as np
+
+    from mm_pc.sim import robot
+
+    path = tmp_path / "tour.csv"
+    _write_tour(path)
+    v, w, vy = robot.load_trajectory_file(path)
+    assert vy is None
+    truth = robot.integrate_pose(v, w, robot.DT)[-1]
+    beagle = {
+        "backend": "sim",
+        "sim_trajectory": f"file:{path}",
+        "sim_start_delay": 4.0,
+        "sim_loop": False,
+        "cpi": 6400,  # quantisation (floor of 4 um) well below the tolerance
+    }
+    ns = "/odo_file"
+    params = {"beagle": "/mm_beagle", "rate": 15.0, "method": "exact", "path_rate": 1.0}
+    odo = subprocess.Popen(
+        ros_command("mm_pc.ros.odometry_node", params, ns), env=dict(os.environ),
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    )  # fmt: skip
+    try:
+        with beagle_process(beagle, env=dict(os.environ), log_path=str(tmp_path / "beagle.log")):
+            client = BeagleClient("odo_file_client")
+            assert client.wait(30)
+            got: list[Odometry] = []
+            diags = []
+            lock = threading.Lock()
+
+            def on_odom(m):
+                with lock:
+                    got.append(m)
+
+            client.node.create_subscription(Odometry, f"{ns}/mm_odometry/odom", on_odom, 10)
+            from diagnostic_msgs.msg import DiagnosticArray
+
+            client.node.create_subscription(DiagnosticArray, "/diagnostics", diags.append, 10)
+            try:
+                deadline = time.monotonic() + 45
+                final = None
+                while time.monotonic() < deadline:
+                    time.sleep(0.3)
+                    with lock:
+                        recent = got[-20:]
+                    moved = recent and abs(recent[-1].pose.pose.position.x) > 0.1
+                    if moved and len(recent) == 20 and all(
+                        m.twist.twist.linear.x == 0 and m.twist.twist.angular.z == 0
+                        for m in recent
+                    ):
+                        final = recent[-1]
+                        break
+                assert final is not None, f"never stood still at the end; {len(got)} messages"
+                p = final.pose.pose
+                yaw = 2 * math.atan2(p.orientation.z, p.orientation.w)
+                err = math.hypot(p.position.x - truth[0], p.position.y - truth[1])
+                assert err < 5e-4, (p.position, truth)
+                assert abs(math.remainder(yaw - truth[2], 2 * math.pi)) < 2e-3
+                # /diagnostics: every poll integrated, no gap
+                mine = [s for a in diags for s in a.status if s.name == "mm_odometry: pose"]
+                assert mine, "no /diagnostics from mm-odometry"
+                values = {kv.key: kv.value for kv in mine[-1].values}
+                assert values["gaps"] == "0" and int(values["polls_integrated"]) > 2 * 14_000
+                assert np.isfinite(err)
+            finally:
+                client.close()
+    finally:
+        odo.send_signal(signal.SIGINT)
+        out, _ = odo.communicate(timeout=15)
+    assert odo.returncode == 0, out
+
+
+def test_polls_lost_to_a_ring_overrun_are_a_gap_on_diagnostics(tmp_path, ros_command):
+    """mm-odometry stopped for 3 s (SIGSTOP) while mm-beagle's ring holds ~1 s: the polls
+    are gone, the interval is stepped with the totals (the pose still ends right) and
+    /diagnostics says so."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+
+    beagle = {"backend": "sim", "sim_trajectory": "straight", "sim_start_delay": 3.0,
+              "sim_duration": 5.0, "ring_size": 1024}  # fmt: skip
+    ns = "/odo_gap"
+    params = {"beagle": "/mm_beagle", "rate": 15.0}
+    odo = subprocess.Popen(
+        ros_command("mm_pc.ros.odometry_node", params, ns), env=dict(os.environ),
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    )  # fmt: skip
+    try:
+        with beagle_process(beagle, env=dict(os.environ), log_path=str(tmp_path / "beagle.log")):
+            client = BeagleClient("odo_gap_client")
+            assert client.wait(30)
+            got: list[Odometry] = []
+            diags: list = []
+            client.node.create_subscription(Odometry, f"{ns}/mm_odometry/odom", got.append, 10)
+            client.node.create_subscription(DiagnosticArray, "/diagnostics", diags.append, 10)
+            try:
+                deadline = time.monotonic() + 20
+                while time.monotonic() < deadline and not (got and got[-1].pose.pose.position.x
+                                                           > 0.1):
+                    time.sleep(0.1)
+                assert got, "no odometry"
+                odo.send_signal(signal.SIGSTOP)
+                time.sleep(3.0)
+                odo.send_signal(signal.SIGCONT)
+                deadline = time.monotonic() + 20
+                warn = None
+                while time.monotonic() < deadline and warn is None:
+                    time.sleep(0.2)
+                    for a in list(diags):
+                        for st in a.status:
+                            if st.name == "mm_odometry: pose" and st.level == DiagnosticStatus.WARN:
+                                warn = st
+                assert warn is not None, "no WARN on /diagnostics after the overrun"
+                assert "gap(s) in the single polls" in warn.message
+                values = {kv.key: kv.value for kv in warn.values}
+                assert int(values["gaps"]) >= 1
+                # the run (1 m straight) still ends at x = 1 m: the totals covered the gap
+                deadline = time.monotonic() + 20
+                while time.monotonic() < deadline and got[-1].pose.pose.position.x < 0.999:
+                    time.sleep(0.2)
+                assert got[-1].pose.pose.position.x == pytest.approx(1.0, abs=0.002)
+            finally:
+                client.close()
+    finally:
+        odo.send_signal(signal.SIGCONT)
+        odo.send_signal(signal.SIGINT)
+        out, _ = odo.communicate(timeout=15)
+    assert "gap in the single polls" in out and "left the node's ring buffer" in out, out

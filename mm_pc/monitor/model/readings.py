@@ -86,11 +86,15 @@ class Reply:
     """One answer of ``get_sensor_data``: the readings, and when and how fast it came.
 
     ``received_s``: monotonic time of arrival (s); ``rtt_s``: request to reply (s).
+    ``polls``: device -> its ``get_samples`` reply for the polls this reply's totals
+    cover (None: that fetch failed), or None when no polls were fetched at all (the
+    session then integrates the pose per reply).
     """
 
     readings: tuple[Reading, ...]
     received_s: float = 0.0
     rtt_s: float = 0.0
+    polls: dict[str, object] | None = None
 
     def by_id(self) -> dict[str, Reading]:
         return {r.id: r for r in self.readings}

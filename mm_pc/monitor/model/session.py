@@ -15,8 +15,16 @@ Every reply of mm_beagle (live, or replayed from a recording) goes through
 4. **Pose math** (:mod:`mm_pc.core.odometry`, method selectable; the mounts
    with the calibration's fitted positions) -- unless a calibration run is
    open: then the raw displacements of a recording step are kept and the
-   robot stays where it is (no pose from uncalibrated data).
-5. One row in the :class:`~.history.History` per reply, read by the views.
+   robot stays where it is (no pose from uncalibrated data). When the reply
+   carries the single polls its totals cover (``Reply.polls``, fetched with
+   ``get_samples`` by the bridge), the pose is integrated **per poll**
+   (:class:`mm_pc.core.polls.PollTracker`), so the request rate, a pause or a
+   slow link change only how often the pose is shown; polls that are missing
+   (ring overrun, a failed fetch) become one **gap** step from the totals,
+   counted in ``stats.gaps``, logged, and kept in :attr:`MonitorSession.gaps`
+   for the map. Without polls (an old recording) the pose is integrated per reply.
+5. One row in the :class:`~.history.History` per reply, read by the views
+   (the per-reply values: Graphs and Data show what each request served).
 
 Units and frames: metres, seconds, radians. Sensor displacements are in the
 sensor frame of the seed (X right, Y forward); poses are odom -> base_link
@@ -45,10 +53,11 @@ from mm_pc.core.calibration_fit import (
 from mm_pc.core.filters import SensorMedianFilter
 from mm_pc.core.geometry import DEFAULT_MOUNTS, SensorMount
 from mm_pc.core.odometry import METHODS, Odometry, Pose2D, Sample
+from mm_pc.core.polls import PollBatch, PollTracker, SensorTotals, integrate_steps
 from mm_pc.monitor.model.history import History
 from mm_pc.monitor.model.readings import Reading, Reply
 
-__all__ = ["LogEntry", "MonitorSession", "SessionStats", "sensor_columns"]
+__all__ = ["Gap", "LogEntry", "MonitorSession", "SessionStats", "sensor_columns"]
 
 #: Per-sensor history columns (prefixed ``s0_``, ``s1_``, ...):
 #: raw_dx/raw_dy  displacement served for the interval (m, sensor frame)
@@ -61,6 +70,14 @@ SENSOR_FIELDS = ("raw_dx", "raw_dy", "dx", "dy", "vx", "vy", "wx", "wy", "lifts"
 #: Robot columns: t (s since the first reply), dt (s), rtt (s), x/y/yaw (odom, m, rad),
 #: residual (m; two-sensor method only, else NaN), calibrating (1 while the wizard records).
 ROBOT_FIELDS = ("t", "dt", "rtt", "x", "y", "yaw", "residual", "calibrating")
+
+
+def _totals(r: Reading) -> SensorTotals:
+    """The poll tracker's view of one reading's monotone totals."""
+    return SensorTotals(
+        seq=r.seq, stamp_ns=r.stamp_ns, x_counts=r.x_total_counts, y_counts=r.y_total_counts,
+        x_m=r.x_total, y_m=r.y_total, x_est_m=r.x_lift_total, y_est_m=r.y_lift_total,
+    )
 
 
 def sensor_columns(k: int) -> dict[str, str]:
@@ -87,9 +104,27 @@ class LogEntry:
     lift_events: int
 
 
+@dataclass(frozen=True)
+class Gap:
+    """A stretch of the path without its single polls: drawn from (x0, y0) to (x1, y1)
+    (odom, m) as one step from the totals (or no step: a restart). ``t``: s since the
+    first reply; ``reason``: why the polls were missing."""
+
+    t: float
+    x0: float
+    y0: float
+    x1: float
+    y1: float
+    reason: str
+
+
 @dataclass
 class SessionStats:
-    """Counters the health view and the benchmarks read."""
+    """Counters the health view and the benchmarks read.
+
+    ``polls``: single polls integrated into the pose; ``per_reply``: replies whose
+    pose was integrated per reply (no polls came with them); ``gaps``: gap steps.
+    """
 
     replies: int = 0
     used: int = 0
@@ -97,6 +132,9 @@ class SessionStats:
     restarts: int = 0
     incomplete: int = 0
     rejected: int = 0
+    polls: int = 0
+    per_reply: int = 0
+    gaps: int = 0
     events: deque = field(default_factory=lambda: deque(maxlen=200))
 
 
@@ -138,6 +176,12 @@ class MonitorSession:
         self.devices: tuple[str, ...] = ()
         self.history: History | None = None
         self.odometry: Odometry | None = None
+        self.tracker: PollTracker | None = None
+        #: stretches without single polls, oldest first (at most 10 000 kept)
+        self.gaps: deque[Gap] = deque(maxlen=10_000)
+        self._poll_filters: dict[str, SensorMedianFilter] = {}
+        #: polls fetched with replies that made no step, joined to the next one's
+        self._stash: dict[str, list] = {}
         if devices is not None:
             self._set_devices(tuple(devices))
 
@@ -156,6 +200,8 @@ class MonitorSession:
         self._mounts = mounts
         self.odometry = odometry
         self.filters = {d: self.filters.get(d, SensorMedianFilter()) for d in devices}
+        self._poll_filters = {d: SensorMedianFilter() for d in devices}
+        self.tracker = PollTracker(len(devices), self.use_lift_estimates)
         cols = list(ROBOT_FIELDS)
         for k in range(len(devices)):
             cols += sensor_columns(k).values()
@@ -367,10 +413,12 @@ class MonitorSession:
         f = self.filters[device]
         f.window = window  # validates first
         f.filter_x, f.filter_y = bool(filter_x), bool(filter_y)
+        pf = self._poll_filters[device]  # the same filter over the single polls
+        pf.window, pf.filter_x, pf.filter_y = f.window, f.filter_x, f.filter_y
 
     def clear_filters(self) -> None:
         """Disable every filter and forget their history."""
-        for f in self.filters.values():
+        for f in (*self.filters.values(), *self._poll_filters.values()):
             f.filter_x = f.filter_y = False
             f.reset()
 
@@ -396,11 +444,13 @@ class MonitorSession:
         by_id = reply.by_id()
         if any(d not in by_id for d in self.devices):
             self.stats.incomplete += 1
+            self._stash_polls(reply)
             return False
         now = [by_id[d] for d in self.devices]
         if not all(math.isfinite(v) for r in now for v in (*self._total(r), r.stamp_ns)):
             self.stats.rejected += 1
             self.stats.events.append(("rejected", "a reply with a non-finite total"))
+            self._stash_polls(reply)
             return False
         prev = [self._prev.get(d) for d in self.devices]
         if any(p is None for p in prev) or any(
@@ -411,6 +461,7 @@ class MonitorSession:
             return False
         dt = (now[0].stamp_ns - prev[0].stamp_ns) / 1e9
         if dt <= 0:
+            self._stash_polls(reply)
             return False  # nothing new was polled since the previous reply
         self._step(reply, now, prev, dt)
         for r in now:
@@ -422,10 +473,16 @@ class MonitorSession:
             self._prev[r.id] = r
         if self._t0_ns is None:
             self._t0_ns = now[0].stamp_ns
+        self.tracker.baseline([_totals(r) for r in now])
+        self._stash.clear()
         self.stats.baselines += 1
         if restarted:
             self.stats.restarts += 1
-            self.stats.events.append(("restart", "the Beagle node restarted; new baseline"))
+            why = "the Beagle node restarted; new baseline (its counts meanwhile are lost)"
+            self.stats.events.append(("restart", why))
+            p = self.pose
+            t = (now[0].stamp_ns - self._t0_ns) / 1e9
+            self.gaps.append(Gap(t, p.x, p.y, p.x, p.y, why))
 
     def _step(self, reply: Reply, now: list[Reading], prev: list[Reading], dt: float) -> None:
         t = (now[0].stamp_ns - self._t0_ns) / 1e9
@@ -438,8 +495,12 @@ class MonitorSession:
             processed.append(self.calibration.apply(r.id, fx, fy))
         if self.calibrating:
             self._record_calibration(raw)
+        if reply.polls is not None:
+            pose = self._pose_from_polls(reply, now, t)
+        elif self.calibrating:
             pose = self.odometry.pose
         else:
+            self.stats.per_reply += 1
             pose = self.odometry.update(Sample.of(dt, *processed))
         self.stats.used += 1
         residual = self.odometry.residual
@@ -465,6 +526,54 @@ class MonitorSession:
             )
         self.history.append(row)
 
+    def _pose_from_polls(self, reply: Reply, now: list[Reading], t: float) -> Pose2D:
+        """Integrate the single polls the reply's totals cover; a gap step where they are
+        missing. The pose after the newest step made (an open lift holds steps back)."""
+        batches: list[PollBatch | None] = []
+        bad = ""
+        self._stash_polls(reply)
+        for dev in self.devices:
+            parts = self._stash.pop(dev, [])
+            try:
+                batches.append(PollBatch.join(parts) if parts and None not in parts else None)
+            except ValueError as e:
+                batches.append(None)
+                bad = f"{dev}: {e}"
+        self.tracker.use_lift_estimates = self.use_lift_estimates
+        steps = self.tracker.step([_totals(r) for r in now], batches)
+        if not len(steps):
+            return self.odometry.pose
+        d = steps.d.copy()
+        for k, dev in enumerate(self.devices):
+            dx, dy = d[:, k, 0], d[:, k, 1]
+            pf = self._poll_filters[dev]
+            if pf.filter_x or pf.filter_y:
+                dx, dy = pf.push_many(dx, dy)
+            d[:, k, 0], d[:, k, 1] = self.calibration.apply(dev, dx, dy)
+        if self.calibrating:
+            return self.odometry.pose  # a calibration run is open: the robot stays put
+        before = self.odometry.pose
+        poses = integrate_steps(self.odometry, steps, d)
+        self.stats.polls += int((~steps.gap).sum())
+        gaps = np.flatnonzero(steps.gap)
+        reasons = [*["polls missing"] * len(gaps), *self.tracker.gap_reasons]
+        reasons = reasons[len(reasons) - len(gaps) :]
+        for j, why in zip(gaps, reasons, strict=True):
+            start = poses[j - 1] if j > 0 else before.as_array()
+            if bad:
+                why = f"{why} ({bad})"
+            self.stats.gaps += 1
+            self.stats.events.append(("gap", f"no single polls: {why}; step from the totals"))
+            self.gaps.append(Gap(t, *map(float, start[:2]), *map(float, poses[j, :2]), why))
+        return self.odometry.pose
+
+    def _stash_polls(self, reply: Reply) -> None:
+        """Keep the polls of a reply until a reply makes a step (None = a failed fetch)."""
+        if reply.polls is None:
+            return
+        for dev, res in reply.polls.items():
+            self._stash.setdefault(dev, []).append(res)
+
     def forget_baselines(self, keep_t0: bool = True) -> None:
         """Take the next reply as a new baseline (switching between live and recorded data).
 
@@ -473,6 +582,7 @@ class MonitorSession:
         the time axis at the next reply.
         """
         self._prev.clear()
+        self._stash.clear()
         if not keep_t0:
             self._t0_ns = None
 
@@ -489,8 +599,9 @@ class MonitorSession:
             self.odometry.reset()
         if self.history is not None:
             self.history.clear()
-        for f in self.filters.values():
+        for f in (*self.filters.values(), *self._poll_filters.values()):
             f.reset()
         self.log.clear()
+        self.gaps.clear()
         if self._prev and self.devices:
             self._t0_ns = self._prev[self.devices[0]].stamp_ns

@@ -246,13 +246,15 @@ class HealthView(QWidget):
     def _show_counters(self) -> None:
         s = self.ctx.session.stats
         b = self.bridge_stats
-        key = (s.replies, s.used, s.restarts, s.incomplete, s.rejected, s.baselines, id(b))
+        key = (s.replies, s.used, s.restarts, s.incomplete, s.rejected, s.baselines, s.polls,
+               s.gaps, id(b))
         if key == self._stats_key:
             return
         self._stats_key = key
         self.session_label.setText(
             f"Session: {s.replies} replies, {s.used} used, {s.baselines} baselines, "
-            f"{s.restarts} node restarts, {s.incomplete} incomplete, {s.rejected} rejected"
+            f"{s.restarts} node restarts, {s.incomplete} incomplete, {s.rejected} rejected; "
+            f"pose from {s.polls} single polls, {s.gaps} gaps, {s.per_reply} replies per reply"
         )
         if self.ctx.bridge is None:
             self.bridge_label.setText("Bridge: offline (no ROS connection)")

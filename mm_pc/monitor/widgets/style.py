@@ -10,13 +10,22 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["ERROR_STYLE", "ROBOT_COLOUR", "SENSOR_COLOURS", "parse_number", "sensor_colour"]
+__all__ = [
+    "ERROR_STYLE",
+    "GAP_COLOUR",
+    "ROBOT_COLOUR",
+    "SENSOR_COLOURS",
+    "parse_number",
+    "sensor_colour",
+]
 
 #: style sheet of the red message shown next to a field that refused its input
 ERROR_STYLE = "color: #b00020"
 
 #: Colours on the white map and in the direction widgets.
 ROBOT_COLOUR = "#1f3a93"
+#: a stretch of the path without its single polls (drawn dashed over the path)
+GAP_COLOUR = "#e0102f"
 SENSOR_COLOURS = ("#e67e22", "#2e8b57", "#8e44ad", "#c0392b")
 
 

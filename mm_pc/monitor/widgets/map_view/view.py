@@ -9,7 +9,10 @@ columns ``x, y`` (robot) and ``s{k}_wx, s{k}_wy`` (sensor k).
 An hour at 100 Hz is 360 000 rows per path, so the paths are decimated
 (:class:`~mm_pc.monitor.model.path_decimator.PathDecimator`: the coarsest level below half
 a pixel) and held as one image (:class:`~.raster.PathRaster`); one light line per path joins
-the image's last point to the newest row. Measurements: docs/monitor.md.
+the image's last point to the newest row. Stretches the session stepped over without
+single polls (``session.gaps``: ring overrun, a failed fetch) are drawn dashed in
+``GAP_COLOUR`` over the path, a node restart as a dashed cross. Measurements:
+docs/monitor.md.
 """
 
 from __future__ import annotations
@@ -42,7 +45,7 @@ from mm_pc.monitor.widgets.map_view.items import (
     sensor_dot,
 )
 from mm_pc.monitor.widgets.map_view.raster import PathRaster
-from mm_pc.monitor.widgets.style import ROBOT_COLOUR, sensor_colour
+from mm_pc.monitor.widgets.style import GAP_COLOUR, ROBOT_COLOUR, sensor_colour
 
 __all__ = [
     "MAX_WIDTH_M",
@@ -121,6 +124,12 @@ class MapView(QWidget):
 
         self.raster = PathRaster()
         self.vb.addItem(self.raster, ignoreBounds=True)
+        pen = pg.mkPen(GAP_COLOUR, width=3)
+        pen.setStyle(Qt.PenStyle.DashLine)
+        self.gap_lines = Lines(pen, connect="pairs")
+        self.gap_lines.setZValue(15)  # over the paths, under the robot
+        self.vb.addItem(self.gap_lines, ignoreBounds=True)
+        self._gaps_drawn: tuple | None = None
         self._build_toolbar()
         self._build_robot_items()
         self._add_path("robot", "robot", ROBOT_COLOUR, 2.0, ("x", "y"))
@@ -252,7 +261,7 @@ class MapView(QWidget):
         self._update_grid()
         width = self.visible_width()
         pad = 3.0 * width / max(self.vb.width(), 1.0)  # 3 px: room for the pens' width
-        lines = [*self.grid, self.robot_outline, self.robot_heading,
+        lines = [*self.grid, self.robot_outline, self.robot_heading, self.gap_lines,
                  *(p.live for p in self.paths.values()), *(s["axes"] for s in self.sensor_items)]
         for item in lines:
             item.set_pad(pad)
@@ -394,6 +403,7 @@ class MapView(QWidget):
         self._ensure_sensors()
         behind = self._take_rows(hist) if hist is not None else False
         self._draw_robot()
+        self._draw_gaps()
         if self.follow_check.isChecked() and (data_changed or self._follow_pending):
             self._follow()
         self._draw_paths(hist)
@@ -450,6 +460,28 @@ class MapView(QWidget):
                          (float(self.vb.width()), float(self.vb.height())), dpr, bounds)
         for p in shown:
             p.draw_live(level, self.raster.done[p.key], *columns[p.key])
+
+    def gap_segments(self) -> np.ndarray:
+        """The gap marks drawn, as (N, 4) rows x0, y0, x1, y1 (m, odom)."""
+        x, y = self.gap_lines.getData()
+        return np.column_stack([x[0::2], y[0::2], x[1::2], y[1::2]]) if len(x) else np.empty((0, 4))
+
+    def _draw_gaps(self) -> None:
+        """Dashed marks over the stretches without single polls (a cross for a restart)."""
+        gaps = self.ctx.session.gaps
+        key = (id(gaps), len(gaps), gaps[-1] if gaps else None)
+        if key == self._gaps_drawn:
+            return
+        self._gaps_drawn = key
+        pts = []
+        for g in gaps:
+            if (g.x0, g.y0) != (g.x1, g.y1):
+                pts += [(g.x0, g.y0), (g.x1, g.y1)]
+            else:  # a restart: the pose did not move; a 2 cm cross where it happened
+                pts += [(g.x0 - 0.01, g.y0 - 0.01), (g.x0 + 0.01, g.y0 + 0.01),
+                        (g.x0 - 0.01, g.y0 + 0.01), (g.x0 + 0.01, g.y0 - 0.01)]
+        arr = np.array(pts, dtype=float).reshape(-1, 2)
+        self.gap_lines.setData(arr[:, 0], arr[:, 1])
 
     def _robot_xy(self) -> tuple[float, float]:
         pose = self.ctx.session.pose

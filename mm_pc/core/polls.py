@@ -1,0 +1,485 @@
+"""Per-poll sensor displacements from the Beagle node's single 1 kHz polls (``get_samples``).
+
+Pure numpy, no ROS: replies are read duck-typed (attributes of
+``mm_interfaces/srv/GetSamples_Response``), so the monitor, mm-odometry and a replay
+run this one implementation.
+
+A client asks ``get_sensor_data`` (monotone totals, per sensor: ``seq`` = polls done,
+measured totals in counts and metres) and, for each sensor, ``get_samples`` from the
+poll after the previous request up to that ``seq``. :class:`PollTracker` turns that
+into **steps**: one per poller tick, paired across sensors, each with its duration,
+per sensor the displacement in metres (sensor frame: X right, Y forward), the lift
+mask, and whether it is a **gap** step. The pose is then integrated step by step
+(:meth:`mm_pc.core.odometry.Odometry.integrate`), so the request rate changes only
+how often the pose is shown, never the pose (docs/pose-math.md, "Per-poll integration").
+
+Pairing: the poller polls every sensor in one tick with the same stamp (ns, system
+clock), so the polls of one tick share ``stamp_ns``. Reads that are not polls (a
+settings read for a command, flag 16, or the drain before a CPI change) carry a stamp
+of their own; their counts are added to the same sensor's next tick (counts are never
+dropped). Polls of one sensor in ticks the other sensor has no poll for (it was down)
+are added to the next common tick too, and that step is marked a gap.
+
+Gaps: when the polls of an interval are missing (``dropped`` > 0: the ring overran;
+the reply ends before the totals' ``seq``; no reply; its counts disagree with the
+totals; a CPI change inside the interval), the interval becomes one gap step carrying
+the whole displacement from the totals, so nothing is lost and the caller can mark it.
+
+Lifts: the polls of a lifted sensor are filled by
+:func:`mm_pc.core.filters.interpolate_lift_gaps`; a step is held back while a lift of
+any sensor is open or closed fewer than :data:`LIFT_CONTEXT_POLLS` polls ago, and the
+last :data:`LIFT_CONTEXT_POLLS` steps are kept as the filler's left context, so the
+steps (and the pose) do not depend on where the request boundaries fell.
+"""
+
+from __future__ import annotations
+
+import inspect
+import itertools
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from mm_pc.core.filters import interpolate_lift_gaps
+from pln2033 import INCH_M
+
+__all__ = [
+    "FLAG_COMMAND_READ",
+    "FLAG_LIFT",
+    "FLAG_MOTION",
+    "FLAG_OVERFLOW",
+    "FLAG_SPI_ERROR",
+    "LIFT_CONTEXT_POLLS",
+    "PollBatch",
+    "PollSteps",
+    "PollTracker",
+    "SensorTotals",
+    "integrate_steps",
+]
+
+# the bits of GetSamples' flags (the same as mm_beagle.shared_state's FLAG_*)
+FLAG_LIFT = 1
+FLAG_MOTION = 2
+FLAG_OVERFLOW = 4
+FLAG_SPI_ERROR = 8
+FLAG_COMMAND_READ = 16
+
+#: Polls on each side of a lift the gap filling may look at (its window must fit).
+LIFT_CONTEXT_POLLS = 64
+
+#: Shortest step (s) handed to the integrator (a command's read shares its tick's time).
+MIN_DT_S = 1e-6
+
+
+@dataclass(frozen=True)
+class SensorTotals:
+    """One sensor's monotone totals in one ``get_sensor_data`` reply.
+
+    ``seq``: polls done so far; ``stamp_ns``: newest poll (ns); ``x_counts``,
+    ``y_counts``: measured counts; ``x_m``, ``y_m``: the same in metres (exact
+    across CPI changes); ``x_est_m``, ``y_est_m``: the node's estimate of what
+    lifts lost (m, not in the measured totals).
+    """
+
+    seq: int
+    stamp_ns: int
+    x_counts: int
+    y_counts: int
+    x_m: float
+    y_m: float
+    x_est_m: float = 0.0
+    y_est_m: float = 0.0
+
+    @classmethod
+    def from_msg(cls, msg) -> SensorTotals:
+        """From an ``mm_interfaces/SensorData`` (attributes only)."""
+        return cls(
+            seq=int(msg.seq),
+            stamp_ns=int(msg.stamp.sec) * 1_000_000_000 + int(msg.stamp.nanosec),
+            x_counts=int(msg.x_total_counts),
+            y_counts=int(msg.y_total_counts),
+            x_m=float(msg.x_total_disp),
+            y_m=float(msg.y_total_disp),
+            x_est_m=float(msg.x_lift_est_total_disp),
+            y_est_m=float(msg.y_lift_est_total_disp),
+        )
+
+
+@dataclass(frozen=True)
+class PollBatch:
+    """The polls of one ``get_samples`` reply of one sensor, checked.
+
+    ``first_seq``..``next_seq``: the sequence numbers covered; ``dropped``: polls
+    asked for that had left the ring; ``cpi``: resolution at the newest poll;
+    ``stamp_ns``, ``dx``, ``dy`` (counts), ``flags``: one entry per poll.
+    """
+
+    first_seq: int
+    next_seq: int
+    dropped: int
+    cpi: int
+    stamp_ns: np.ndarray
+    dx: np.ndarray
+    dy: np.ndarray
+    flags: np.ndarray
+
+    @classmethod
+    def from_reply(cls, res) -> PollBatch:
+        """From a ``GetSamples.Response`` (attributes only); ValueError saying what is wrong."""
+        try:
+            stamp = np.asarray(res.stamp_ns, dtype=np.int64)
+            dx = np.asarray(res.dx, dtype=np.int64)
+            dy = np.asarray(res.dy, dtype=np.int64)
+            flags = np.asarray(res.flags, dtype=np.int64)
+            first, nxt = int(res.first_seq), int(res.next_seq)
+            dropped, cpi = int(res.dropped), int(res.cpi)
+        except (AttributeError, TypeError, ValueError) as e:
+            raise ValueError(f"not a get_samples reply: {e}") from None
+        n = len(stamp)
+        if not (len(dx) == len(dy) == len(flags) == n):
+            raise ValueError(
+                f"get_samples reply with {n} stamps, {len(dx)} dx, {len(dy)} dy, "
+                f"{len(flags)} flags: every poll needs all four"
+            )
+        if nxt - first != n or first < 0:
+            raise ValueError(
+                f"get_samples reply covers seq {first}..{nxt} but holds {n} polls"
+            )
+        if n and cpi <= 0:
+            raise ValueError(f"get_samples reply with {n} polls but cpi {cpi}")
+        return cls(first, nxt, dropped, cpi, stamp, dx, dy, flags)
+
+    def __len__(self) -> int:
+        return len(self.stamp_ns)
+
+    @classmethod
+    def join(cls, replies: Sequence) -> PollBatch:
+        """Consecutive replies (or batches) of one sensor as one batch; ValueError if they
+        do not follow each other (``next_seq`` of one = ``first_seq`` of the next)."""
+        parts = [r if isinstance(r, PollBatch) else cls.from_reply(r) for r in replies]
+        if not parts:
+            raise ValueError("no get_samples replies to join")
+        if len(parts) == 1:
+            return parts[0]
+        for a, b in itertools.pairwise(parts):
+            if b.first_seq != a.next_seq and len(b):
+                raise ValueError(f"polls up to seq {a.next_seq}, the next from {b.first_seq}")
+        parts = [parts[0], *(p for p in parts[1:] if len(p))]
+        cpi = next((p.cpi for p in reversed(parts) if len(p)), parts[-1].cpi)
+        return cls(
+            parts[0].first_seq, parts[-1].next_seq, sum(p.dropped for p in parts), cpi,
+            *(np.concatenate([getattr(p, f) for p in parts]) for f in ("stamp_ns", "dx", "dy",
+                                                                        "flags")),
+        )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class PollSteps:
+    """Steps ready to integrate, oldest first (one per poller tick, or one per gap).
+
+    ``stamp_ns`` (N,): end of each step (ns); ``dt`` (N,): its length (s, > 0);
+    ``d`` (N, n_sensors, 2): sensor-frame displacement (dX right, dY forward) in
+    metres, lifted polls filled; ``counts`` (N, n_sensors, 2): the measured counts
+    (0 for gap steps); ``lifted`` (N, n_sensors): the sensor's lift bit; ``gap`` (N,):
+    True for a step that stands for missing polls (its displacement from the totals).
+    """
+
+    stamp_ns: np.ndarray
+    dt: np.ndarray
+    d: np.ndarray
+    counts: np.ndarray
+    lifted: np.ndarray
+    gap: np.ndarray
+
+    @classmethod
+    def empty(cls, n_sensors: int) -> PollSteps:
+        return cls(
+            np.empty(0, np.int64), np.empty(0), np.empty((0, n_sensors, 2)),
+            np.empty((0, n_sensors, 2), np.int64), np.empty((0, n_sensors), bool),
+            np.empty(0, bool),
+        )  # fmt: skip
+
+    def __len__(self) -> int:
+        return len(self.dt)
+
+    @staticmethod
+    def concat(parts: Sequence[PollSteps], n_sensors: int) -> PollSteps:
+        parts = [p for p in parts if len(p)]
+        if not parts:
+            return PollSteps.empty(n_sensors)
+        if len(parts) == 1:
+            return parts[0]
+        return PollSteps(*(np.concatenate([getattr(p, f) for p in parts]) for f in _FIELDS))
+
+
+_FIELDS = ("stamp_ns", "dt", "d", "counts", "lifted", "gap")
+
+
+@dataclass
+class _Pending:
+    """One sensor's polls received but not yet turned into steps."""
+
+    stamp: np.ndarray
+    dx: np.ndarray
+    dy: np.ndarray
+    flags: np.ndarray
+    cpi: int = 0
+
+    @classmethod
+    def empty(cls) -> _Pending:
+        z = np.empty(0, np.int64)
+        return cls(z, z, z, z)
+
+    def add(self, b: PollBatch) -> None:
+        self.stamp = np.concatenate([self.stamp, b.stamp_ns])
+        self.dx = np.concatenate([self.dx, b.dx])
+        self.dy = np.concatenate([self.dy, b.dy])
+        self.flags = np.concatenate([self.flags, b.flags])
+        if len(b):
+            self.cpi = b.cpi
+
+    def drop(self, k: int) -> None:
+        self.stamp, self.dx, self.dy, self.flags = (
+            a[k:] for a in (self.stamp, self.dx, self.dy, self.flags)
+        )
+
+
+class PollTracker:
+    """Turns (totals, polls) per request into per-poll steps; one per client of a node.
+
+    Call :meth:`baseline` with the first reply's totals (and again after a node
+    restart), then for every later reply :meth:`step` with its totals and the
+    ``get_samples`` reply of each sensor (None when it failed or was not asked),
+    fetched with ``since_seq`` = :meth:`cursor` and ``max_samples`` = the totals'
+    ``seq`` minus it. ``use_lift_estimates``: a gap step adds the node's lift
+    estimates of its interval (the per-poll steps fill lifts themselves).
+    """
+
+    def __init__(self, n_sensors: int, use_lift_estimates: bool = True) -> None:
+        if n_sensors < 1:
+            raise ValueError(f"a PollTracker needs at least one sensor, got {n_sensors}")
+        self.n = n_sensors
+        self.use_lift_estimates = bool(use_lift_estimates)
+        self._cursor: list[int] | None = None
+        #: gap steps made so far, and why (newest last, at most 200 kept)
+        self.gaps = 0
+        self.gap_reasons: list[str] = []
+        #: polls turned into steps so far (per sensor, all entries incl. command reads)
+        self.polls_used = [0] * n_sensors
+
+    # -- state ---------------------------------------------------------------------
+
+    @property
+    def started(self) -> bool:
+        return self._cursor is not None
+
+    def cursor(self, i: int) -> int | None:
+        """The ``since_seq`` to ask sensor ``i``'s polls from (None before a baseline)."""
+        return None if self._cursor is None else self._cursor[i]
+
+    def baseline(self, totals: Sequence[SensorTotals]) -> None:
+        """Start (again) from these totals: nothing before them is integrated."""
+        self._check_totals(totals)
+        self._cursor = [t.seq for t in totals]
+        self._acc_counts = [(t.x_counts, t.y_counts) for t in totals]  # totals at the cursor
+        self._acc_m = [(t.x_m, t.y_m) for t in totals]
+        # totals (m) up to the end of the last step made, and the estimates at that reply
+        self._emitted_m = [[t.x_m, t.y_m] for t in totals]
+        self._est_ref = [(t.x_est_m, t.y_est_m) for t in totals]
+        self._last_stamp = max(t.stamp_ns for t in totals)
+        self._pending = [_Pending.empty() for _ in range(self.n)]
+        self._ctx_counts = np.zeros((0, self.n, 2), np.int64)
+        self._ctx_lifted = np.zeros((0, self.n), bool)
+
+    def _check_totals(self, totals: Sequence[SensorTotals]) -> None:
+        if len(totals) != self.n:
+            raise ValueError(f"expected totals of {self.n} sensor(s), got {len(totals)}")
+
+    # -- one request ------------------------------------------------------------------
+
+    def step(
+        self, totals: Sequence[SensorTotals], polls: Sequence[PollBatch | None]
+    ) -> PollSteps:
+        """The steps this reply makes ready (possibly none; a gap step when polls are missing).
+
+        Raises ValueError before a :meth:`baseline`, for the wrong number of
+        sensors, or for totals that went back (a restart: call :meth:`baseline`).
+        """
+        if self._cursor is None:
+            raise ValueError("PollTracker.step before baseline()")
+        self._check_totals(totals)
+        if len(polls) != self.n:
+            raise ValueError(f"expected polls of {self.n} sensor(s), got {len(polls)}")
+        for i, t in enumerate(totals):
+            if t.seq < self._cursor[i]:
+                raise ValueError(
+                    f"sensor {i}'s seq went back ({self._cursor[i]} -> {t.seq}): "
+                    "the node restarted; take a new baseline"
+                )
+        problem = self._why_not_usable(totals, polls)
+        if problem:
+            return self._gap(totals, problem)
+        for i, (t, b) in enumerate(zip(totals, polls, strict=True)):
+            if b is not None and len(b):
+                self._pending[i].add(b)
+            self._cursor[i] = t.seq
+            self._acc_counts[i] = (t.x_counts, t.y_counts)
+            self._acc_m[i] = (t.x_m, t.y_m)
+        steps = self._pair()
+        if not self._pending_any():
+            self._est_ref = [(t.x_est_m, t.y_est_m) for t in totals]
+        return steps
+
+    def _why_not_usable(self, totals, polls) -> str:
+        for i, (t, b) in enumerate(zip(totals, polls, strict=True)):
+            want = t.seq - self._cursor[i]
+            if want == 0:
+                continue
+            if b is None:
+                return f"sensor {i}: no polls for seq {self._cursor[i]}..{t.seq}"
+            if b.dropped or b.first_seq != self._cursor[i]:
+                return (
+                    f"sensor {i}: {max(b.dropped, b.first_seq - self._cursor[i])} polls "
+                    "had left the node's ring buffer"
+                )
+            if b.next_seq != t.seq:
+                return f"sensor {i}: polls up to seq {b.next_seq}, totals at {t.seq}"
+            ax, ay = self._acc_counts[i]
+            sx, sy = int(b.dx.sum()), int(b.dy.sum())
+            if (sx, sy) != (t.x_counts - ax, t.y_counts - ay):
+                return (
+                    f"sensor {i}: polls sum to ({sx}, {sy}) counts, the totals moved "
+                    f"({t.x_counts - ax}, {t.y_counts - ay})"
+                )
+            mx, my = self._acc_m[i]
+            scale = INCH_M / b.cpi
+            for got, want_m in ((sx * scale, t.x_m - mx), (sy * scale, t.y_m - my)):
+                if not math.isclose(got, want_m, rel_tol=1e-9, abs_tol=1e-12):
+                    return f"sensor {i}: the CPI changed within the interval"
+        return ""
+
+    def _pending_any(self) -> bool:
+        return any(len(p.stamp) for p in self._pending)
+
+    def _gap(self, totals: Sequence[SensorTotals], why: str) -> PollSteps:
+        """One step with the totals' displacement since the last step; forget the polls."""
+        d = np.empty((1, self.n, 2))
+        for i, t in enumerate(totals):
+            ex, ey = self._emitted_m[i]
+            gx, gy = t.x_m - ex, t.y_m - ey
+            if self.use_lift_estimates:
+                gx += t.x_est_m - self._est_ref[i][0]
+                gy += t.y_est_m - self._est_ref[i][1]
+            d[0, i] = gx, gy
+        stamp = max(t.stamp_ns for t in totals)
+        dt = max((stamp - self._last_stamp) / 1e9, MIN_DT_S)
+        self.gaps += 1
+        self.gap_reasons = [*self.gap_reasons[-199:], why]
+        self.baseline(totals)
+        return PollSteps(
+            np.array([stamp], np.int64), np.array([dt]), d,
+            np.zeros((1, self.n, 2), np.int64), np.zeros((1, self.n), bool),
+            np.array([True]),
+        )  # fmt: skip
+
+    # -- pairing and lift filling -------------------------------------------------------
+
+    def _pair(self) -> PollSteps:
+        pend = self._pending
+        if any(len(p.stamp) == 0 for p in pend):
+            return PollSteps.empty(self.n)
+        # ticks: stamps of real polls (not command reads) present for every sensor
+        ticks = None
+        for p in pend:
+            s = p.stamp[(p.flags & FLAG_COMMAND_READ) == 0]
+            ticks = s if ticks is None else np.intersect1d(ticks, s, assume_unique=False)
+        ticks = np.unique(ticks)
+        if not len(ticks):
+            return PollSteps.empty(self.n)
+        k = len(ticks)
+        counts = np.zeros((k, self.n, 2), np.int64)
+        lifted = np.zeros((k, self.n), bool)
+        folded = np.zeros(k, bool)
+        used = []
+        for i, p in enumerate(pend):
+            m = int(np.searchsorted(p.stamp, ticks[-1], side="right"))
+            idx = np.searchsorted(ticks, p.stamp[:m], side="left")  # the tick at or after
+            np.add.at(counts[:, i, 0], idx, p.dx[:m])
+            np.add.at(counts[:, i, 1], idx, p.dy[:m])
+            own = p.stamp[:m] == ticks[idx]
+            lifted[idx[own], i] = (p.flags[:m][own] & FLAG_LIFT) != 0
+            # polls this sensor made while another had none -- but not those of a tick
+            # whose other polls fell before the baseline (the totals of the sensors
+            # of one reply are read one after the other, so they may end a tick apart)
+            extra = ~own & ((p.flags[:m] & FLAG_COMMAND_READ) == 0)
+            extra &= p.stamp[:m] > self._last_stamp
+            folded[idx[extra]] = True
+            used.append(m)
+        cut = self._ready(lifted)
+        if cut == 0:
+            return PollSteps.empty(self.n)
+        # polls up to the last tick taken leave the pending lists
+        for i, p in enumerate(pend):
+            m = int(np.searchsorted(p.stamp, ticks[cut - 1], side="right")) if cut < k else used[i]
+            self.polls_used[i] += m
+            p.drop(m)
+        for j in np.flatnonzero(folded[:cut]):
+            self.gaps += 1
+            self.gap_reasons = [
+                *self.gap_reasons[-199:],
+                f"a sensor polled alone (another was down) up to {int(ticks[j])} ns",
+            ]
+        filled = self._fill(counts, lifted, cut)
+        scale = np.array([INCH_M / max(p.cpi, 1) for p in pend])
+        d = filled * scale[None, :, None]
+        stamps = ticks[:cut]
+        prev = np.concatenate([[self._last_stamp], stamps[:-1]])
+        dt = np.maximum((stamps - prev) / 1e9, MIN_DT_S)
+        self._last_stamp = int(stamps[-1])
+        for i in range(self.n):
+            self._emitted_m[i][0] += float(counts[:cut, i, 0].sum() * scale[i])
+            self._emitted_m[i][1] += float(counts[:cut, i, 1].sum() * scale[i])
+        ctx_c = np.concatenate([self._ctx_counts, counts[:cut]])[-LIFT_CONTEXT_POLLS:]
+        ctx_l = np.concatenate([self._ctx_lifted, lifted[:cut]])[-LIFT_CONTEXT_POLLS:]
+        self._ctx_counts, self._ctx_lifted = ctx_c, ctx_l
+        return PollSteps(stamps, dt, d, counts[:cut], lifted[:cut], folded[:cut])
+
+    @staticmethod
+    def _ready(lifted: np.ndarray) -> int:
+        """How many leading ticks can be made steps: up to the start of the first lift
+        that closed fewer than LIFT_CONTEXT_POLLS ticks before the newest (or is open)."""
+        k = len(lifted)
+        any_lift = lifted.any(axis=1)
+        late = np.flatnonzero(any_lift[max(0, k - LIFT_CONTEXT_POLLS) :])
+        if not len(late):
+            return k
+        j = max(0, k - LIFT_CONTEXT_POLLS) + int(late[0])
+        while j > 0 and any_lift[j - 1]:
+            j -= 1
+        return j
+
+    def _fill(self, counts: np.ndarray, lifted: np.ndarray, cut: int) -> np.ndarray:
+        """Counts of the first ``cut`` ticks with lifted polls filled (float)."""
+        out = counts[:cut].astype(float)
+        if not lifted.any():
+            return out
+        c0 = len(self._ctx_counts)
+        allc = np.concatenate([self._ctx_counts, counts])
+        alll = np.concatenate([self._ctx_lifted, lifted])
+        for i in range(self.n):
+            if lifted[:cut, i].any():
+                f = interpolate_lift_gaps(allc[:, i, :], alll[:, i])
+                out[:, i, :] = f[c0 : c0 + cut]
+        return out
+
+
+def integrate_steps(odometry, steps: PollSteps, d: np.ndarray | None = None) -> np.ndarray:
+    """``odometry.integrate`` over the steps (``d``: their displacements after calibration,
+    default ``steps.d``); the lift mask goes along where ``integrate`` takes ``lifted``
+    (``two-sensor`` then drops a lifted sensor's equations). Returns the (N, 3) poses."""
+    d = steps.d if d is None else d
+    if steps.lifted.any() and "lifted" in inspect.signature(odometry.integrate).parameters:
+        return odometry.integrate(steps.dt, d, lifted=steps.lifted)
+    return odometry.integrate(steps.dt, d)
