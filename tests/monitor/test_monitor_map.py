@@ -400,7 +400,7 @@ def test_history_dropping_old_rows_rebuilds_the_paths(qtbot):
     for r in replies[300:]:
         ctx.on_reply(r)
     v.refresh()
-    hist = ctx.session.history
+    hist = ctx.session.map_history
     assert hist.dropped_rows > 0
     assert_path_from_history(v, "robot", hist, "x", "y")
 
@@ -812,8 +812,15 @@ def fill_hour(ctx: MonitorContext, rows: int = 360_000) -> None:
     session = ctx.session
     data = hour_rows(session, rows)
     session.history.extend(data)
+    session.map_history.extend(map_rows(session, data))
     col = session.history.index
     session.odometry.reset(Pose2D(*data[-1, [col["x"], col["y"], col["yaw"]]]))
+
+
+def map_rows(session: MonitorSession, rows: np.ndarray) -> np.ndarray:
+    """The map's columns (session.map_history) of history-shaped rows."""
+    col = session.history.index
+    return rows[:, [col[name] for name in session.map_history.columns]]
 
 
 def time_frames(view: MapView, ctx: MonitorContext, app, n: int = 60):
@@ -828,6 +835,7 @@ def time_frames(view: MapView, ctx: MonitorContext, app, n: int = 60):
         for name in ("x", "s0_wx", "s1_wx"):
             row[col[name]] += 0.002 * math.cos(row[col["yaw"]])
         hist.append(row)
+        ctx.session.map_history.extend(map_rows(ctx.session, row[None, :]))
         ctx.session.odometry.reset(Pose2D(row[col["x"]], row[col["y"]], row[col["yaw"]]))
         t0 = time.perf_counter()
         view.refresh()

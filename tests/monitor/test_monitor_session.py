@@ -338,6 +338,40 @@ def test_pose_from_polls_is_the_same_with_a_five_second_pause():
     assert np.hypot(*(s.pose.as_array()[:2] - truth[:2])) > 3e-3
 
 
+def test_the_map_follows_the_path_through_a_pause_not_its_chord():
+    """The map's rows (map_history) of the reply that covers a 5 s pause are its per-poll
+    poses: they lie on the true path, and the paused session's map matches the unpaused one."""
+    from fakes import FakeRing
+
+    from mm_pc.monitor.model.session import MAP_SPACING_M
+    from mm_pc.sim.robot import request_boundaries
+
+    v, w = trajectory("s_curves")
+    ring = FakeRing(v[:15000], w[:15000])
+    ends = [int(e) for e in request_boundaries(ring.n_polls, 15.0)]
+    paused = [e for e in ends if not 4000 < e < 9000]
+    s = MonitorSession(devices=DEVS)
+    for r in _poll_replies(ring, [0, *paused]):
+        s.process(r)
+    m = s.map_history
+    t, x, y = m.column("t"), m.column("x"), m.column("y")
+    inside = (t > 4.1) & (t < 8.9)  # drawn inside the pause: only per-poll poses can be there
+    travelled = float(np.sum(np.abs(v[4000:9000])) * 0.001)
+    assert inside.sum() > 0.8 * travelled / MAP_SPACING_M
+    truth = integrate_pose(ring.v, ring.w, 0.001)
+    k = np.clip(np.round(t * 1000).astype(int) - 1, 0, len(truth) - 1)  # poll k ends at (k+1) ms
+    off = np.hypot(x - truth[k, 0], y - truth[k, 1])
+    assert off.max() < 1e-3  # on the path (1600 CPI quantisation), not on a 5 s chord
+    assert (m.column("x")[-1], m.column("y")[-1]) == (s.pose.x, s.pose.y)
+    # without the polls the map has one row per reply: the pause is one straight segment
+    s2 = MonitorSession(devices=DEVS)
+    for r in _poll_replies(ring, [0, *paused]):
+        s2.process(type(r)(r.readings))
+    assert len(s2.map_history) == len(s2.history) and not (
+        (s2.map_history.column("t") > 4.1) & (s2.map_history.column("t") < 8.9)
+    ).any()
+
+
 def test_a_failed_poll_fetch_is_a_marked_gap_from_the_totals():
     from fakes import FakeRing
 

@@ -70,6 +70,13 @@ SENSOR_FIELDS = ("raw_dx", "raw_dy", "dx", "dy", "vx", "vy", "wx", "wy", "lifts"
 #: Robot columns: t (s since the first reply), dt (s), rtt (s), x/y/yaw (odom, m, rad),
 #: residual (m; two-sensor method only, else NaN), calibrating (1 while the wizard records).
 ROBOT_FIELDS = ("t", "dt", "rtt", "x", "y", "yaw", "residual", "calibrating")
+#: The map's path (:attr:`MonitorSession.map_history`): t, x, y, yaw and s<k>_wx, s<k>_wy as
+#: above, one row per reply -- or, where the reply brought its single polls, the per-poll
+#: poses kept every MAP_SPACING_M of travel or MAP_SPACING_RAD of turn (so a long reply,
+#: after a pause or a slow link, is drawn along the path it covered, not as a chord).
+MAP_FIELDS = ("t", "x", "y", "yaw")
+MAP_SPACING_M = 0.002
+MAP_SPACING_RAD = math.radians(1.0)
 
 
 def _totals(r: Reading) -> SensorTotals:
@@ -78,6 +85,24 @@ def _totals(r: Reading) -> SensorTotals:
         seq=r.seq, stamp_ns=r.stamp_ns, x_counts=r.x_total_counts, y_counts=r.y_total_counts,
         x_m=r.x_total, y_m=r.y_total, x_est_m=r.x_lift_total, y_est_m=r.y_lift_total,
     )
+
+
+def _map_keep(poses: np.ndarray) -> np.ndarray:
+    """Indices of the per-poll poses (N x 3: x, y, yaw) the map keeps: where the travelled
+    distance passes a multiple of MAP_SPACING_M or the turned angle one of MAP_SPACING_RAD,
+    and always the last (the reply's pose)."""
+    if len(poses) == 0:
+        return np.zeros(0, dtype=int)
+    x, y = poses[:, 0], poses[:, 1]
+    step = np.hypot(np.diff(x, prepend=x[0]), np.diff(y, prepend=y[0]))
+    turn = np.abs(np.diff(poses[:, 2], prepend=poses[0, 2]))
+    dist_bin = np.floor(np.cumsum(step) / MAP_SPACING_M)
+    turn_bin = np.floor(np.cumsum(turn) / MAP_SPACING_RAD)
+    new = np.ones(len(poses), dtype=bool)
+    new[1:] = (dist_bin[1:] != dist_bin[:-1]) | (turn_bin[1:] != turn_bin[:-1])
+    new[0] = False  # the first pose of a reply continues the previous reply's last row
+    new[-1] = True
+    return np.flatnonzero(new)
 
 
 def sensor_columns(k: int) -> dict[str, str]:
@@ -175,6 +200,7 @@ class MonitorSession:
         self._cal_rec: list = []  # its raw per-interval displacements
         self.devices: tuple[str, ...] = ()
         self.history: History | None = None
+        self.map_history: History | None = None
         self.odometry: Odometry | None = None
         self.tracker: PollTracker | None = None
         #: stretches without single polls, oldest first (at most 10 000 kept)
@@ -206,6 +232,11 @@ class MonitorSession:
         for k in range(len(devices)):
             cols += sensor_columns(k).values()
         self.history = History(cols, max_rows=self.max_rows)
+        map_cols = list(MAP_FIELDS)
+        for k in range(len(devices)):
+            map_cols += [f"s{k}_wx", f"s{k}_wy"]
+        self.map_history = History(map_cols, max_rows=self.max_rows)
+        self._poll_poses: tuple[np.ndarray, np.ndarray] | None = None
 
     def _mounts_for(self, n: int) -> tuple[SensorMount, ...]:
         if len(self._mounts) >= n:
@@ -525,6 +556,22 @@ class MonitorSession:
                 )
             )
         self.history.append(row)
+        self._append_map(t, pose)
+
+    def _append_map(self, t: float, pose: Pose2D) -> None:
+        """The map's rows for this reply: its per-poll poses (decimated) or the reply's pose."""
+        if self._poll_poses is not None:
+            ts, poses = self._poll_poses
+            self._poll_poses = None
+            keep = _map_keep(poses)
+            ts, poses = ts[keep], poses[keep]
+        else:
+            ts, poses = np.array([t]), np.array([[pose.x, pose.y, pose.yaw]])
+        c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+        cols = [ts, poses[:, 0], poses[:, 1], poses[:, 2]]
+        for m in self._mounts:
+            cols += [poses[:, 0] + c * m.x - s * m.y, poses[:, 1] + s * m.x + c * m.y]
+        self.map_history.extend(np.column_stack(cols))
 
     def _pose_from_polls(self, reply: Reply, now: list[Reading], t: float) -> Pose2D:
         """Integrate the single polls the reply's totals cover; a gap step where they are
@@ -554,6 +601,7 @@ class MonitorSession:
             return self.odometry.pose  # a calibration run is open: the robot stays put
         before = self.odometry.pose
         poses = integrate_steps(self.odometry, steps, d)
+        self._poll_poses = ((steps.stamp_ns - self._t0_ns) / 1e9, np.asarray(poses, float))
         self.stats.polls += int((~steps.gap).sum())
         gaps = np.flatnonzero(steps.gap)
         reasons = [*["polls missing"] * len(gaps), *self.tracker.gap_reasons]
@@ -599,6 +647,7 @@ class MonitorSession:
             self.odometry.reset()
         if self.history is not None:
             self.history.clear()
+            self.map_history.clear()
         for f in (*self.filters.values(), *self._poll_filters.values()):
             f.reset()
         self.log.clear()

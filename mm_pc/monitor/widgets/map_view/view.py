@@ -3,8 +3,9 @@
 Odom x points right on the screen, y up; everything in metres. The robot is
 drawn as an outline with a heading arrow at the session's current pose, each
 sensor as a dot with its own axis arrows (sensor +Y = robot forward, sensor
-+X = robot right, turned by the mount's yaw error). The paths are the history
-columns ``x, y`` (robot) and ``s{k}_wx, s{k}_wy`` (sensor k).
++X = robot right, turned by the mount's yaw error). The paths are the session's
+``map_history`` columns ``x, y`` (robot) and ``s{k}_wx, s{k}_wy`` (sensor k): one
+row per reply, or the reply's per-poll poses where it brought its single polls.
 
 An hour at 100 Hz is 360 000 rows per path, so the paths are decimated
 (:class:`~mm_pc.monitor.model.path_decimator.PathDecimator`: the coarsest level below half
@@ -330,7 +331,7 @@ class MapView(QWidget):
     def path_data(self, key) -> tuple[np.ndarray, np.ndarray]:
         """The points drawn for a path (m, odom), in path order: those of the raster (the
         segments near its area) then the live end, without repeated joining points."""
-        path, hist, r = self.paths[key], self.ctx.session.history, self.raster
+        path, hist, r = self.paths[key], self.ctx.session.map_history, self.raster
         if hist is None or not path.visible or key not in r.done:
             return np.empty(0), np.empty(0)
         x, y = hist.column(path.columns[0]), hist.column(path.columns[1])
@@ -346,7 +347,7 @@ class MapView(QWidget):
     def finish_drawing(self) -> None:
         """Draw now what the raster still has queued off the screen (drawn over the next
         frames otherwise): for tests and exports."""
-        hist = self.ctx.session.history
+        hist = self.ctx.session.map_history
         if hist is None or self.raster.image is None:
             return
         shown = [p for p in self._drawing_order() if p.key in self.raster.done]
@@ -369,7 +370,7 @@ class MapView(QWidget):
         moved (``shifts``), path ends drawn onto it (``commits``), paints;
         ``memory_mb``: the decimators' arrays and the raster image."""
         ms = np.array(self._refresh_ms[-1000:]) if self._refresh_ms else np.zeros(1)
-        hist = self.ctx.session.history
+        hist = self.ctx.session.map_history
         r = self.raster
         return {
             "rows": len(hist) if hist is not None else 0,
@@ -392,7 +393,7 @@ class MapView(QWidget):
 
     def refresh(self) -> None:
         """Redraw what changed since the last call; returns at once when nothing did."""
-        hist = self.ctx.session.history
+        hist = self.ctx.session.map_history
         key = (id(hist), hist.version) if hist is not None else None
         if key == self._seen and not self._dirty:
             return
