@@ -288,6 +288,9 @@ class RemoteAgent:
             self._apply(block, fetch_gaps=True)
             if block.count:
                 newest = max(newest, int(np.frombuffer(block.ints, np.int64)[ss.I_STAMP_NS]))
+        # a gap fetch can take seconds: frames that kept arriving meanwhile mean the link is
+        # up (else the feeder would call it lost the moment the fetch returns)
+        self.last_heard = max(self.last_heard, self.last_rx)
         if newest:
             self._clock(recv_ns, newest)
             self.apply_latency_ms.append((time.time_ns() - newest) / 1e6)
