@@ -70,7 +70,9 @@ DIAGNOSTICS_QOS = qos_profile()
 
 def qos_yaml(profiles: list[dict]) -> str:
     """The ``offered_qos_profiles`` string rosbag2 puts into an MCAP channel's metadata."""
-    return yaml.safe_dump(profiles, default_flow_style=False, sort_keys=False).strip()
+    return yaml.dump(
+        profiles, Dumper=_PlainDumper, default_flow_style=False, sort_keys=False
+    ).strip()
 
 
 @dataclass(frozen=True)
@@ -172,6 +174,13 @@ def bag_files(path: str | Path) -> list[Path]:
     return files
 
 
+class _PlainDumper(yaml.SafeDumper):
+    """Every profile written out in full (no YAML anchors/aliases, as rosbag2 writes it)."""
+
+    def ignore_aliases(self, data) -> bool:
+        return True
+
+
 def write_metadata(
     folder: Path,
     mcap_name: str,
@@ -223,6 +232,10 @@ def write_metadata(
     }
     out = folder / "metadata.yaml"
     tmp = out.with_suffix(".yaml.tmp")
-    tmp.write_text(yaml.safe_dump({"rosbag2_bagfile_information": info}, sort_keys=False))
+    tmp.write_text(
+        yaml.dump(
+            {"rosbag2_bagfile_information": info}, Dumper=_PlainDumper, sort_keys=False
+        )
+    )
     tmp.replace(out)
     return out
