@@ -411,3 +411,96 @@ def test_mm_monitor_record_refuses_a_bad_path_with_exit_2(tmp_path, make, messag
     assert "--record" in out.stderr and message in out.stderr
     assert "Traceback" not in out.stderr
     assert sorted(tmp_path.rglob("*")) == before
+
+
+# -- live topics through the bridge, against the real node ---------------------------------------
+
+
+#: the module-wide mm-beagle (tests/monitor/conftest.py), with its own odometry on ~/odom
+BEAGLE_PARAMS = {"backend": "sim", "sim_trajectory": "figure_eight", "odometry_rate": 50.0}
+
+
+@pytest.mark.ros
+def test_the_bridge_records_the_live_topics_with_the_publishers_qos(qtbot, tmp_path, beagle_node):
+    """SensorData (best effort), mm-beagle's Odometry, /tf, a /tf_static latched before the
+    recording started (transient local) and /diagnostics land in a rosbag2 folder that
+    both readers decode, with the publishers' offered QoS in metadata.yaml."""
+    import rclpy
+    from rclpy.context import Context
+
+    from mm_pc.monitor.context import MonitorConfig, MonitorContext
+    from mm_pc.monitor.main_window import MainWindow
+    from mm_pc.monitor.recording import start_recording, stop_recording
+    from mm_pc.monitor.ros_bridge import RosBridge
+    from mm_pc.ros.tf import TfPublisher, planar_transform
+
+    ctx = Context()
+    rclpy.init(context=ctx)
+    node = rclpy.create_node("mm_test_tf", context=ctx)
+    tf = TfPublisher(node)
+    now = node.get_clock().now
+    tf.send_static([planar_transform(now().to_msg(), "base_link", "mouse0", 0.1, 0.0, 0.0)])
+    bridge = RosBridge("/mm_beagle", 20.0, node_name="mm_monitor_bag_test")
+    config = MonitorConfig(rate_hz=20.0, calibration_file=tmp_path / "cal.yaml")
+    window = MainWindow(MonitorContext(MonitorSession(), bridge, config))
+    qtbot.addWidget(window)
+    folder = tmp_path / "live"
+    want = {"/mm_beagle/sensor_data": 20, "/mm_beagle/odom": 5, "/tf": 5, "/tf_static": 1,
+            "/diagnostics": 1, SENSOR_TOPIC: 10}  # fmt: skip
+
+    def enough() -> bool:
+        tf.send(planar_transform(now().to_msg(), "odom", "base_link", 0.5, 0.25, 0.1))
+        counts = recorder.topic_counts()
+        return all(counts.get(t, 0) >= n for t, n in want.items())
+
+    try:
+        bridge.start()
+        assert start_recording(window, folder)
+        recorder = window.ctx.recorder
+        qtbot.waitUntil(enough, timeout=30_000)
+        stop_recording(window)
+    finally:
+        bridge.stop()
+        node.destroy_node()
+        ctx.try_shutdown()
+    assert bridge.recording_skipped == {}
+    msgs = decode_everything(folder)
+    assert msgs["/mm_beagle/odom"][-1].child_frame_id == "base_link"
+    assert msgs["/tf_static"][0].transforms[0].child_frame_id == "mouse0"
+    assert msgs["/tf"][-1].transforms[0].transform.translation.x == 0.5
+    assert {m.id for m in msgs["/mm_beagle/sensor_data"]} == set(DEVS)
+    info = yaml.safe_load((folder / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    qos = {
+        t["topic_metadata"]["name"]: t["topic_metadata"]["offered_qos_profiles"][0]
+        for t in info["topics_with_message_count"]
+    }
+    assert qos["/mm_beagle/sensor_data"]["reliability"] == "best_effort"
+    assert qos["/tf_static"]["durability"] == "transient_local"
+    assert qos["/tf"]["reliability"] == "reliable"
+    assert qos["/mm_beagle/odom"]["reliability"] == "reliable"
+    counts = {
+        t["topic_metadata"]["name"]: t["message_count"] for t in info["topics_with_message_count"]
+    }
+    assert counts == {k: len(v) for k, v in msgs.items()}
+
+
+def test_mm_monitor_records_a_replay_into_a_file(tmp_path):
+    """--replay with --record (no node): the replayed replies and polls are recorded again."""
+    source = tmp_path / "in.mcap"
+    rec = McapRecorder(source)
+    replies = poll_replies()
+    for r in replies:
+        rec.write_reply(r)
+    rec.close()
+    out_path = tmp_path / "again.mcap"
+    out = run_monitor(
+        "--headless", "--duration", "3", "--replay", str(source), "--record", str(out_path)
+    )
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert f"recorded {len(replies)} replies and 0 live messages" in out.stdout
+    back = read_replies(out_path)
+    assert [r.readings for r in back] == [r.readings for r in replies]
+    assert [sorted(k for k, v in r.polls.items() if v is not None) for r in back] == [
+        sorted(k for k, v in r.polls.items() if v is not None) for r in replies
+    ]
+    decode_everything(out_path)
