@@ -148,9 +148,11 @@ def recording_target(path: str | Path) -> tuple[Path, Path | None]:
 
 def bag_files(path: str | Path) -> list[Path]:
     """The MCAP files of a recording: ``path`` itself, or a rosbag2 folder's files (in the
-    order of its metadata.yaml, else its ``*.mcap`` sorted). ValueError for a folder
-    without any."""
+    order of its metadata.yaml, else its ``*.mcap`` sorted; the folder's ``metadata.yaml``
+    stands for the folder). ValueError for a folder without any."""
     path = Path(path)
+    if path.name == "metadata.yaml" and path.is_file():  # the folder's index chosen
+        path = path.parent
     if not path.is_dir():
         return [path]
     meta = path / "metadata.yaml"

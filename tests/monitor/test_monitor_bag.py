@@ -216,6 +216,10 @@ def test_a_folder_gets_a_rosbag2_metadata_yaml_that_rosbags_reads(tmp_path):
     back = read_replies(folder)
     assert [r.readings for r in back] == [r.readings for r in replies]
     assert list(back[2].polls[DEVS[0]].dx) == list(replies[2].polls[DEVS[0]].dx)
+    # File > Replay picks the folder's metadata.yaml: the same recording
+    assert [r.readings for r in read_replies(folder / "metadata.yaml")] == [
+        r.readings for r in back
+    ]
     ((device, res),) = read_samples(folder)
     assert device == DEVS[1] and list(res.flags) == [2, 3]
 
