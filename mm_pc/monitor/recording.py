@@ -319,6 +319,8 @@ class McapRecorder:
         self.replies = 0
         self.samples_messages = 0
         self.live_messages = 0
+        #: live topics not recorded: topic -> why (their type's definition is not installed)
+        self.skipped: dict[str, str] = {}
         self.devices: list[str] = []
         self.error = ""
         self.on_error = None
@@ -450,10 +452,16 @@ class McapRecorder:
         with self._lock:
             if self.closed or self.error:
                 return
+            if topic in self.skipped:
+                return
             try:
                 channel = self._live_channels.get(topic)
                 if channel is None:
-                    channel = self._channel(topic, type_name, qos=qos)
+                    try:
+                        channel = self._channel(topic, type_name, qos=qos)
+                    except ValueError as e:  # no installed definition: never raise into rclpy
+                        self.skipped[topic] = str(e)
+                        return
                     self._live_channels[topic] = channel
                 self._add(channel, now, bytes(data), now, self._topics[channel][3] & 0xFFFFFFFF)
             except OSError as e:

@@ -508,3 +508,13 @@ def test_mm_monitor_records_a_replay_into_a_file(tmp_path):
         sorted(k for k, v in r.polls.items() if v is not None) for r in replies
     ]
     decode_everything(out_path)
+
+
+def test_a_live_topic_of_an_unknown_type_is_skipped_not_raised(tmp_path):
+    rec = McapRecorder(tmp_path / "x.mcap")
+    rec.write_live("/odd", "no_such_pkg/msg/Thing", b"\x00\x01\x00\x00")
+    rec.write_live("/odd", "no_such_pkg/msg/Thing", b"\x00\x01\x00\x00")
+    assert "no_such_pkg" in rec.skipped["/odd"] and rec.live_messages == 0
+    rec.close()
+    rec.write_live("/tf", "tf2_msgs/msg/TFMessage", b"")  # after close: dropped silently
+    assert decode_everything(tmp_path / "x.mcap") == {}
