@@ -1,8 +1,9 @@
 """Per-poll sensor displacements from the Beagle node's single 1 kHz polls (``get_samples``).
 
 Pure numpy, no ROS: replies are read duck-typed (attributes of
-``mm_interfaces/srv/GetSamples_Response``), so the monitor, mm-odometry and a replay
-run this one implementation.
+``mm_interfaces/srv/GetSamples_Response``, or the ``mm_interfaces/msg/SensorPolls`` of a
+recording: the same fields), so the monitor, mm-odometry and a replay run this one
+implementation.
 
 A client asks ``get_sensor_data`` (monotone totals, per sensor: ``seq`` = polls done,
 measured totals in counts and metres) and, for each sensor, ``get_samples`` from the

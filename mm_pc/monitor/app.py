@@ -5,6 +5,9 @@
     mm-monitor --headless --duration 10 --screenshot monitor.png
                                         offscreen run, a screenshot of the main window, exit 0
     mm-monitor --replay run.mcap        replay a recording into the monitor (no node needed)
+    mm-monitor --headless --duration 60 --record run/
+                                        record 60 s (replies, single polls, live topics) into
+                                        the rosbag2 folder run/ (or a file: --record run.mcap)
 
 Where there is no display (no $DISPLAY / $WAYLAND_DISPLAY) and --headless was
 not given, the monitor says so and runs headless instead, leaving a
@@ -49,6 +52,11 @@ def _parser() -> argparse.ArgumentParser:
         "backend:=remote on its link",
     )  # fmt: skip
     p.add_argument("--replay", type=Path, default=None, help="replay an MCAP recording")
+    p.add_argument(
+        "--record", type=Path, default=None, metavar="PATH",
+        help="record from the start: PATH.mcap = one MCAP file, any other PATH = a new "
+        "rosbag2 folder with metadata.yaml (replies, single polls, live topics)",
+    )  # fmt: skip
     p.add_argument("--tab", default="Map", help="tab to show first (Map, Graphs, Data, ...)")
     return p
 
@@ -131,6 +139,9 @@ def main(argv: list[str] | None = None) -> int:
         except ValueError as e:
             print(f"mm-monitor: --sim: {e}", file=sys.stderr)
             return 2
+    if args.record is not None and (problem := _record_problem(args)):
+        print(f"mm-monitor: --record {args.record}: {problem}", file=sys.stderr)
+        return 2
     headless = args.headless
     if not headless and not _has_display() and os.environ.get("QT_QPA_PLATFORM") != "offscreen":
         duration = args.duration or 20.0
@@ -151,6 +162,28 @@ def main(argv: list[str] | None = None) -> int:
             print(f"mm-monitor: {missing}", file=sys.stderr)
             return 2
     return _run(args, headless)
+
+
+def _record_problem(args) -> str:
+    """Why ``--record`` cannot take its path ('' when it can); nothing is created."""
+    import os.path
+
+    from mm_pc.monitor.bag_format import recording_target
+
+    try:
+        target, folder = recording_target(args.record)
+    except ValueError as e:
+        return str(e)
+    for name, given in (("--replay", args.replay), ("--calibration", args.calibration)):
+        if given is None or not given.exists():
+            continue
+        for mine in {args.record, target}:
+            if mine.exists() and os.path.samefile(mine, given):
+                return f"that is the {name} input; record to another path"
+    where = folder.parent if folder is not None else target.parent
+    if not os.access(where, os.W_OK):
+        return f"the folder {where} is not writable"
+    return ""
 
 
 def _quiet_qt_messages() -> None:
@@ -208,6 +241,16 @@ def _run(args, headless: bool) -> int:
         if bridge is not None:
             bridge.start()
             stack.callback(bridge.stop)
+        if args.record is not None:
+            from mm_pc.monitor.recording import start_recording, stop_recording
+
+            if not start_recording(window, args.record):
+                print(f"mm-monitor: {window.statusBar().currentMessage()}", file=sys.stderr)
+                window.close()
+                return 2
+            print(f"mm-monitor: recording to {args.record}", flush=True)
+            recorder = ctx.recorder
+            stack.callback(_report_recording, window, recorder, stop_recording)
         if args.replay is not None:
             from mm_pc.monitor.replay import start_replay
 
@@ -237,6 +280,22 @@ def _run(args, headless: bool) -> int:
             print(summary(window, seconds), flush=True)
         window.close()
     return code
+
+
+def _report_recording(window, recorder, stop_recording) -> None:
+    """Stop the --record recording (if the window has not) and say what is in it."""
+    if window.ctx.recorder is recorder:
+        stop_recording(window)
+    recorder.close()
+    counts = recorder.topic_counts()
+    if recorder.error:
+        print(f"mm-monitor: {recorder.error}", file=sys.stderr)
+    print(
+        f"mm-monitor: recorded {recorder.replies} replies and {recorder.live_messages} live "
+        f"messages ({sum(counts.values())} messages on {sum(1 for n in counts.values() if n)} "
+        f"topics) to {recorder.path}",
+        flush=True,
+    )
 
 
 if __name__ == "__main__":

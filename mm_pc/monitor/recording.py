@@ -8,16 +8,27 @@ File layout (MCAP profile ``ros2``, schemas ``ros2msg``, messages ``cdr``):
 ``/mm_monitor/reply_meta`` -- ``std_msgs/msg/Float64MultiArray``
     One message per reply, ``data = [received_s, rtt_s]``: the exact
     monotonic arrival time and round-trip time (s) of the reply.
-``/mm_monitor/reply_polls/<device>`` -- ``mm_interfaces/srv/GetSamples_Response``
+``/mm_monitor/reply_polls/<device>`` -- ``mm_interfaces/msg/SensorPolls``
     The single polls each reply's totals cover (``Reply.polls``, fetched by the
     bridge for the per-poll pose), with the reply's number as ``sequence``; the
     reply's ``reply_meta`` then has a third value 1.0 ("polls were fetched": a
     device without a message had a failed fetch). A replay integrates them per
     poll, as live; a recording without them is integrated per reply.
-``/mm_monitor/samples/<device>`` -- ``mm_interfaces/srv/GetSamples_Response``
+``/mm_monitor/samples/<device>`` -- ``mm_interfaces/msg/SensorPolls``
     The single 1 kHz polls, whenever they were fetched while recording (the
     recorder listens to the bridge's ``samples_received``;
     :meth:`McapRecorder.write_samples`); channel metadata ``device``.
+Live topics (:meth:`McapRecorder.write_live`, subscribed by the bridge:
+:func:`mm_pc.monitor.bag_format.live_topics`) -- under their own names and types
+    ``<beagle>/sensor_data``, the odometries' ``.../odom``, ``/tf``,
+    ``/tf_static``, ``/diagnostics``, as the publishers sent them (log time =
+    arrival on the system clock).
+
+Recordings before the SensorPolls type carry the polls as
+``mm_interfaces/srv/GetSamples_Response``; they are still read. Every channel has
+rosbag2's ``offered_qos_profiles`` (and ``topic_type_hash``) metadata; a path
+without ``.mcap`` is recorded as a rosbag2 folder with ``metadata.yaml``
+(:mod:`mm_pc.monitor.bag_format`).
 
 Every message of one reply has the reply's number (from 0) as its MCAP
 ``sequence`` and the same ``log_time``: the arrival time on the system clock
@@ -38,6 +49,7 @@ import contextlib
 import functools
 import math
 import re
+import threading
 import time
 import warnings
 from datetime import datetime, timezone
@@ -47,10 +59,21 @@ from types import SimpleNamespace
 from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import QFileDialog, QLabel
 
+from mm_pc.monitor.bag_format import (
+    DEFAULT_QOS,
+    bag_files,
+    qos_yaml,
+    recording_target,
+    type_hash,
+    write_metadata,
+)
 from mm_pc.monitor.model.readings import Reading, Reply
 
 __all__ = [
+    "LEGACY_POLLS_TYPE",
     "META_TOPIC",
+    "POLLS_TYPE",
+    "REPLY_POLLS_TOPIC",
     "SAMPLES_TOPIC",
     "SENSOR_TOPIC",
     "McapRecorder",
@@ -68,10 +91,12 @@ SAMPLES_TOPIC = "/mm_monitor/samples"
 REPLY_POLLS_TOPIC = "/mm_monitor/reply_polls"
 SENSOR_TYPE = "mm_interfaces/msg/SensorData"
 META_TYPE = "std_msgs/msg/Float64MultiArray"
-SAMPLES_TYPE = "mm_interfaces/srv/GetSamples_Response"
+POLLS_TYPE = "mm_interfaces/msg/SensorPolls"
+#: how recordings before SensorPolls carried the polls (read, no longer written)
+LEGACY_POLLS_TYPE = "mm_interfaces/srv/GetSamples_Response"
+SAMPLES_TYPE = POLLS_TYPE
+_POLL_TYPES = (POLLS_TYPE, LEGACY_POLLS_TYPE)
 META_LABEL = "received_s,rtt_s"
-#: rosbag2 requires this channel metadata key; "" = default QoS
-QOS = {"offered_qos_profiles": ""}
 
 _PRIMITIVES = {
     "bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16",
@@ -156,12 +181,13 @@ def _ros() -> SimpleNamespace:
     from rclpy.serialization import deserialize_message, serialize_message
     from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
 
-    from mm_interfaces.msg import SensorData
+    from mm_interfaces.msg import SensorData, SensorPolls
     from mm_interfaces.srv import GetSamples
 
     return SimpleNamespace(
         Time=Time,
         SensorData=SensorData,
+        SensorPolls=SensorPolls,
         GetSamplesResponse=GetSamples.Response,
         Float64MultiArray=Float64MultiArray,
         MultiArrayDimension=MultiArrayDimension,
@@ -186,15 +212,17 @@ _INT_RANGES = {
 }
 
 
-def _samples_msg(res):
-    """A ``GetSamples.Response`` from anything with its fields (the bridge's empty ones)."""
+def _polls_msg(device: str, res):
+    """The ``SensorPolls`` of ``device`` from anything with GetSamples' response fields
+    (a response, the bridge's empty stand-ins, a SensorPolls)."""
     ros = _ros()
-    if isinstance(res, ros.GetSamplesResponse):
-        return res
-    return ros.GetSamplesResponse(
-        success=True, message="", first_seq=int(res.first_seq), next_seq=int(res.next_seq),
+    stamps = res.stamp_ns
+    newest = int(stamps[-1]) if len(stamps) else 0
+    return ros.SensorPolls(
+        stamp=ros.Time(sec=newest // 1_000_000_000, nanosec=newest % 1_000_000_000),
+        id=device, first_seq=int(res.first_seq), next_seq=int(res.next_seq),
         dropped=int(res.dropped), cpi=int(res.cpi),
-        stamp_ns=[int(v) for v in res.stamp_ns], dx=[int(v) for v in res.dx],
+        stamp_ns=[int(v) for v in stamps], dx=[int(v) for v in res.dx],
         dy=[int(v) for v in res.dy], status=[int(v) for v in res.status],
         flags=[int(v) for v in res.flags],
     )  # fmt: skip
@@ -249,21 +277,33 @@ def _serialize_reading(r: Reading) -> bytes:
 
 
 class McapRecorder:
-    """Writes replies (and fetched single polls) to ``path`` as MCAP, ROS 2 profile.
+    """Writes replies, fetched single polls and live topics to ``path``, ROS 2 MCAP.
 
-    Raises OSError when the file cannot be created. A write error later
-    (disk full) does not raise into the monitor: the recorder stops writing,
-    keeps the message in ``error`` and calls ``on_error(message)`` once.
+    ``path`` ending in ``.mcap``: one file; any other path: a rosbag2 folder
+    (``<dir>/<dir name>_0.mcap`` + ``metadata.yaml`` at :meth:`close`). Raises
+    ValueError for a path that cannot take a recording (see
+    :func:`~mm_pc.monitor.bag_format.recording_target`) and OSError when the
+    file cannot be created. A write error later (disk full) does not raise
+    into the monitor: the recorder stops writing, keeps the message in
+    ``error`` and calls ``on_error(message)`` once. Thread-safe: the live
+    topics arrive on the bridge's executor thread, the replies on the GUI thread.
     """
 
     def __init__(self, path: str | Path, beagle: str = "/mm_beagle", rate_hz: float = 0.0) -> None:
         from mcap.writer import CompressionType, Writer
 
         self.path = Path(path)
+        self.file, self.folder = recording_target(self.path)
         self.beagle = beagle
         self.rate_hz = float(rate_hz)
+        self._lock = threading.Lock()
         self._schemas: dict[str, int] = {}
-        self._file = open(self.path, "wb")  # noqa: SIM115 - closed in close()
+        #: channel id -> [topic, type, offered QoS profiles, message count]
+        self._topics: dict[int, list] = {}
+        self._first_ns = self._last_ns = 0
+        if self.folder is not None:
+            self.folder.mkdir(exist_ok=True)
+        self._file = open(self.file, "wb")  # noqa: SIM115 - closed in close()
         try:
             self._writer = Writer(self._file, compression=CompressionType.ZSTD)
             self._writer.start(profile="ros2", library="mm_monitor")
@@ -274,9 +314,13 @@ class McapRecorder:
             raise
         self._sample_channels: dict[str, int] = {}
         self._poll_channels: dict[str, int] = {}
+        self._live_channels: dict[str, int] = {}
         self.started = datetime.now(timezone.utc)
         self.replies = 0
         self.samples_messages = 0
+        self.live_messages = 0
+        #: live topics not recorded: topic -> why (their type's definition is not installed)
+        self.skipped: dict[str, str] = {}
         self.devices: list[str] = []
         self.error = ""
         self.on_error = None
@@ -287,18 +331,34 @@ class McapRecorder:
             dim=[ros.MultiArrayDimension(label=META_LABEL, size=2, stride=2)]
         )
 
-    def _channel(self, topic: str, type_name: str, metadata: dict | None = None) -> int:
+    def _channel(
+        self, topic: str, type_name: str, metadata: dict | None = None,
+        qos: list[dict] | None = None,
+    ) -> int:  # fmt: skip
         schemas = self._schemas
         if type_name not in schemas:
             schemas[type_name] = self._writer.register_schema(
                 name=type_name, encoding="ros2msg", data=ros2msg_definition(type_name).encode()
             )
-        return self._writer.register_channel(
+        profiles = [DEFAULT_QOS] if qos is None else list(qos)
+        meta = {"offered_qos_profiles": qos_yaml(profiles)}
+        if digest := type_hash(type_name):
+            meta["topic_type_hash"] = digest
+        channel = self._writer.register_channel(
             topic=topic,
             message_encoding="cdr",
             schema_id=schemas[type_name],
-            metadata={**QOS, **(metadata or {})},
+            metadata={**meta, **(metadata or {})},
         )
+        self._topics[channel] = [topic, type_name, profiles, 0]
+        return channel
+
+    def _add(self, channel: int, log_time: int, data: bytes, publish_time: int, seq: int) -> None:
+        self._writer.add_message(channel, log_time, data, publish_time, seq)
+        self._topics[channel][3] += 1
+        if not self._first_ns or log_time < self._first_ns:
+            self._first_ns = log_time
+        self._last_ns = max(self._last_ns, log_time)
 
     def _log_time(self, received_s: float) -> int:
         ns = round(received_s * 1e9)
@@ -307,7 +367,7 @@ class McapRecorder:
         return max(0, ns + self._offset_ns)
 
     def write_reply(self, reply: Reply) -> None:
-        """Append one reply: its readings and its arrival/round-trip times.
+        """Append one reply: its readings, its single polls and its arrival/round-trip times.
 
         ValueError (nothing written) when a reading does not fit SensorData
         or the recorder is closed.
@@ -318,106 +378,165 @@ class McapRecorder:
             return
         ros = _ros()
         msgs = [(r, _serialize_reading(r)) for r in reply.readings]
+        polls = [
+            (dev, ros.serialize(_polls_msg(dev, res)))
+            for dev, res in (reply.polls or {}).items()
+            if res is not None
+        ]
         values = [float(reply.received_s), float(reply.rtt_s)]
         if reply.polls is not None:
             values.append(1.0)
-        meta = ros.Float64MultiArray(layout=self._meta_layout, data=values)
-        log_time = self._log_time(reply.received_s)
-        seq = self.replies & 0xFFFFFFFF
-        try:
-            self._writer.add_message(
-                self._meta_channel, log_time, ros.serialize(meta), log_time, seq
-            )
-            for r, data in msgs:
-                self._writer.add_message(self._sensor_channel, log_time, data, r.stamp_ns, seq)
-            for dev, res in (reply.polls or {}).items():
-                if res is not None:
-                    self._writer.add_message(
-                        self._poll_channel(dev), log_time, ros.serialize(_samples_msg(res)),
-                        log_time, seq,
-                    )  # fmt: skip
-        except OSError as e:
-            self._fail(e)
-            return
-        self.replies += 1
+        meta = ros.serialize(ros.Float64MultiArray(layout=self._meta_layout, data=values))
+        with self._lock:
+            if self.closed:
+                return
+            log_time = self._log_time(reply.received_s)
+            seq = self.replies & 0xFFFFFFFF
+            try:
+                self._add(self._meta_channel, log_time, meta, log_time, seq)
+                for r, data in msgs:
+                    self._add(self._sensor_channel, log_time, data, r.stamp_ns, seq)
+                for dev, data in polls:
+                    self._add(self._poll_channel(dev), log_time, data, log_time, seq)
+            except OSError as e:
+                self._fail(e)
+                return
+            self.replies += 1
         for r in reply.readings:
             if r.id not in self.devices:
                 self.devices.append(r.id)
 
-    def _poll_channel(self, device: str) -> int:
-        if device not in self._poll_channels:
+    def _device_channel(self, channels: dict, prefix: str, device: str) -> int:
+        if device not in channels:
             suffix = re.sub(r"[^A-Za-z0-9_/]", "_", device).strip("/") or "sensor"
-            self._poll_channels[device] = self._channel(
-                f"{REPLY_POLLS_TOPIC}/{suffix}", SAMPLES_TYPE, {"device": device}
-            )
-        return self._poll_channels[device]
+            channels[device] = self._channel(f"{prefix}/{suffix}", POLLS_TYPE, {"device": device})
+        return channels[device]
+
+    def _poll_channel(self, device: str) -> int:
+        return self._device_channel(self._poll_channels, REPLY_POLLS_TOPIC, device)
 
     def write_samples(self, device: str, response) -> None:
-        """Append a ``GetSamples.Response`` of ``device`` (the debug view's single polls)."""
+        """Append the single polls of a ``GetSamples.Response`` of ``device`` (the debug
+        view's fetches) as a SensorPolls."""
         if self.closed:
             raise ValueError(f"the recording {self.path} is closed")
         if self.error:
             return
-        serialize_message = _ros().serialize
-        try:
-            if device not in self._sample_channels:
-                suffix = re.sub(r"[^A-Za-z0-9_/]", "_", device).strip("/") or "sensor"
-                self._sample_channels[device] = self._channel(
-                    f"{SAMPLES_TOPIC}/{suffix}", SAMPLES_TYPE, {"device": device}
-                )
-            now = time.time_ns()
-            stamps = list(response.stamp_ns)
-            publish = int(stamps[-1]) if stamps else now
-            self._writer.add_message(
-                self._sample_channels[device], now, serialize_message(response), publish,
-                self.samples_messages & 0xFFFFFFFF,
-            )  # fmt: skip
-        except OSError as e:
-            self._fail(e)
-            return
-        self.samples_messages += 1
+        ros = _ros()
+        msg = _polls_msg(device, response)
+        data = ros.serialize(msg)
+        with self._lock:
+            if self.closed:
+                return
+            try:
+                channel = self._device_channel(self._sample_channels, SAMPLES_TOPIC, device)
+                now = time.time_ns()
+                publish = int(msg.stamp_ns[-1]) if len(msg.stamp_ns) else now
+                self._add(channel, now, data, publish, self.samples_messages & 0xFFFFFFFF)
+            except OSError as e:
+                self._fail(e)
+                return
+            self.samples_messages += 1
+
+    def write_live(
+        self, topic: str, type_name: str, data: bytes, qos: list[dict] | None = None,
+        log_time_ns: int | None = None,
+    ) -> None:  # fmt: skip
+        """Append one CDR message received on a live topic (any thread).
+
+        ``qos``: the publishers' offered profiles, stored with the channel when
+        the topic's first message arrives. After :meth:`close` it is dropped
+        silently (a message still on its way from the executor thread).
+        """
+        now = time.time_ns() if log_time_ns is None else int(log_time_ns)
+        with self._lock:
+            if self.closed or self.error:
+                return
+            if topic in self.skipped:
+                return
+            try:
+                channel = self._live_channels.get(topic)
+                if channel is None:
+                    try:
+                        channel = self._channel(topic, type_name, qos=qos)
+                    except ValueError as e:  # no installed definition: never raise into rclpy
+                        self.skipped[topic] = str(e)
+                        return
+                    self._live_channels[topic] = channel
+                self._add(channel, now, bytes(data), now, self._topics[channel][3] & 0xFFFFFFFF)
+            except OSError as e:
+                self._fail(e)
+                return
+            self.live_messages += 1
 
     def _fail(self, e: OSError) -> None:
         self.error = f"recording to {self.path} stopped: {e}"
         if self.on_error is not None:
             self.on_error(self.error)
 
+    def topic_counts(self) -> dict[str, int]:
+        """Messages written so far per topic."""
+        return {t[0]: t[3] for t in self._topics.values()}
+
     def close(self) -> None:
-        """Write the metadata and the index, close the file (idempotent)."""
-        if self.closed:
-            return
-        self.closed = True
-        try:
-            self._writer.add_metadata(
-                "mm_monitor",
-                {
-                    "start_time": self.started.isoformat(),
-                    "start_time_ns": str(int(self.started.timestamp() * 1e9)),
-                    "end_time": datetime.now(timezone.utc).isoformat(),
-                    "beagle": self.beagle,
-                    "devices": ",".join(self.devices),
-                    "rate_hz": f"{self.rate_hz:g}",
-                    "replies": str(self.replies),
-                    "reply_meta": f"{META_TOPIC}: data = [received_s, rtt_s] (s, monotonic)",
-                },
-            )
-            self._writer.finish()
-        except OSError as e:
-            if not self.error:
-                self._fail(e)
-        finally:
-            self._file.close()
+        """Write the metadata and the index, close the file, then a folder's metadata.yaml
+        (idempotent)."""
+        with self._lock:
+            if self.closed:
+                return
+            self.closed = True
+            try:
+                self._writer.add_metadata(
+                    "mm_monitor",
+                    {
+                        "start_time": self.started.isoformat(),
+                        "start_time_ns": str(int(self.started.timestamp() * 1e9)),
+                        "end_time": datetime.now(timezone.utc).isoformat(),
+                        "beagle": self.beagle,
+                        "devices": ",".join(self.devices),
+                        "rate_hz": f"{self.rate_hz:g}",
+                        "replies": str(self.replies),
+                        "reply_meta": f"{META_TOPIC}: data = [received_s, rtt_s] (s, monotonic)",
+                    },
+                )
+                self._writer.finish()
+            except OSError as e:
+                if not self.error:
+                    self._fail(e)
+            finally:
+                self._file.close()
+            if self.folder is not None:
+                try:
+                    write_metadata(
+                        self.folder, self.file.name, list(self._topics.values()),
+                        self._first_ns, self._last_ns,
+                    )  # fmt: skip
+                except OSError as e:
+                    if not self.error:
+                        self._fail(e)
 
 
 # -- reading back ------------------------------------------------------------------------------
 
 
 def _open_messages(path: str | Path):
-    """((schema, channel, message) of every message, {topic: schema name}); ValueError
-    saying what is wrong with a file that cannot be read."""
+    """((schema, channel, message) of every message, {topic: schema name}) of a file or a
+    rosbag2 folder; ValueError saying what is wrong with one that cannot be read."""
+    path = Path(path)
+    if not path.exists():
+        raise ValueError(f"no recording at {path} (file not found)")
+    messages, types = [], {}
+    for file in bag_files(path):
+        m, t = _open_file(file)
+        messages += m
+        for k, v in t.items():
+            types.setdefault(k, v)
+    return messages, types
+
+
+def _open_file(path: Path):
     from mcap.reader import make_reader
 
-    path = Path(path)
     if not path.is_file():
         raise ValueError(f"no recording at {path} (file not found)")
     try:
@@ -457,8 +576,13 @@ def read_replies(path: str | Path) -> list[Reply]:
     deserialize_message, SensorData = ros.deserialize, ros.SensorData  # noqa: N806
     Float64MultiArray = ros.Float64MultiArray  # noqa: N806
     messages, types = _open_messages(path)
-    sensor = [(c, m) for s, c, m in messages if s is not None and s.name == SENSOR_TYPE]
     meta = [m for s, c, m in messages if c.topic == META_TOPIC and s and s.name == META_TYPE]
+    # a monitor recording's replies are on SENSOR_TOPIC (the live topic's SensorData is
+    # another stream); a foreign bag's SensorData on any topic
+    sensor = [
+        (c, m) for s, c, m in messages
+        if s is not None and s.name == SENSOR_TYPE and (not meta or c.topic == SENSOR_TOPIC)
+    ]  # fmt: skip
     if SENSOR_TYPE not in types.values():
         topics = sorted(types)
         raise ValueError(
@@ -476,12 +600,10 @@ def read_replies(path: str | Path) -> list[Reply]:
             fetched = len(values) > 2 and values[2] == 1.0
             metas[m.sequence] = (m.log_time, float(values[0]), float(values[1]), fetched)
         polls: dict[int, dict[str, object]] = {}
-        GetSamplesResponse = ros.GetSamplesResponse  # noqa: N806
         for s, c, m in messages:
             if c.topic.startswith(REPLY_POLLS_TOPIC + "/") and s is not None:
                 device = c.metadata.get("device", c.topic)
-                res = deserialize_message(m.data, GetSamplesResponse)
-                polls.setdefault(m.sequence, {})[device] = res
+                polls.setdefault(m.sequence, {})[device] = _decode_polls(s.name, m.data)
     except Exception as e:  # deserialisation of foreign bytes can fail in many ways
         raise ValueError(
             f"{path}: a message could not be decoded ({type(e).__name__}: {e})"
@@ -504,14 +626,25 @@ def read_replies(path: str | Path) -> list[Reply]:
     return [Reply(tuple(v), received_s=t / 1e9) for t, v in sorted(by_time.items())]
 
 
-def read_samples(path: str | Path) -> list[tuple[str, object]]:
-    """(device, GetSamples.Response) of every recorded single-poll fetch, in order."""
+def _decode_polls(schema: str, data: bytes):
+    """A SensorPolls, or a GetSamples response of a recording made before SensorPolls
+    (both have the fields the pose needs); ValueError for another type."""
     ros = _ros()
+    if schema == POLLS_TYPE:
+        return ros.deserialize(data, ros.SensorPolls)
+    if schema == LEGACY_POLLS_TYPE:
+        return ros.deserialize(data, ros.GetSamplesResponse)
+    raise ValueError(f"single polls of type {schema!r}, expected {POLLS_TYPE}")
+
+
+def read_samples(path: str | Path) -> list[tuple[str, object]]:
+    """(device, SensorPolls or old GetSamples response) of every recorded single-poll fetch
+    on ``/mm_monitor/samples/*``, in order."""
     out = []
     for s, c, m in _open_messages(path)[0]:
-        if s is not None and s.name == SAMPLES_TYPE:
+        if s is not None and s.name in _POLL_TYPES and c.topic.startswith(SAMPLES_TOPIC + "/"):
             device = c.metadata.get("device", c.topic)
-            out.append((m.log_time, device, ros.deserialize(m.data, ros.GetSamplesResponse)))
+            out.append((m.log_time, device, _decode_polls(s.name, m.data)))
     return [(d, r) for _, d, r in sorted(out, key=lambda x: x[0])]
 
 
@@ -534,9 +667,11 @@ def _set_indicator(window, text: str | None) -> None:
     label.setText(text)
 
 
-def start_recording(window, path: str | Path) -> bool:
-    """Record every reply from now on to ``path``; False (nothing attached) on an error,
-    which is shown in the status bar."""
+def start_recording(window, path: str | Path, live: bool = True) -> bool:
+    """Record every reply from now on to ``path`` (``*.mcap`` or a rosbag2 folder), and
+    with ``live`` and a bridge also the live topics
+    (:func:`~mm_pc.monitor.bag_format.live_topics` of the watched node); False (nothing
+    attached) on an error, which is shown in the status bar."""
     ctx = window.ctx
     if ctx.recorder is not None:
         window.statusBar().showMessage(f"already recording to {ctx.recorder.path}", 8000)
@@ -555,6 +690,10 @@ def start_recording(window, path: str | Path) -> bool:
     ctx.recorder = recorder
     if ctx.bridge is not None:  # single polls fetched by anyone (the debug view) go in too
         ctx.bridge.samples_received.connect(recorder.write_samples)
+        if live:
+            from mm_pc.monitor.bag_format import live_topics
+
+            ctx.bridge.record_topics(live_topics(ctx.config.beagle), recorder.write_live)
     window.record_action.setText("Stop &recording")
     _set_indicator(window, f"● REC {recorder.path.name}")
     window.statusBar().showMessage(f"recording to {recorder.path}")
@@ -577,6 +716,7 @@ def stop_recording(window) -> Path | None:
         with contextlib.suppress(RuntimeError, TypeError), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             window.ctx.bridge.samples_received.disconnect(recorder.write_samples)
+        window.ctx.bridge.stop_recording_topics()
     recorder.close()
     window.record_action.setText("&Record…")
     _set_indicator(window, None)

@@ -321,10 +321,11 @@ def load_in_background(window, path: str | Path, speed) -> concurrent.futures.Fu
 
 
 def open_replay(window) -> None:
-    """File > Replay: choose a recording and a speed (1x, 2x, 5x, 10x, max), then replay
-    (the file is read in the background)."""
+    """File > Replay: choose a recording (an MCAP file, or a rosbag2 folder's metadata.yaml)
+    and a speed (1x, 2x, 5x, 10x, max), then replay (the file is read in the background)."""
     name, _ = QFileDialog.getOpenFileName(
-        window, "Replay a recording", "", "MCAP recordings (*.mcap);;All files (*)"
+        window, "Replay a recording", "",
+        "Recordings (*.mcap metadata.yaml);;MCAP recordings (*.mcap);;All files (*)",
     )
     if not name:
         return None

@@ -18,6 +18,11 @@ the next reply's totals cover the gap, so a slow link (WLAN latency) costs
 neither double counts nor lost counts. A request without an answer after
 ``timeout_s`` is abandoned and counted in ``dropped_requests``.
 
+Recording live topics: :meth:`RosBridge.record_topics` subscribes (on the
+executor thread, with a QoS matching each publisher's) and hands every
+message's CDR bytes to the recorder as it arrives, with the publishers'
+offered QoS; the GUI thread is not involved.
+
 Connection states: ``waiting`` (the node was never seen), ``connected``
 (replies arrive), ``lost`` (it was seen, and now the service is gone or
 requests time out). The bridge keeps asking, so a restarted node is found
@@ -133,6 +138,10 @@ class RosBridge(QObject):
         self.requests = self.replies = self.skipped_ticks = 0
         self.dropped_requests = self.failed_replies = 0
         self._consecutive_failures = 0
+        #: live-topic subscriptions for a recorder; executor thread only
+        self._recording_subs: list = []
+        #: live topics that could not be subscribed: topic -> why
+        self.recording_skipped: dict[str, str] = {}
 
     # -- life cycle (GUI thread) ---------------------------------------------------------
 
@@ -243,6 +252,56 @@ class RosBridge(QObject):
                 max_samples=int(max_samples),
             )
         )
+
+    def record_topics(self, topics, sink) -> None:
+        """Subscribe to ``topics`` (:class:`~mm_pc.monitor.bag_format.LiveTopic`) and call
+        ``sink(topic, type_name, cdr_bytes, offered_qos)`` for each message, on the executor
+        thread, until :meth:`stop_recording_topics`. ``offered_qos``: the publishers'
+        profiles (rosbag2's v9 dicts), looked up at the topic's first message. A type
+        that is not installed is skipped (``recording_skipped`` says why)."""
+        self._post(lambda: self._subscribe_raw(tuple(topics), sink))
+
+    def stop_recording_topics(self) -> None:
+        """End the subscriptions of :meth:`record_topics` (messages already queued may
+        still reach the sink: the recorder drops them once closed)."""
+        self._post(self._unsubscribe_raw)
+
+    def _subscribe_raw(self, topics, sink) -> None:
+        import importlib
+
+        self._unsubscribe_raw()
+        for t in topics:
+            pkg, _, name = t.type_name.split("/")
+            try:
+                msg_type = getattr(importlib.import_module(f"{pkg}.msg"), name)
+            except (ImportError, AttributeError) as e:
+                self.recording_skipped[t.name] = f"{t.type_name} is not installed ({e})"
+                continue
+            offered: dict[str, list] = {}
+
+            def on_message(data, t=t, offered=offered) -> None:
+                if "qos" not in offered:
+                    offered["qos"] = self._offered_qos(t.name) or [t.qos]
+                sink(t.name, t.type_name, data, offered["qos"])
+
+            self._recording_subs.append(
+                self.node.create_subscription(
+                    msg_type, t.name, on_message, _qos_from_dict(t.qos), raw=True
+                )
+            )
+
+    def _unsubscribe_raw(self) -> None:
+        for sub in self._recording_subs:
+            with suppress(Exception):
+                self.node.destroy_subscription(sub)
+        self._recording_subs = []
+
+    def _offered_qos(self, topic: str) -> list[dict]:
+        try:
+            infos = self.node.get_publishers_info_by_topic(topic)
+        except Exception:  # a graph query must not stop the recording
+            return []
+        return [_qos_to_dict(i.qos_profile) for i in infos]
 
     # -- executor thread ------------------------------------------------------------------
 
@@ -463,3 +522,35 @@ class RosBridge(QObject):
             out[status.hardware_id] = values
         if out:
             self.diagnostics_received.emit(out)
+
+
+def _qos_from_dict(q: dict):
+    """An rclpy QoSProfile from rosbag2's v9 dict (history, depth, reliability, durability)."""
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    return QoSProfile(
+        history=HistoryPolicy[q["history"].upper()],
+        depth=int(q["depth"]),
+        reliability=ReliabilityPolicy[q["reliability"].upper()],
+        durability=DurabilityPolicy[q["durability"].upper()],
+    )
+
+
+def _qos_to_dict(p) -> dict:
+    """rosbag2's v9 dict of an rclpy QoSProfile (a publisher's offered QoS)."""
+
+    def span(d) -> dict:
+        sec, nsec = divmod(int(d.nanoseconds), 1_000_000_000)
+        return {"sec": sec, "nsec": nsec}
+
+    return {
+        "history": p.history.name.lower(),
+        "depth": int(p.depth),
+        "reliability": p.reliability.name.lower(),
+        "durability": p.durability.name.lower(),
+        "deadline": span(p.deadline),
+        "lifespan": span(p.lifespan),
+        "liveliness": p.liveliness.name.lower(),
+        "liveliness_lease_duration": span(p.liveliness_lease_duration),
+        "avoid_ros_namespace_conventions": bool(p.avoid_ros_namespace_conventions),
+    }

@@ -360,7 +360,7 @@ def test_unwritable_path_shows_why_and_attaches_nothing(qtbot, tmp_path):
     assert window.ctx.recorder is None
     assert window.record_action.text() == "&Record…"
     msg = window.statusBar().currentMessage()
-    assert f"cannot record to {bad}" in msg and "No such file" in msg
+    assert f"cannot record to {bad}" in msg and "does not exist" in msg
 
 
 def test_a_write_error_stops_the_recording_without_breaking_processing(qtbot, tmp_path):
