@@ -425,10 +425,14 @@ class RemoteAgent:
         self._history_pub.put(json.dumps(req).encode())
         deadline = time.monotonic() + HISTORY_TIMEOUT_S
         while (left := deadline - time.monotonic()) > 0:
+            if self._rx_silent():  # the link died while we wait: say so now, not in 2 s
+                self._watch_link(self.last_rx)
+                self.query_error = "the link went down while asking"
+                return None
             try:
-                data = self._history_q.get(timeout=left)
+                data = self._history_q.get(timeout=min(left, 0.1))
             except queue.Empty:
-                break
+                continue
             if data[:4] == link.MAGIC:
                 if link.HEADER.unpack_from(data, 0)[5] == rid:
                     return data
