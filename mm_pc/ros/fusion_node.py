@@ -329,7 +329,7 @@ class FusionNode(Node):
         self._diag_prev: dict[str, dict[str, int]] = {}
         self.hardware_id = self.get_fully_qualified_name()
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self._timers = {
+        self._rate_timers = {
             name: self.create_timer(1.0 / p[name], callback, clock=self._steady)
             for name, callback in self._timed().items()
         }
@@ -393,8 +393,8 @@ class FusionNode(Node):
         self.p.update(changes)
         for name, callback in self._timed().items():
             if name in changes:
-                self.destroy_timer(self._timers[name])
-                self._timers[name] = self.create_timer(
+                self.destroy_timer(self._rate_timers[name])
+                self._rate_timers[name] = self.create_timer(
                     1.0 / changes[name], callback, clock=self._steady
                 )
         if "map_frame" in changes:
