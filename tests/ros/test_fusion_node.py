@@ -762,6 +762,7 @@ def test_bad_parameters_exit_2_with_a_message(ros_command):
             {"initial_sigma": "[0.1,0.0,0.1]"},
             "'initial_sigma' needs three",
         ),
+        ("mm_pc.ros.fusion_node", {"map_frame": "/map"}, "'map_frame' is '/map'"),
         ("mm_pc.ros.field_sim_node", {"speed": 0.0}, "speed"),
         ("mm_pc.ros.field_sim_node", {"mouse_dropout": "[1.0]"}, "'mouse_dropout' needs"),
     ]

@@ -86,16 +86,26 @@ def test_straight_run_ends_where_the_robot_stopped(method, tmp_path, ros_command
     assert odo.returncode == 0, out
 
 
-def test_bad_method_exits_with_a_message(ros_command):
+@pytest.mark.parametrize(
+    ("params", "expect"),
+    [
+        ({"method": "guess"}, "unknown odometry method 'guess'"),
+        ({"base_frame": "base link"}, "'base_frame' is 'base link': a TF frame id"),
+        ({"sensor_frames": ["a", "a"]}, "'sensor_frames' must be distinct"),
+        ({"sensor_frames": ["/left", "right"]}, "no leading '/'"),
+    ],
+)
+def test_bad_parameters_exit_2_with_a_message(params, expect, ros_command):
     out = subprocess.run(
-        ros_command("mm_pc.ros.odometry_node", {"method": "guess"}, "/odo_bad"),
+        ros_command("mm_pc.ros.odometry_node", params, "/odo_bad"),
         capture_output=True,
         text=True,
         timeout=60,
         env=dict(os.environ),
     )
     assert out.returncode == 2
-    assert "unknown odometry method 'guess'" in out.stderr
+    assert expect in out.stderr
+    assert "Traceback" not in out.stderr
 
 
 def test_uncertainty_grows_with_distance_and_turn():
@@ -157,6 +167,11 @@ def test_beagle_rejects_bad_odometry_settings():
         (
             {"backend": "sim", "odometry_rate": 10.0, "calibration_file": "/nonexistent.yaml"},
             "nonexistent.yaml",
+        ),
+        ({"backend": "sim", "odometry_rate": 10.0, "odom_frame": "/odom"}, "leading '/'"),
+        (
+            {"backend": "sim", "odometry_rate": 10.0, "sensor_frames": ["only_one"]},
+            "names 1 frames for 2 devices",
         ),
     ):
         out = subprocess.run(
