@@ -263,6 +263,18 @@ class BeagleClient:
         res = self._wait_future(self._params_get, req, "get_parameters", timeout)
         return [parameter_value_to_python(v) for v in res.values]
 
+    def trigger(self, service: str, timeout: float = 5.0):
+        """Call the std_srvs/Trigger ``service`` (full name, e.g. /mm_odometry/reset): its reply."""
+        from std_srvs.srv import Trigger
+
+        client = self.node.create_client(Trigger, service)
+        try:
+            if not client.wait_for_service(timeout_sec=timeout):
+                raise TimeoutError(f"{service} is not offered")
+            return self._wait_future(client, Trigger.Request(), service, timeout)
+        finally:
+            self.node.destroy_client(client)
+
     def diagnostics(
         self, newer_than: float = 0.0, timeout: float = 5.0
     ) -> dict[str, dict[str, str]]:

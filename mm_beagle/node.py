@@ -31,6 +31,8 @@ from rclpy.qos import qos_profile_sensor_data
 
 from mm_interfaces.msg import SensorData
 from mm_pc.ros import spin as ros_spin
+from mm_pc.ros.clock import ClockWatch, node_stamp
+from mm_pc.ros.tf import frame_id_problem
 
 from . import messages
 from . import shared_state as ss
@@ -96,6 +98,7 @@ class BeagleNode(Node):
             self._start_onboard_odometry()
         self.create_timer(0.2, self.relay_poller_events)
         self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.clock_watch = ClockWatch(self)
         where = (
             f"read from the agent at {self.settings.remote.agent}"
             if cfg.backend == "remote"
@@ -170,8 +173,10 @@ class BeagleNode(Node):
         """
         changes = {p.name: p.value for p in params}
         for frame in ("odom_frame", "base_frame"):
-            if frame in changes and not str(changes[frame]).strip():
-                return SetParametersResult(successful=False, reason=f"'{frame}' must not be empty")
+            problem = frame_id_problem(frame, changes[frame]) if frame in changes else ""
+            if problem:
+                self.get_logger().warning(f"parameter {frame} not changed: {problem}")
+                return SetParametersResult(successful=False, reason=problem)
         if "cpi" in changes:
             problem = self._set_cpi_everywhere(int(changes["cpi"]))
             if problem:
@@ -195,6 +200,8 @@ class BeagleNode(Node):
         for frame in ("odom_frame", "base_frame"):
             if frame in changes:
                 setattr(self.settings.odometry, frame, str(changes[frame]))
+        if "base_frame" in changes and self.onboard is not None:
+            self._send_static_frames()
         for name, value in changes.items():
             if name != "cpi":  # set_cpi logs its own line per sensor
                 self.get_logger().info(f"parameter {name} set to {value}")
@@ -341,37 +348,70 @@ class BeagleNode(Node):
                 self.data_pub.publish(msg)
 
     def _start_onboard_odometry(self) -> None:
-        """Optional: integrate every 1 kHz poll here and publish ~/odom (same math, same msg)."""
+        """Optional: integrate every 1 kHz poll here and publish ~/odom (same math, same msg).
+
+        With ``publish_tf`` also odom -> base_link on /tf and the mounts on /tf_static;
+        ``~/reset`` (std_srvs/Trigger) puts the pose and its covariance back to the start.
+        """
         from nav_msgs.msg import Odometry as OdometryMsg
 
         from mm_pc.core.uncertainty import PoseUncertainty
         from mm_pc.ros.odometry_node import odometry_message
+        from mm_pc.ros.reset import create_reset_service
+        from mm_pc.ros.tf import TfPublisher, planar_transform, sensor_frame_names
 
         from .onboard_odometry import OnboardOdometry
 
         o = self.settings.odometry
         self.onboard = OnboardOdometry(o, self.devices, self.poller.state)
-        uncertainty = PoseUncertainty()
+        self.sensor_frames = sensor_frame_names(self.devices, o.sensor_frames)
+        self.uncertainty = PoseUncertainty()
+        self.tf = TfPublisher(self, o.publish_tf)
+        self._send_static_frames()
         pub = self.create_publisher(OdometryMsg, "~/odom", 10)
 
         def tick() -> None:
             step = self.onboard.step()
-            if step is not None:
-                before, after, dt, stamp_ns, cpi = step
-                pub.publish(
-                    odometry_message(
-                        before,
-                        after,
-                        dt,
-                        messages.stamp(stamp_ns),
-                        cpi,
-                        uncertainty,
-                        o.odom_frame,
-                        o.base_frame,
-                    )
+            if step is None:
+                return
+            before, after, dt, stamp_ns, cpi = step
+            msg = odometry_message(
+                before,
+                after,
+                dt,
+                node_stamp(self, stamp_ns),
+                cpi,
+                self.uncertainty,
+                o.odom_frame,
+                o.base_frame,
+            )
+            pub.publish(msg)
+            self.tf.send(
+                planar_transform(
+                    msg.header.stamp, o.odom_frame, o.base_frame, after.x, after.y, after.yaw
                 )
+            )
 
+        def reset() -> str:
+            self.onboard.reset()
+            self.uncertainty.reset()
+            return f"onboard odometry back to (0, 0, 0) in {o.odom_frame}, covariance cleared"
+
+        create_reset_service(self, reset)
         self.create_timer(1.0 / o.rate, tick)
+
+    def _send_static_frames(self) -> None:
+        """base_link -> each sensor frame at its (calibrated) mount, latched on /tf_static."""
+        from mm_pc.ros.tf import mount_transforms
+
+        self.tf.send_static(
+            mount_transforms(
+                self.get_clock().now().to_msg(),
+                self.settings.odometry.base_frame,
+                self.sensor_frames,
+                self.onboard.odometry.mounts,
+            )
+        )
 
     def relay_poller_events(self) -> None:
         """Log what the poller reported; stop the node if the poller is gone."""

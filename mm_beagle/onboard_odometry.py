@@ -46,6 +46,10 @@ class OnboardOdometry:
         self.next_seq = [int(state.snapshot(i).seq) for i in range(len(devices))]
         self.last_stamp = [0] * len(devices)
 
+    def reset(self) -> None:
+        """Pose back to the origin; the polls from here on are integrated (the past is not)."""
+        self.odometry.reset()
+
     def step(self) -> tuple[Pose2D, Pose2D, float, int, int] | None:
         """Integrate the new polls: (before, after, seconds, last stamp ns, cpi), or None."""
         batches = [self.state.samples(i, self.next_seq[i], 0) for i in range(len(self.devices))]

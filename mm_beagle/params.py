@@ -7,6 +7,8 @@ from dataclasses import dataclass
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.node import Node
 
+from mm_pc.ros.tf import frame_id_problem, sensor_frame_names
+
 from . import link
 from .poller import PollerConfig, poller_config
 from .sim_backend import SimConfig, check_trajectory, parse_fail_windows
@@ -96,6 +98,18 @@ PARAMETERS = {
     "calibration_file": ("", _plain("odometry: YAML calibration to apply ('' = none)")),
     "odom_frame": ("odom", _plain("odometry: frame_id")),
     "base_frame": ("base_link", _plain("odometry: child_frame_id")),
+    "publish_tf": (
+        False,
+        _plain(
+            "odometry: broadcast odom -> base_link on /tf and the sensor mounts on /tf_static; "
+            "mm-odometry normally owns odom -> base_link (its publish_tf is true): set this "
+            "true only where this node's own odometry replaces mm-odometry"
+        ),
+    ),
+    "sensor_frames": (
+        [""],
+        _plain("odometry: TF frame of each sensor, in device order ('' = mouse_ + device name)"),
+    ),
     "sim_trajectory": (
         "figure_eight",
         _plain(
@@ -143,6 +157,8 @@ class OdometrySettings:
     calibration_file: str
     odom_frame: str
     base_frame: str
+    publish_tf: bool = False
+    sensor_frames: tuple[str, ...] = ()
 
 
 @dataclass
@@ -207,7 +223,15 @@ def declare(node: Node) -> NodeSettings:
         calibration_file=p["calibration_file"],
         odom_frame=p["odom_frame"],
         base_frame=p["base_frame"],
+        publish_tf=p["publish_tf"],
+        sensor_frames=tuple(p["sensor_frames"]),
     )
+    if odometry.rate > 0:  # checked before the poller starts
+        for frame in ("odom_frame", "base_frame"):
+            problem = frame_id_problem(frame, p[frame])
+            if problem:
+                raise ValueError(problem)
+        sensor_frame_names(devices, odometry.sensor_frames)
     remote = RemoteSettings(
         p["agent"], p["agent_name"], p["agent_credentials"], p["agent_clock_sync"]
     )

@@ -36,7 +36,7 @@ def generate_launch_description() -> LaunchDescription:
                 "monitor", default_value="false", description="also open mm-monitor"
             ),
             _include("mm_beagle", "beagle.launch.py", {"backend": backend}),
-            _include("mm_pc", "odometry.launch.py", {"beagle": "/mm_beagle"}),
+            _include("mm_pc", "odometry.launch.py", {"beagle": "mm_beagle"}),
             _include("mm_pc", "fusion.launch.py", {}),
             _include(
                 "mm_pc",

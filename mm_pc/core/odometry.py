@@ -26,6 +26,8 @@ __all__ = [
     "Pose2D",
     "Sample",
     "arc_poses",
+    "compose",
+    "inverse",
 ]
 
 DEFAULT_METHOD = "exact"
@@ -47,6 +49,21 @@ class Pose2D:
     def as_array(self) -> np.ndarray:
         """``np.array([x, y, yaw])``."""
         return np.array([self.x, self.y, self.yaw], dtype=float)
+
+
+def compose(a: Pose2D, b: Pose2D) -> Pose2D:
+    """``a * b``: pose ``b`` (given in ``a``'s child frame) expressed in ``a``'s parent frame.
+
+    E.g. map_T_odom * odom_T_base = map_T_base (metres, rad; yaws add, not wrapped).
+    """
+    c, s = math.cos(a.yaw), math.sin(a.yaw)
+    return Pose2D(a.x + c * b.x - s * b.y, a.y + s * b.x + c * b.y, a.yaw + b.yaw)
+
+
+def inverse(p: Pose2D) -> Pose2D:
+    """The inverse transform: parent in child (``compose(p, inverse(p))`` is the identity)."""
+    c, s = math.cos(p.yaw), math.sin(p.yaw)
+    return Pose2D(-c * p.x - s * p.y, s * p.x - c * p.y, -p.yaw)
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,4 @@
-"""mm-odometry alone: ``ros2 launch mm_pc odometry.launch.py [beagle:=/mm_beagle]``.
+"""mm-odometry alone: ``ros2 launch mm_pc odometry.launch.py [beagle:=mm_beagle]``.
 
 It asks the mm_beagle node named by ``beagle`` for the sensor data and publishes
 ~/odom and ~/path; the rest comes from ``params_file`` (default: the installed
@@ -23,7 +23,9 @@ def generate_launch_description() -> LaunchDescription:
                 description="YAML parameters of mm_odometry",
             ),
             DeclareLaunchArgument(
-                "beagle", default_value="/mm_beagle", description="the mm_beagle node to ask"
+                "beagle",
+                default_value="mm_beagle",
+                description="the mm_beagle node to ask (relative: in the node's namespace)",
             ),
             DeclareLaunchArgument("namespace", default_value="", description="node namespace"),
             Node(

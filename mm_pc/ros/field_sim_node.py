@@ -5,7 +5,7 @@ time it reported it, ``speed`` times faster than real time; then exits 0.
 Stamps are sensor time: the node's clock at the start plus the run's time
 (at speed > 1 they run ahead of the wall clock, as in a fast bag replay).
 
-  /mm_odometry/odom  nav_msgs/Odometry   mouse odometry (20 Hz), odom -> base_link,
+  mm_odometry/odom   nav_msgs/Odometry   mouse odometry (20 Hz), odom -> base_link,
                      starting at the origin as mm-odometry does; not published
                      during ``mouse_dropout`` (lifted sensors: the counts of that
                      stretch are lost, the pose resumes where it stopped)
@@ -94,7 +94,10 @@ PARAMETERS = {
         _ro("no mouse odometry from start s for duration s (duration 0 = none)"),
     ),
     "perimeter_known_wire": (False, _ro("contacts name the wire's coordinate")),
-    "mouse_odom_topic": ("/mm_odometry/odom", _ro("mouse odometry topic")),
+    "mouse_odom_topic": (
+        "mm_odometry/odom",
+        _ro("mouse odometry topic (relative: mm-fusion's default in the same namespace)"),
+    ),
     "wheel_odom_topic": ("/wheel/odom", _ro("wheel odometry topic")),
     "gps_topic": ("/gps/fix", _ro("GPS topic")),
     "imu_topic": ("/imu/data", _ro("compass (Imu) topic")),

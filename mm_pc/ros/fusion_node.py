@@ -4,7 +4,7 @@ A thin ROS node around :class:`mm_pc.core.fusion.ekf.PoseEKF`, fed in stamp orde
 :class:`mm_pc.core.fusion.loop.FusionCore` (message meanings and checks are in
 :mod:`mm_pc.core.fusion.inputs`). Inputs (each topic a parameter, '' = not used):
 
-  mouse_odom_topic  nav_msgs/Odometry   /mm_odometry/odom   the motion model
+  mouse_odom_topic  nav_msgs/Odometry   mm_odometry/odom    the motion model
   wheel_odom_topic  nav_msgs/Odometry   /wheel/odom         motion model only while
                     the mouse odometry has been silent for > mouse_stale_timeout
                     (0.5 s of stamp time: lifted sensors, mm-odometry stopped)
@@ -21,6 +21,12 @@ Outputs:
           (x, y, yaw; z, roll, pitch 1e6), body twist of the last increment;
           at publish_rate Hz (wall clock) when the estimate changed, else 1 Hz
   ~/path (nav_msgs/Path): the estimate every path_spacing m, at path_rate Hz
+  /tf (publish_tf): map -> odom (the mouse odometry's frame_id) with each ~/odom, at
+          its stamp: map_T_odom = map_T_base * inverse(odom_T_base), odom_T_base the
+          mouse pose the estimate is at, so odom -> base_link stays mm-odometry's and
+          both chains coexist (REP 105); not sent while the wheels are the motion model
+  ~/reset (std_srvs/Trigger): the estimate back to initial_pose / initial_sigma,
+          the path cleared (the counts on /diagnostics go on)
   /diagnostics: per source accepted / rejected (gate) / invalid / unusable /
           stale / reacquired counts and the last reason; the estimate
           and the motion model in use
@@ -29,7 +35,8 @@ Every input is checked; a message that cannot be used is counted, logged with
 a WARN at most once per 5 s per source and kind, and changes nothing. Inputs
 are read with best-effort QoS, so sensor drivers publishing with either
 reliability are heard. The plot defaults are the field simulator's
-(mm-field-sim): set yours in the parameter file.
+(mm-field-sim): set yours in the parameter file. The ``LIVE`` parameters take
+``ros2 param set`` (checked; a refused value keeps the old one).
 """
 
 from __future__ import annotations
@@ -43,7 +50,12 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, PoseStamped
 from nav_msgs.msg import Odometry as OdometryMsg
 from nav_msgs.msg import Path
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    SetParametersResult,
+)
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -69,7 +81,7 @@ from mm_pc.core.fusion.inputs import (
 )
 from mm_pc.core.fusion.loop import FusionCore, increment_noise
 from mm_pc.core.maps.trilateration import Beacon
-from mm_pc.core.odometry import Pose2D
+from mm_pc.core.odometry import Pose2D, compose, inverse
 from mm_pc.core.uncertainty import (
     Q_POS,
     Q_YAW_DIST,
@@ -78,6 +90,8 @@ from mm_pc.core.uncertainty import (
     planar_covariance_6x6,
 )
 from mm_pc.ros import spin as ros_spin
+from mm_pc.ros.reset import create_reset_service
+from mm_pc.ros.tf import TfPublisher, frame_id_problem, planar_transform
 from mm_pc.ros.throttle import WarnThrottle
 
 COMPASS_INPUTS = ("imu", "heading", "none")
@@ -93,7 +107,10 @@ def _range(lo: float, hi: float) -> dict:
 
 
 PARAMETERS = {
-    "mouse_odom_topic": ("/mm_odometry/odom", _ro("mouse odometry (nav_msgs/Odometry); ''=off")),
+    "mouse_odom_topic": (
+        "mm_odometry/odom",
+        _ro("mouse odometry (nav_msgs/Odometry), relative to the namespace; '' = off"),
+    ),
     "wheel_odom_topic": ("/wheel/odom", _ro("wheel odometry (nav_msgs/Odometry); ''=off")),
     "gps_topic": ("/gps/fix", _ro("GPS (sensor_msgs/NavSatFix); '' = off")),
     "compass_input": ("imu", _ro(f"compass input: {', '.join(COMPASS_INPUTS)}")),
@@ -206,7 +223,20 @@ PARAMETERS = {
         _ro("poses kept in the path", integer_range=[IntegerRange(from_value=2, to_value=10**6)]),
     ),
     "diagnostics_rate": (1.0, _ro("/diagnostics messages per second (Hz)", **_range(0.01, 100.0))),
+    "publish_tf": (
+        True,
+        _ro(
+            "broadcast map -> odom on /tf (from the estimate and the mouse odometry's pose); "
+            "odom -> base_link stays mm-odometry's"
+        ),
+    ),
 }
+
+#: parameters that take ``ros2 param set`` while the node runs; the rest are read-only
+LIVE = ("publish_rate", "path_rate", "diagnostics_rate", "map_frame", "base_frame")
+for _name in LIVE:
+    PARAMETERS[_name][1].read_only = False
+    PARAMETERS[_name][1].description += " (live: ros2 param set)"
 
 #: Wall seconds without any odometry message after which fixes are applied on arrival.
 IDLE_AFTER_S = 0.5
@@ -270,32 +300,27 @@ class FusionNode(Node):
             if p["beacon_topic"]
             else ()
         )
+        for frame in ("map_frame", "base_frame"):
+            problem = frame_id_problem(frame, p[frame])
+            if problem:
+                raise ValueError(problem)
         x0 = _triple("initial_pose", p["initial_pose"])
         s0 = _triple("initial_sigma", p["initial_sigma"], positive=True)
+        self.x0, self.s0 = x0, s0
         mouse_q = _triple("mouse_noise", p["mouse_noise"])
         self.wheel_q = _triple("wheel_noise", p["wheel_noise"])
         if min(mouse_q + self.wheel_q) < 0:
             raise ValueError("'mouse_noise' and 'wheel_noise' must be >= 0")
         self.mouse_q = mouse_q
         w, h = p["plot_width"], p["plot_height"]
-        wires = rectangle_perimeter(w, h) if w > 0 and h > 0 else ()
-        ekf = PoseEKF(Pose2D(*x0), np.diag(np.square(s0)), *mouse_q)
-        self.core = FusionCore(
-            ekf,
-            wheel_noise=self.wheel_q,
-            stale_s=p["mouse_stale_timeout"],
-            max_delay_s=p["max_delay"],
-            reacquire_after=p["reacquire_after"],
-            wires=wires,
-            wire_var=p["wire_sigma"] ** 2,
-            wire_max_distance=p["wire_max_distance"],
-            max_speed=p["max_speed"],
-        )
+        self.wires = rectangle_perimeter(w, h) if w > 0 and h > 0 else ()
+        self.core = self._new_core()
         self.throttle = WarnThrottle(5.0)
         self._subscribe()
         self.odom_pub = self.create_publisher(OdometryMsg, "~/odom", 10)
         self.path_pub = self.create_publisher(Path, "~/path", 1)
         self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.tf = TfPublisher(self, p["publish_tf"])
         self.path = Path()
         self.path.header.frame_id = p["map_frame"]
         self._published_stamp: float | None = None
@@ -303,15 +328,80 @@ class FusionNode(Node):
         self._last_motion_wall = time.monotonic()
         self._diag_prev: dict[str, dict[str, int]] = {}
         self.hardware_id = self.get_fully_qualified_name()
-        steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(1.0 / p["publish_rate"], self.publish_odometry, clock=steady)
-        self.create_timer(1.0 / p["path_rate"], self.publish_path, clock=steady)
-        self.create_timer(1.0 / p["diagnostics_rate"], self.publish_diagnostics, clock=steady)
-        self.create_timer(0.1, self.check_idle, clock=steady)
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self._rate_timers = {
+            name: self.create_timer(1.0 / p[name], callback, clock=self._steady)
+            for name, callback in self._timed().items()
+        }
+        self.create_timer(0.1, self.check_idle, clock=self._steady)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        create_reset_service(self, self.reset)
         self.get_logger().info(
             f"fusing {', '.join(self.inputs) or 'nothing'}; start pose {x0}; publishing "
             f"{self.get_fully_qualified_name()}/odom and /path in frame {p['map_frame']}"
+            + (f", TF {p['map_frame']} -> odom" if p["publish_tf"] else "")
         )
+
+    def _timed(self) -> dict:
+        """rate parameter -> the callback its steady-clock timer runs."""
+        return {
+            "publish_rate": self.publish_odometry,
+            "path_rate": self.publish_path,
+            "diagnostics_rate": self.publish_diagnostics,
+        }
+
+    def _new_core(self, counts=None) -> FusionCore:
+        """A fresh filter at initial_pose / initial_sigma (``counts`` carried over)."""
+        p = self.p
+        ekf = PoseEKF(Pose2D(*self.x0), np.diag(np.square(self.s0)), *self.mouse_q)
+        core = FusionCore(
+            ekf,
+            wheel_noise=self.wheel_q,
+            stale_s=p["mouse_stale_timeout"],
+            max_delay_s=p["max_delay"],
+            reacquire_after=p["reacquire_after"],
+            wires=self.wires,
+            wire_var=p["wire_sigma"] ** 2,
+            wire_max_distance=p["wire_max_distance"],
+            max_speed=p["max_speed"],
+        )
+        if counts is not None:
+            core.counts = counts
+        return core
+
+    def reset(self) -> str:
+        """~/reset: the estimate back to the start, the path cleared; counts go on."""
+        self.core = self._new_core(self.core.counts)
+        self.path.poses.clear()
+        self._published_stamp, self._published_wall = None, 0.0  # the start pose out at once
+        return (
+            f"estimate back to {self.x0} in {self.p['map_frame']} with sigma {self.s0}, "
+            "path cleared; the next mouse odometry starts a new baseline"
+        )
+
+    def _on_set_parameters(self, params) -> SetParametersResult:
+        """Apply ``ros2 param set`` on a LIVE parameter, or refuse it and keep the old value.
+
+        rclpy has already checked the read-only flags and the ranges.
+        """
+        changes = {p.name: p.value for p in params}
+        for frame in ("map_frame", "base_frame"):
+            problem = frame_id_problem(frame, changes[frame]) if frame in changes else ""
+            if problem:
+                self.get_logger().warning(f"parameter {frame} not changed: {problem}")
+                return SetParametersResult(successful=False, reason=problem)
+        self.p.update(changes)
+        for name, callback in self._timed().items():
+            if name in changes:
+                self.destroy_timer(self._rate_timers[name])
+                self._rate_timers[name] = self.create_timer(
+                    1.0 / changes[name], callback, clock=self._steady
+                )
+        if "map_frame" in changes:
+            self.path.header.frame_id = changes["map_frame"]
+        for name, value in changes.items():
+            self.get_logger().info(f"parameter {name} set to {value}")
+        return SetParametersResult(successful=True)
 
     # -- inputs -----------------------------------------------------------------------------
 
@@ -322,7 +412,7 @@ class FusionNode(Node):
             depth=p["queue_depth"],
             reliability=ReliabilityPolicy.BEST_EFFORT,
         )
-        base, mframe = p["base_frame"], p["map_frame"]
+        # read at each message: base_frame and map_frame are live
         gps_kw = {
             "default_sigma": p["gps_default_sigma"],
             "max_sigma": p["gps_max_sigma"],
@@ -337,7 +427,7 @@ class FusionNode(Node):
                     OdometryMsg,
                     p["mouse_odom_topic"],
                     "mouse",
-                    lambda m: odometry_input(m, "mouse", base),
+                    lambda m: odometry_input(m, "mouse", p["base_frame"]),
                 )
             )
         if p["wheel_odom_topic"]:
@@ -346,7 +436,7 @@ class FusionNode(Node):
                     OdometryMsg,
                     p["wheel_odom_topic"],
                     "wheel",
-                    lambda m: odometry_input(m, "wheel", base),
+                    lambda m: odometry_input(m, "wheel", p["base_frame"]),
                 )
             )
         if p["gps_topic"]:
@@ -384,7 +474,7 @@ class FusionNode(Node):
                     PointStamped,
                     p["perimeter_topic"],
                     "perimeter",
-                    lambda m: perimeter_input(m, mframe),
+                    lambda m: perimeter_input(m, p["map_frame"]),
                 )
             )
         for b in self.beacons:
@@ -509,9 +599,23 @@ class FusionNode(Node):
             return
         msg = self.odometry_message()
         self.odom_pub.publish(msg)
+        self._send_map_to_odom(msg)
         self._published_stamp, self._published_wall = stamp, now
         if stamp is not None:
             self._add_path_pose(msg)
+
+    def _send_map_to_odom(self, msg: OdometryMsg) -> None:
+        """map -> odom at ``msg``'s stamp: the estimate times inverse(the mouse odom pose)."""
+        mouse = self.core.mouse_pose
+        if mouse is None or not self.tf.enabled:
+            return
+        map_odom = compose(self.core.ekf.pose, inverse(mouse.pose))
+        self.tf.send(
+            planar_transform(
+                msg.header.stamp, self.p["map_frame"], mouse.frame_id, map_odom.x, map_odom.y,
+                map_odom.yaw,
+            )
+        )  # fmt: skip
 
     def _add_path_pose(self, msg: OdometryMsg) -> None:
         poses = self.path.poses
@@ -541,7 +645,9 @@ class FusionNode(Node):
             now = counts.as_dict()
             prev = self._diag_prev.get(source, dict.fromkeys(now, 0))
             new = {k: now[k] - prev[k] for k in now}
-            st = DiagnosticStatus(name=f"mm_fusion: {source}", hardware_id=self.hardware_id)
+            st = DiagnosticStatus(
+                name=f"{self.hardware_id}: {source}", hardware_id=self.hardware_id
+            )
             if sum(new.values()) and not new["accepted"]:
                 st.level, st.message = DiagnosticStatus.WARN, f"nothing used: {counts.last_reason}"
             else:
@@ -555,7 +661,7 @@ class FusionNode(Node):
     def _estimate_status(self) -> DiagnosticStatus:
         ekf = self.core.ekf
         pose, cov = ekf.pose, ekf.covariance
-        st = DiagnosticStatus(name="mm_fusion: estimate", hardware_id=self.hardware_id)
+        st = DiagnosticStatus(name=f"{self.hardware_id}: estimate", hardware_id=self.hardware_id)
         st.level = DiagnosticStatus.OK
         st.message = f"motion model: {self.core.motion_source or 'none yet'}"
         values = {

@@ -15,10 +15,17 @@ from other clients, applies the calibration, runs the pose math of
           request's interval), with the covariance of :mod:`mm_pc.core.uncertainty`
   ~/path (nav_msgs/Path):    the poses so far (at most ``path_length``), at
           ``path_rate`` Hz
-  /diagnostics:              "mm_odometry: pose" once a second: polls integrated,
+  /diagnostics:              "/NS/mm_odometry: pose" once a second: polls integrated,
           gap steps and the last reason (WARN after a new gap)
+  /tf (publish_tf):          odom -> base_link, the same pose and stamp as ~/odom
+  /tf_static (publish_tf):   base_link -> each sensor frame (``sensor_frames``) at its
+          mount (the calibrated one where a calibration is loaded)
+  ~/reset (std_srvs/Trigger): pose and covariance back to the start, path cleared
 
-Frame ids, rates, method and geometry are parameters.
+Frame ids, rates, method and geometry are parameters; ``LIVE`` ones take
+``ros2 param set`` (checked: a refused value keeps the old one). ``beagle`` is
+relative to the node's namespace (``-r __ns:=/robot1`` asks /robot1/mm_beagle).
+Header stamps follow the node clock (:func:`mm_pc.ros.clock.node_stamp`).
 """
 
 from __future__ import annotations
@@ -31,7 +38,12 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry as OdometryMsg
 from nav_msgs.msg import Path
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    SetParametersResult,
+)
 from rclpy.node import Node
 
 from mm_interfaces.srv import GetSamples, GetSensorData
@@ -42,6 +54,15 @@ from mm_pc.core.odometry import METHODS, Odometry, Pose2D, Sample
 from mm_pc.core.polls import PollBatch, PollTracker, SensorTotals, integrate_steps
 from mm_pc.core.uncertainty import PoseUncertainty, twist_covariance
 from mm_pc.ros import spin as ros_spin
+from mm_pc.ros.clock import ClockWatch, node_stamp
+from mm_pc.ros.reset import create_reset_service
+from mm_pc.ros.tf import (
+    TfPublisher,
+    frame_id_problem,
+    mount_transforms,
+    planar_transform,
+    sensor_frame_names,
+)
 
 #: a get_samples reply later than this is given up on (the interval is stepped with the totals)
 FETCH_TIMEOUT_S = 2.0
@@ -52,7 +73,10 @@ def _ro(desc: str, **kw) -> ParameterDescriptor:
 
 
 PARAMETERS = {
-    "beagle": ("/mm_beagle", _ro("namespace/name of the mm_beagle node to ask")),
+    "beagle": (
+        "mm_beagle",
+        _ro("the mm_beagle node to ask: relative to this node's namespace, or absolute (/...)"),
+    ),
     "rate": (
         15.0,
         _ro(
@@ -76,8 +100,19 @@ PARAMETERS = {
     "calibration_file": ("", _ro("YAML calibration to apply ('' = none)")),
     "use_lift_estimates": (True, _ro("add the node's estimates of counts lost to lifts")),
     "per_poll": (True, _ro("integrate every single poll (get_samples); false = per request")),
-    "odom_frame": ("odom", _ro("frame_id of the odometry")),
-    "base_frame": ("base_link", _ro("child_frame_id of the odometry")),
+    "odom_frame": ("odom", _ro("frame_id of the odometry (and parent of the TF)")),
+    "base_frame": ("base_link", _ro("child_frame_id of the odometry (and of the TF)")),
+    "publish_tf": (
+        True,
+        _ro(
+            "broadcast odom -> base_link on /tf and the sensor mounts on /tf_static; this node "
+            "normally owns odom -> base_link (keep mm-beagle's publish_tf false)"
+        ),
+    ),
+    "sensor_frames": (
+        [""],
+        _ro("TF frame of each sensor, in device order ('' = mouse_ + the device name)"),
+    ),
     "path_length": (
         10000,
         _ro("poses kept in the path", integer_range=[IntegerRange(from_value=2, to_value=10**6)]),
@@ -90,6 +125,12 @@ PARAMETERS = {
         ),
     ),
 }
+
+#: parameters that take ``ros2 param set`` while the node runs; the rest are read-only
+LIVE = ("rate", "path_rate", "method", "odom_frame", "base_frame")
+for _name in LIVE:
+    PARAMETERS[_name][1].read_only = False
+    PARAMETERS[_name][1].description += " (live: ros2 param set)"
 
 
 def odometry_message(
@@ -149,10 +190,18 @@ class OdometryNode(Node):
             Calibration.load(p["calibration_file"]) if p["calibration_file"] else Calibration()
         )
         mounts = self.calibration.mounts(devices, mounts)
+        self.mounts = mounts
         self.odometry = Odometry(mounts, method=p["method"], sensor=p["sensor"])
         self.uncertainty = PoseUncertainty()
+        for frame in ("odom_frame", "base_frame"):
+            problem = frame_id_problem(frame, p[frame])
+            if problem:
+                raise ValueError(problem)
+        self.sensor_frames = sensor_frame_names(devices, p["sensor_frames"])
         self.client = self.create_client(GetSensorData, f"{p['beagle']}/get_sensor_data")
         self.samples_client = self.create_client(GetSamples, f"{p['beagle']}/get_samples")
+        #: the mm_beagle node asked, fully qualified (``beagle`` resolved in this namespace)
+        self.beagle = self.resolve_service_name(p["beagle"])
         self.tracker = PollTracker(len(devices), p["use_lift_estimates"])
         self._fetch: dict | None = None  # the reply waiting for its polls
         self._reported_gaps = 0
@@ -165,12 +214,72 @@ class OdometryNode(Node):
         self._last: dict[str, tuple[float, float, int]] = {}  # id -> totals, stamp
         self._in_flight = False
         self.samples_used = 0
-        self.create_timer(1.0 / p["rate"], self.request)
-        self.create_timer(1.0 / p["path_rate"], self.publish_path)
+        self.tf = TfPublisher(self, p["publish_tf"])
+        self.send_static_frames()
+        self._request_timer = self.create_timer(1.0 / p["rate"], self.request)
+        self._path_timer = self.create_timer(1.0 / p["path_rate"], self.publish_path)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        create_reset_service(self, self.reset)
+        self.clock_watch = ClockWatch(self)
         self.get_logger().info(
-            f"odometry ({p['method']}) from {p['beagle']} at {p['rate']:g} Hz; "
+            f"odometry ({p['method']}) from {self.beagle} at {p['rate']:g} Hz; "
             f"publishing {self.get_fully_qualified_name()}/odom and /path"
+            + (f", TF {p['odom_frame']} -> {p['base_frame']}" if p["publish_tf"] else "")
         )
+
+    def send_static_frames(self) -> None:
+        """base_link -> each sensor frame at its mount, latched on /tf_static."""
+        self.tf.send_static(
+            mount_transforms(
+                self.get_clock().now().to_msg(), self.p["base_frame"], self.sensor_frames,
+                self.mounts,
+            )
+        )  # fmt: skip
+
+    def reset(self) -> str:
+        """~/reset: pose back to the origin, covariance to zero, the path cleared."""
+        self.odometry.reset()
+        self.uncertainty.reset()
+        self.path.poses.clear()
+        return (
+            f"pose back to (0, 0, 0) in {self.p['odom_frame']}, covariance cleared, path "
+            "cleared (polls not yet integrated, at most one request interval, count after it)"
+        )
+
+    def _on_set_parameters(self, params) -> SetParametersResult:
+        """Apply ``ros2 param set`` on a LIVE parameter, or refuse it and keep the old value.
+
+        rclpy has already checked the read-only flags and the ranges.
+        """
+        changes = {p.name: p.value for p in params}
+        problem = ""
+        for frame in ("odom_frame", "base_frame"):
+            if frame in changes:
+                problem = problem or frame_id_problem(frame, changes[frame])
+        if "method" in changes and changes["method"] not in METHODS:
+            problem = f"unknown method '{changes['method']}'; known: {', '.join(sorted(METHODS))}"
+        if problem:
+            self.get_logger().warning(f"parameters not changed: {problem}")
+            return SetParametersResult(successful=False, reason=problem)
+        if "method" in changes:  # the new method goes on from the current pose
+            self.odometry = Odometry(
+                self.mounts, method=changes["method"], sensor=self.p["sensor"],
+                pose=self.odometry.pose,
+            )  # fmt: skip
+        if "rate" in changes:
+            self.destroy_timer(self._request_timer)
+            self._request_timer = self.create_timer(1.0 / changes["rate"], self.request)
+        if "path_rate" in changes:
+            self.destroy_timer(self._path_timer)
+            self._path_timer = self.create_timer(1.0 / changes["path_rate"], self.publish_path)
+        self.p.update(changes)
+        if "odom_frame" in changes:
+            self.path.header.frame_id = changes["odom_frame"]
+        if "base_frame" in changes:
+            self.send_static_frames()
+        for name, value in changes.items():
+            self.get_logger().info(f"parameter {name} set to {value}")
+        return SetParametersResult(successful=True)
 
     def request(self) -> None:
         """Ask mm-beagle for new sensor data (timer callback); one call in flight at a time."""
@@ -306,8 +415,8 @@ class OdometryNode(Node):
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
         arr.status.append(DiagnosticStatus(
-            level=level, name=f"{self.get_name()}: pose", message=text,
-            hardware_id=self.p["beagle"],
+            level=level, name=f"{self.get_fully_qualified_name()}: pose", message=text,
+            hardware_id=self.beagle,
             values=[KeyValue(key=k, value=str(v)) for k, v in values.items()],
         ))  # fmt: skip
         self.diag_pub.publish(arr)
@@ -316,17 +425,24 @@ class OdometryNode(Node):
         self, before: Pose2D, after: Pose2D, dt: float, data, stamp=None
     ) -> None:
         """Publish nav_msgs/Odometry for the step ``before`` -> ``after`` over ``dt`` s."""
+        poll = data.stamp if stamp is None else stamp
         msg = odometry_message(
             before,
             after,
             dt,
-            data.stamp if stamp is None else stamp,
+            node_stamp(self, poll.sec * 1_000_000_000 + poll.nanosec),
             data.cpi,
             self.uncertainty,
             self.p["odom_frame"],
             self.p["base_frame"],
         )
         self.odom_pub.publish(msg)
+        self.tf.send(
+            planar_transform(
+                msg.header.stamp, self.p["odom_frame"], self.p["base_frame"], after.x, after.y,
+                after.yaw,
+            )
+        )  # fmt: skip
         ps = PoseStamped()
         ps.header = msg.header
         ps.pose = msg.pose.pose

@@ -12,6 +12,7 @@ Frames: REP 103/105 (odom -> base_link, map -> odom); poses in metres and rad.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 
 from geometry_msgs.msg import TransformStamped
@@ -22,12 +23,64 @@ from tf2_msgs.msg import TFMessage
 from mm_pc.core.angles import yaw_to_quaternion
 from mm_pc.core.geometry import SensorMount
 
-__all__ = ["DYNAMIC_QOS", "STATIC_QOS", "TfPublisher", "mount_transforms", "planar_transform"]
+__all__ = [
+    "DYNAMIC_QOS",
+    "STATIC_QOS",
+    "TfPublisher",
+    "frame_id_problem",
+    "mount_transforms",
+    "planar_transform",
+    "sensor_frame_names",
+]
 
 DYNAMIC_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 STATIC_QOS = QoSProfile(
     depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
 )
+
+
+_FRAME_ID = re.compile(r"[A-Za-z_][A-Za-z0-9_./-]*")
+
+
+def frame_id_problem(name: str, value: object) -> str:
+    """'' if ``value`` can be a TF frame id (tf2: no leading '/', no spaces), else why not.
+
+    ``name`` is the parameter's name, for the message.
+    """
+    v = str(value)
+    if not v:
+        return f"'{name}' must not be empty"
+    if v.startswith("/"):
+        return f"'{name}' is '{v}': TF frame ids have no leading '/' (tf2 rejects them)"
+    if not _FRAME_ID.fullmatch(v):
+        return (
+            f"'{name}' is '{v}': a TF frame id starts with a letter or '_' and holds only "
+            "letters, digits, '_', '.', '/', '-'"
+        )
+    return ""
+
+
+def sensor_frame_names(devices: Sequence[str], given: Sequence[str] = ()) -> list[str]:
+    """One TF frame per sensor: ``given`` (checked) or derived from the device names.
+
+    Derived: ``mouse_`` + the last path part with every other character as '_'
+    ('/dev/spidev1.0' -> 'mouse_spidev1_0'). ValueError says what is wrong.
+    """
+    names = [str(g) for g in given if str(g)]
+    if not names:
+        names = ["mouse_" + re.sub(r"[^A-Za-z0-9_]", "_", d.rstrip("/").rsplit("/", 1)[-1])
+                 for d in devices]  # fmt: skip
+    if len(names) != len(devices):
+        raise ValueError(
+            f"'sensor_frames' names {len(names)} frames for {len(devices)} devices; give one each"
+        )
+    if len(set(names)) != len(names):
+        raise ValueError(f"'sensor_frames' must be distinct, got {names}")
+    for n in names:
+        problem = frame_id_problem("sensor_frames", n)
+        if problem:
+            raise ValueError(problem)
+    return names
 
 
 def planar_transform(

@@ -480,3 +480,75 @@ def test_a_node_started_by_the_harness_stops_when_its_parent_dies():
     except psutil.TimeoutExpired:
         proc.kill()
         pytest.fail(f"mm-beagle (pid {pid}) outlived its parent")
+
+
+def test_onboard_odometry_broadcasts_tf_when_asked_and_resets(tmp_path):
+    """publish_tf:=true: odom -> base_link with ~/odom's pose and stamp, the mounts latched;
+    ~/reset puts the pose back to 0 and it moves on from there."""
+    from nav_msgs.msg import Odometry
+    from tf2_msgs.msg import TFMessage
+
+    from mm_pc.ros.tf import DYNAMIC_QOS, STATIC_QOS
+
+    ns = "/onboard_tf"
+    params = {
+        "backend": "sim",
+        "sim_trajectory": "straight",
+        "odometry_rate": 20.0,
+        "publish_tf": True,
+        "sensor_frames": ["left_mouse", "right_mouse"],
+    }
+    client = BeagleClient("onboard_tf_client", f"{ns}/mm_beagle")
+    odoms: list = []
+    tfs: list = []
+    client.node.create_subscription(Odometry, f"{ns}/mm_beagle/odom", odoms.append, 50)
+    client.node.create_subscription(TFMessage, "/tf", tfs.append, DYNAMIC_QOS)
+    try:
+        with beagle_process(params, dict(os.environ), str(tmp_path / "b.log"), ns):
+            deadline = time.monotonic() + 20
+            while not (len(odoms) > 10 and odoms[-1].pose.pose.position.x > 0.1):
+                assert time.monotonic() < deadline, "no onboard odometry"
+                time.sleep(0.05)
+            sent = {(t.header.stamp.sec, t.header.stamp.nanosec): t for m in list(tfs)
+                    for t in m.transforms}  # fmt: skip
+            matched = 0
+            for o in list(odoms):
+                t = sent.get((o.header.stamp.sec, o.header.stamp.nanosec))
+                if t is None:
+                    continue
+                assert (t.header.frame_id, t.child_frame_id) == ("odom", "base_link")
+                assert t.transform.translation.x == o.pose.pose.position.x
+                assert t.transform.rotation == o.pose.pose.orientation
+                matched += 1
+            assert matched >= 5
+            statics: list = []
+            client.node.create_subscription(TFMessage, "/tf_static", statics.append, STATIC_QOS)
+            deadline = time.monotonic() + 5
+            while not statics:
+                assert time.monotonic() < deadline, "no /tf_static for a late subscriber"
+                time.sleep(0.05)
+            frames = statics[0].transforms
+            assert [f.child_frame_id for f in frames] == ["left_mouse", "right_mouse"]
+            assert [f.transform.translation.y for f in frames] == [-0.0395, 0.0395]
+            before = odoms[-1]
+            res = client.trigger(f"{ns}/mm_beagle/reset")
+            assert res.success, res.message
+            n = len(odoms)
+            deadline = time.monotonic() + 5
+            while len(odoms) < n + 2:
+                assert time.monotonic() < deadline, "no odometry after the reset"
+                time.sleep(0.05)
+            first = odoms[n + 1]
+            assert abs(first.pose.pose.position.x) < 0.03 < before.pose.pose.position.x - 0.05
+            assert first.pose.covariance[0] < before.pose.covariance[0] / 2
+            deadline = time.monotonic() + 5
+            while odoms[-1].pose.pose.position.x < first.pose.pose.position.x + 0.05:
+                assert time.monotonic() < deadline, "the pose did not move on after the reset"
+                time.sleep(0.05)
+            (r,) = client.set_parameters(base_frame="/base")
+            assert not r.successful and "leading '/'" in r.reason
+    finally:
+        client.close()
+    log = (tmp_path / "b.log").read_text()
+    assert "reset: onboard odometry back to (0, 0, 0)" in log
+    assert "Traceback" not in log

@@ -450,3 +450,22 @@ def test_bad_lift_mask_is_refused_and_changes_nothing(lifted):
     assert odo.pose == Pose2D() and odo.lifted_samples == 0
     with pytest.raises(ValueError, match="one bool per sensor"):
         odo.update(Sample.of(0.1, (0, 0), (0, 0), lifted=(True,)))
+
+
+def test_compose_and_inverse_are_planar_transforms():
+    from mm_pc.core.odometry import compose, inverse
+
+    a = Pose2D(2.0, -1.0, math.pi / 2)
+    b = Pose2D(1.0, 0.5, 0.3)
+    # b's (1, 0.5) turned by 90 deg is (-0.5, 1), then moved by (2, -1)
+    ab = compose(a, b)
+    assert (ab.x, ab.y, ab.yaw) == pytest.approx((1.5, 0.0, math.pi / 2 + 0.3), abs=1e-12)
+    for p in (a, b, compose(a, b)):
+        ident = compose(p, inverse(p))
+        assert (ident.x, ident.y, ident.yaw) == pytest.approx((0.0, 0.0, 0.0), abs=1e-12)
+        back = compose(inverse(p), p)
+        assert (back.x, back.y, back.yaw) == pytest.approx((0.0, 0.0, 0.0), abs=1e-12)
+    # map -> odom from map -> base and odom -> base gives back map -> base
+    map_odom = compose(a, inverse(b))
+    again = compose(map_odom, b)
+    assert (again.x, again.y, again.yaw) == pytest.approx((a.x, a.y, a.yaw), abs=1e-12)

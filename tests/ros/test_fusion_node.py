@@ -666,7 +666,7 @@ def test_garbage_messages_are_counted_and_ignored_and_the_node_keeps_working(ros
         "gps": node.create_publisher(NavSatFix, "/gps/fix", 10),
         "range": node.create_publisher(Range, "/beacons/SW/range", 10),
         "imu": node.create_publisher(Imu, "/imu/data", 10),
-        "odom": node.create_publisher(Odometry, "/mm_odometry/odom", 10),
+        "odom": node.create_publisher(Odometry, f"{ns}/mm_odometry/odom", 10),
         "wire": node.create_publisher(PointStamped, "/perimeter/contact", 10),
     }
     try:
@@ -762,6 +762,7 @@ def test_bad_parameters_exit_2_with_a_message(ros_command):
             {"initial_sigma": "[0.1,0.0,0.1]"},
             "'initial_sigma' needs three",
         ),
+        ("mm_pc.ros.fusion_node", {"map_frame": "/map"}, "'map_frame' is '/map'"),
         ("mm_pc.ros.field_sim_node", {"speed": 0.0}, "speed"),
         ("mm_pc.ros.field_sim_node", {"mouse_dropout": "[1.0]"}, "'mouse_dropout' needs"),
     ]
@@ -781,3 +782,113 @@ def test_bad_parameters_exit_2_with_a_message(ros_command):
         assert proc.returncode == 2, (module, params, out)
         assert expect in out, (module, params, out)
         assert "Traceback" not in out
+
+
+@pytest.mark.ros
+def test_map_to_odom_composes_with_the_mouse_pose_reset_and_live_parameters(ros_command):
+    """map_T_odom * odom_T_base (the mouse pose fused) == map_T_base of ~/odom, at its stamp;
+    ~/reset goes back to initial_pose; live parameters are checked."""
+    pytest.importorskip("rclpy")
+    from nav_msgs.msg import Odometry
+    from tf2_msgs.msg import TFMessage
+
+    from mm_beagle.harness import BeagleClient
+    from mm_pc.core.odometry import compose
+    from mm_pc.ros.tf import DYNAMIC_QOS
+
+    ns = "/fztf"
+    x0 = (2.0, -1.0, math.pi / 2)
+    client = BeagleClient("fztf_client", f"{ns}/mm_fusion")
+    node = client.node
+    fused: dict = {}
+    tfs: list = []
+    node.create_subscription(
+        Odometry, f"{ns}/mm_fusion/odom", lambda m: fused.update({stamp_key(m): m}), 100
+    )
+    node.create_subscription(TFMessage, "/tf", tfs.append, DYNAMIC_QOS)
+    mouse_pub = node.create_publisher(Odometry, f"{ns}/mm_odometry/odom", 10)
+    proc = subprocess.Popen(
+        ros_command("mm_pc.ros.fusion_node", {"publish_rate": 50.0}, ns),
+        env=ros_env(),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    sent: dict = {}  # stamp -> the mouse pose published with it
+
+    def drive(k0: int, n: int) -> None:
+        for k in range(k0, k0 + n):
+            t = 100.0 + 0.05 * k
+            pose = Pose2D(0.3 + 0.02 * k, 0.1 + 0.005 * k, 0.2 + 0.01 * k)
+            m = Odometry()
+            m.header.stamp.sec, m.header.stamp.nanosec = int(t), round((t % 1) * 1e9)
+            m.header.frame_id, m.child_frame_id = "odom", "base_link"
+            m.pose.pose.position.x, m.pose.pose.position.y = pose.x, pose.y
+            o = m.pose.pose.orientation
+            o.x, o.y, o.z, o.w = yaw_to_quaternion(pose.yaw)
+            sent[stamp_key(m)] = pose
+            mouse_pub.publish(m)
+            time.sleep(0.03)
+
+    try:
+        deadline = time.monotonic() + 20
+        while not fused or mouse_pub.get_subscription_count() < 1:
+            assert time.monotonic() < deadline and proc.poll() is None, "mm-fusion did not come up"
+            time.sleep(0.1)
+        drive(0, 30)
+        time.sleep(0.8)  # idle: everything fused
+        checked = 0
+        for msg in list(tfs):
+            for t in msg.transforms:
+                k = (t.header.stamp.sec, t.header.stamp.nanosec)
+                if k not in fused or k not in sent:
+                    continue
+                assert (t.header.frame_id, t.child_frame_id) == ("map", "odom")
+                r = t.transform.rotation
+                map_odom = Pose2D(
+                    t.transform.translation.x,
+                    t.transform.translation.y,
+                    quaternion_yaw(r.x, r.y, r.z, r.w),
+                )
+                got = compose(map_odom, sent[k])
+                want = planar(fused[k])
+                assert (got.x, got.y) == pytest.approx(want[:2], abs=1e-9)
+                assert math.remainder(got.yaw - want[2], math.tau) == pytest.approx(0, abs=1e-9)
+                checked += 1
+        assert checked >= 10, (checked, len(tfs), len(fused))
+        last = planar(fused[max(k for k in fused if k in sent)])
+        assert last[:2] != pytest.approx(x0[:2], abs=0.05)  # it moved
+
+        (r,) = client.set_parameters(map_frame="/map")
+        assert not r.successful and "leading '/'" in r.reason
+        (r,) = client.set_parameters(publish_rate=0.0)
+        assert not r.successful
+        (r,) = client.set_parameters(max_speed=1.0)
+        assert not r.successful and "read-only" in r.reason.lower()
+        r1, r2 = client.set_parameters(publish_rate=20.0, map_frame="world")
+        assert r1.successful and r2.successful, (r1.reason, r2.reason)
+        assert client.get_parameters("publish_rate", "map_frame") == [20.0, "world"]
+
+        res = client.trigger(f"{ns}/mm_fusion/reset")
+        assert res.success and "estimate back to" in res.message
+        time.sleep(0.3)  # what was on its way before the reset is in
+        fused.clear()
+        deadline = time.monotonic() + 5
+        while not fused:
+            assert time.monotonic() < deadline, "no estimate after the reset"
+            time.sleep(0.05)
+        after = next(iter(fused.values()))
+        assert planar(after) == pytest.approx(x0, abs=1e-9)
+        assert after.header.frame_id == "world"
+        assert after.pose.covariance[0] == pytest.approx(0.01**2)
+        drive(40, 10)  # a new baseline, then on from the start pose
+        time.sleep(0.8)
+        moved = planar(fused[max(k for k in fused if k in sent)])
+        assert math.hypot(moved[0] - x0[0], moved[1] - x0[1]) > 0.1
+        assert tfs[-1].transforms[0].header.frame_id == "world"
+    finally:
+        client.close()
+        log = stop(proc)
+    assert proc.returncode == 0, log
+    assert "reset: estimate back to" in log and "parameter map_frame set to world" in log
+    assert "Traceback" not in log

@@ -86,16 +86,26 @@ def test_straight_run_ends_where_the_robot_stopped(method, tmp_path, ros_command
     assert odo.returncode == 0, out
 
 
-def test_bad_method_exits_with_a_message(ros_command):
+@pytest.mark.parametrize(
+    ("params", "expect"),
+    [
+        ({"method": "guess"}, "unknown odometry method 'guess'"),
+        ({"base_frame": "base link"}, "'base_frame' is 'base link': a TF frame id"),
+        ({"sensor_frames": ["a", "a"]}, "'sensor_frames' must be distinct"),
+        ({"sensor_frames": ["/left", "right"]}, "no leading '/'"),
+    ],
+)
+def test_bad_parameters_exit_2_with_a_message(params, expect, ros_command):
     out = subprocess.run(
-        ros_command("mm_pc.ros.odometry_node", {"method": "guess"}, "/odo_bad"),
+        ros_command("mm_pc.ros.odometry_node", params, "/odo_bad"),
         capture_output=True,
         text=True,
         timeout=60,
         env=dict(os.environ),
     )
     assert out.returncode == 2
-    assert "unknown odometry method 'guess'" in out.stderr
+    assert expect in out.stderr
+    assert "Traceback" not in out.stderr
 
 
 def test_uncertainty_grows_with_distance_and_turn():
@@ -157,6 +167,11 @@ def test_beagle_rejects_bad_odometry_settings():
         (
             {"backend": "sim", "odometry_rate": 10.0, "calibration_file": "/nonexistent.yaml"},
             "nonexistent.yaml",
+        ),
+        ({"backend": "sim", "odometry_rate": 10.0, "odom_frame": "/odom"}, "leading '/'"),
+        (
+            {"backend": "sim", "odometry_rate": 10.0, "sensor_frames": ["only_one"]},
+            "names 1 frames for 2 devices",
         ),
     ):
         out = subprocess.run(
@@ -288,7 +303,7 @@ def test_file_trajectory_at_15_hz_ends_on_the_files_ground_truth(tmp_path, ros_c
                 assert err < 5e-4, (p.position, truth)
                 assert abs(math.remainder(yaw - truth[2], 2 * math.pi)) < 2e-3
                 # /diagnostics: every poll integrated, no gap
-                mine = [s for a in diags for s in a.status if s.name == "mm_odometry: pose"]
+                mine = [s for a in diags for s in a.status if s.name.endswith("mm_odometry: pose")]
                 assert mine, "no /diagnostics from mm-odometry"
                 values = {kv.key: kv.value for kv in mine[-1].values}
                 assert values["gaps"] == "0" and int(values["polls_integrated"]) > 2 * 14_000
@@ -338,7 +353,8 @@ def test_polls_lost_to_a_ring_overrun_are_a_gap_on_diagnostics(tmp_path, ros_com
                     time.sleep(0.2)
                     for a in list(diags):
                         for st in a.status:
-                            if st.name == "mm_odometry: pose" and st.level == DiagnosticStatus.WARN:
+                            pose = st.name.endswith("mm_odometry: pose")
+                            if pose and st.level == DiagnosticStatus.WARN:
                                 warn = st
                 assert warn is not None, "no WARN on /diagnostics after the overrun"
                 assert "gap(s) in the single polls" in warn.message

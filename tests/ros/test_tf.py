@@ -67,3 +67,22 @@ def test_transforms_arrive_on_tf_and_the_mounts_stay_latched_on_tf_static():
         node.destroy_node()
     finally:
         rclpy.shutdown(context=ctx)
+
+
+def test_frame_ids_are_checked_and_sensor_frames_derived_from_the_devices():
+    from mm_pc.ros.tf import frame_id_problem, sensor_frame_names
+
+    assert frame_id_problem("odom_frame", "odom") == ""
+    assert frame_id_problem("odom_frame", "robot1/odom") == ""
+    assert "must not be empty" in frame_id_problem("odom_frame", "")
+    assert "leading '/'" in frame_id_problem("odom_frame", "/odom")
+    assert "a TF frame id" in frame_id_problem("base_frame", "base link")
+    assert "a TF frame id" in frame_id_problem("base_frame", "1st")
+    devices = ["/dev/spidev1.0", "/dev/spidev1.1"]
+    assert sensor_frame_names(devices) == ["mouse_spidev1_0", "mouse_spidev1_1"]
+    assert sensor_frame_names(devices, [""]) == ["mouse_spidev1_0", "mouse_spidev1_1"]
+    assert sensor_frame_names(devices, ["left", "right"]) == ["left", "right"]
+    for bad, why in ((["left"], "names 1 frames for 2"), (["a", "a"], "distinct"),
+                     (["a", "/b"], "leading '/'")):  # fmt: skip
+        with pytest.raises(ValueError, match=why):
+            sensor_frame_names(devices, bad)

@@ -177,6 +177,16 @@ class FusionCore:
         return self._idle
 
     @property
+    def mouse_pose(self) -> MotionInput | None:
+        """The mouse odometry record the estimate is at (its odom pose), or None.
+
+        None while the wheels are the motion model or before any mouse record: then
+        the estimate does not sit on a mouse pose. For map -> odom = estimate *
+        inverse(this pose).
+        """
+        return self._mouse_prev if self.motion_source == "mouse" else None
+
+    @property
     def pending(self) -> int:
         """Records waiting for the odometry to reach their stamp."""
         return len(self._queue)
