@@ -43,6 +43,12 @@ from .services import service_types
 
 NODE_NAME = "mm_beagle"
 
+# A local poller whose poll count has not moved for this long (s) while its
+# process lives is stuck (stopped, or hung mid-write): reported on /diagnostics
+# as ERROR and restarted. Longer than any stall the diagnostics should report
+# as a stall (a 4 s stop still gets its counter-wrap ERROR first).
+POLLER_STUCK_S = 5.0
+
 
 class StartupError(RuntimeError):
     """The poller could not start (its message says why)."""
@@ -71,6 +77,8 @@ class BeagleNode(Node):
         self._last_errors = [""] * len(self.devices)
         self.fatal = ""
         self._diag_errors = [(0, 0)] * len(self.devices)
+        self._progress = (-1, time.monotonic())  # (G_POLLS, when it last changed)
+        self.stuck = ""  # why the poller counts as stuck, '' while it polls
         self.poller.start()
         self._wait_for_first_bring_up(timeout=10.0)
 
@@ -257,8 +265,12 @@ class BeagleNode(Node):
             res.message = f"down: {', '.join(down)}" if down else ""
         data = []
         with self._lock:
-            for i in wanted:
-                now = self.poller.state.snapshot(i)
+            try:  # every snapshot first: a busy poller moves no cursor
+                nows = [self.poller.state.snapshot(i) for i in wanted]
+            except ss.PollerBusyError:
+                res.success, res.message = False, ss.BUSY_MESSAGE
+                return res
+            for i, now in zip(wanted, nows, strict=True):
                 data.append(messages.sensor_data(self.devices[i], self._served[i], now))
                 self._served[i] = now
         res.data = data
@@ -317,7 +329,13 @@ class BeagleNode(Node):
             res.success = False
             res.message = f"since_seq {req.since_seq} is ahead of the newest poll ({seq_now})"
             return res
-        first, nxt, dropped, arr = self.poller.state.samples(i, req.since_seq, req.max_samples)
+        try:
+            first, nxt, dropped, arr = self.poller.state.samples(
+                i, req.since_seq, req.max_samples
+            )
+        except ss.PollerBusyError:
+            res.success, res.message = False, ss.BUSY_MESSAGE
+            return res
         res.first_seq, res.next_seq, res.dropped = first, nxt, dropped
         res.cpi = (
             int(arr["cpi"][-1]) if len(arr["cpi"]) else int(self.poller.state.ints[i][ss.I_CPI_Y])
@@ -342,7 +360,10 @@ class BeagleNode(Node):
             for i, dev in enumerate(self.devices):
                 if not self._is_up(i):
                     continue
-                now = self.poller.state.snapshot(i)
+                try:
+                    now = self.poller.state.snapshot(i)
+                except ss.PollerBusyError:
+                    continue  # this round skipped: the cursor keeps the next interval exact
                 msg = messages.sensor_data(dev, self._published[i], now)
                 self._published[i] = now
                 self.data_pub.publish(msg)
@@ -371,7 +392,10 @@ class BeagleNode(Node):
         pub = self.create_publisher(OdometryMsg, "~/odom", 10)
 
         def tick() -> None:
-            step = self.onboard.step()
+            try:
+                step = self.onboard.step()
+            except ss.PollerBusyError:
+                return  # the polls stay in the ring: the next tick integrates them
             if step is None:
                 return
             before, after, dt, stamp_ns, cpi = step
@@ -414,14 +438,34 @@ class BeagleNode(Node):
         )
 
     def relay_poller_events(self) -> None:
-        """Log what the poller reported; stop the node if the poller is gone."""
+        """Log what the poller reported; restart a stuck one; stop the node if it is gone."""
         for event in self.poller.drain_events():
             self._relay(event)
+        self._check_progress()
         if not self.poller.alive:
             # Without the poller the node has nothing to serve: stop, exit non-zero.
             self.fatal = self.fatal or "the poller process is gone"
             self.get_logger().fatal(f"{self.fatal}; shutting down")
             self.context.try_shutdown()
+
+    def _check_progress(self) -> None:
+        """Restart a local poller whose poll count stood still for POLLER_STUCK_S."""
+        if not isinstance(self.poller, PollerClient) or not self.poller.alive:
+            return
+        polls, now = int(self.poller.state.glob[ss.G_POLLS]), time.monotonic()
+        if polls != self._progress[0]:
+            self._progress = (polls, now)
+            return
+        if now - self._progress[1] < POLLER_STUCK_S:
+            return
+        self.stuck = (
+            f"poller stuck: no poll for {now - self._progress[1]:.1f} s "
+            f"(limit {POLLER_STUCK_S:g} s); restarted it"
+        )
+        self.get_logger().error(self.stuck)
+        self.publish_diagnostics()  # the ERROR goes out before the restart
+        self.poller.restart()
+        self._progress = (-1, time.monotonic())
 
     def _relay(self, event: tuple) -> None:
         """Log one poller event and keep what the services need from it."""
@@ -447,8 +491,14 @@ class BeagleNode(Node):
         """One DiagnosticStatus per sensor: state, rates, errors, totals (and the link)."""
         state = self.poller.state
         glob = state.glob
+        try:
+            snaps = [state.snapshot(i) for i in range(len(self.devices))]
+        except ss.PollerBusyError:
+            if self.stuck:
+                self._publish_stuck()
+            return  # a brief stall mid-write: this round skipped
         wall = time.monotonic()
-        seqs = [int(state.ints[i][ss.I_SEQ]) for i in range(len(self.devices))]
+        seqs = [t.seq for t in snaps]
         polls = int(glob[ss.G_POLLS])
         last, self._diag_last = self._diag_last, (wall, seqs, polls)
         p50, p99 = state.period_percentiles(0.5, 0.99)
@@ -458,7 +508,7 @@ class BeagleNode(Node):
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
         for i, dev in enumerate(self.devices):
-            t = state.snapshot(i)
+            t = snaps[i]
             rate = (
                 (seqs[i] - last[1][i]) / (wall - last[0])
                 if last and wall > last[0]
@@ -485,6 +535,7 @@ class BeagleNode(Node):
                 "y_total_counts": t.y_total,
                 "reinits": t.reinits,
                 "poller_cpu_percent": f"{cpu:.1f}",
+                "poller_restarts": getattr(self.poller, "restarts", 0),
                 "last_error": self._last_errors[i],
             }
             values.update(link)
@@ -493,7 +544,9 @@ class BeagleNode(Node):
                 values["sim_generated_y_counts"] = t.gen_y
                 values["sim_lift_lost_x_counts"] = t.lift_lost_x
                 values["sim_lift_lost_y_counts"] = t.lift_lost_y
-            if unavailable:
+            if self.stuck:
+                level, text = DiagnosticStatus.ERROR, self.stuck
+            elif unavailable:
                 level, text = DiagnosticStatus.ERROR, unavailable
             elif t.state != ss.STATE_UP:
                 level, text = DiagnosticStatus.ERROR, self._down_message(i)
@@ -508,6 +561,20 @@ class BeagleNode(Node):
             name = f"{self.get_fully_qualified_name()}: {dev}"  # unique per robot namespace
             arr.status.append(messages.diagnostic(name, dev, level, text, values))
         self.diag_pub.publish(arr)
+        self.stuck = ""  # reported (the restart's own round and this one)
+
+    def _publish_stuck(self) -> None:
+        """ERROR per sensor when no snapshot can be had (the poller stopped mid-write)."""
+        arr = DiagnosticArray()
+        arr.header.stamp = self.get_clock().now().to_msg()
+        restarts = getattr(self.poller, "restarts", 0)
+        for dev in self.devices:
+            name = f"{self.get_fully_qualified_name()}: {dev}"
+            values = {"state": "stuck", "poller_restarts": restarts}
+            arr.status.append(
+                messages.diagnostic(name, dev, DiagnosticStatus.ERROR, self.stuck, values)
+            )
+        self.diag_pub.publish(arr)
 
     def shutdown(self) -> None:
         """Stop the poller process (or close the link to the agent)."""
@@ -515,18 +582,23 @@ class BeagleNode(Node):
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Exit 0 on a clean stop, 2 for bad configuration (found while starting), else 1."""
     stop = ros_spin.init(argv)
     node = None
     code = 0
     try:
-        node = BeagleNode()
+        try:
+            node = BeagleNode()
+        except (ValueError, OSError, ParameterException, StartupError) as exc:  # say what, exit 2
+            print(f"mm-beagle: {exc}", file=sys.stderr)
+            return 2
         ros_spin.spin_until(node, stop)
         code = 1 if node.fatal else 0
     except (KeyboardInterrupt, ExternalShutdownException):
         code = 1 if node is not None and node.fatal else 0
-    except (ValueError, OSError, ParameterException, StartupError) as exc:  # say what, exit 2
-        print(f"mm-beagle: {exc}", file=sys.stderr)
-        code = 2
+    except Exception as exc:  # at run time nothing is bad configuration: exit 1, never 2
+        print(f"mm-beagle: stopped by an error at run time: {exc!r}", file=sys.stderr)
+        code = 1
     finally:
         ros_spin.stopping()
         if node is not None:
@@ -536,7 +608,6 @@ def main(argv: list[str] | None = None) -> int:
         if rclpy.ok():
             rclpy.shutdown()
     return code
-
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -91,7 +91,11 @@ class Channel:
         self.cpi_x = self.cpi_y = 0
         self.scale_x = self.scale_y = 0.0  # metres per count at the CPI in force
         self.cpi_wanted = 0  # the CPI the chip should have: configured, then as commanded
-        self.seq = 0
+        # A restarted poller (the node restarts a stuck one) carries on where the
+        # shared totals stand; one killed mid-write leaves the version odd.
+        self.seq = int(self.ints[ss.I_SEQ])
+        if self.ints[ss.I_VERSION] & 1:
+            self.ints[ss.I_VERSION] += 1
         self.consecutive_errors = 0
         self.next_retry = 0.0
         self.last_error = ""
@@ -323,11 +327,12 @@ class Poller:
         if stats is not None and ch.sim_stats is None:
             # Counts before the first initialisation were discarded on purpose.
             ch.sim_stats = stats
+            ints = ch.ints  # non-zero only after a restart: the truth carries on too
             ch.sim_base = (
-                stats.counted_x,
-                stats.counted_y,
-                stats.lift_cleared_x + round(stats.lift_motion_x),
-                stats.lift_cleared_y + round(stats.lift_motion_y),
+                stats.counted_x - ints[ss.I_GEN_X],
+                stats.counted_y - ints[ss.I_GEN_Y],
+                stats.lift_cleared_x + round(stats.lift_motion_x) - ints[ss.I_LIFT_LOST_X],
+                stats.lift_cleared_y + round(stats.lift_motion_y) - ints[ss.I_LIFT_LOST_Y],
             )
         ch.ints[ss.I_REINITS] += 1
         ch.ints[ss.I_STATE] = ss.STATE_UP

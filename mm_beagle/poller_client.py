@@ -32,15 +32,22 @@ class PollerClient:
         self._buffer = ctx.RawArray("b", ss.SharedState.size(n, cfg.ring_size))
         self.state = ss.SharedState(self._buffer, n, cfg.ring_size)
         self.state.ints[:, ss.I_STATE] = ss.STATE_STARTING  # zeroed memory would read "down"
+        self._ctx = ctx
+        self._lock = threading.Lock()
+        self.restarts = 0
+        self._make_process()
+
+    def _make_process(self) -> None:
+        """A fresh (not yet started) poller process on the same shared memory."""
+        ctx = self._ctx
         self._cmd, child_cmd = ctx.Pipe(duplex=True)
         self.events, child_events = ctx.Pipe(duplex=False)
         self.process = ctx.Process(
             target=run_poller,
-            args=(cfg, self._buffer, child_cmd, child_events),
+            args=(self.cfg, self._buffer, child_cmd, child_events),
             name="mm_beagle_poller",
             daemon=True,
         )
-        self._lock = threading.Lock()
         self._abandoned = 0  # commands that timed out; their late replies are dropped
         self._child_ends: tuple[Connection, Connection] = (child_cmd, child_events)
         self._ps = None
@@ -52,6 +59,21 @@ class PollerClient:
             self.process.start()
         for end in self._child_ends:
             end.close()  # only the child holds these now: EOF tells us it died
+
+    def restart(self) -> None:
+        """Kill a stuck poller (SIGKILL: a stopped process never sees SIGTERM), start a new one.
+
+        The new poller carries on from the shared totals (see poller.Channel);
+        its sensors are initialised again, so counts the chips held are lost.
+        """
+        with self._lock:
+            self.process.kill()
+            self.process.join(2.0)
+            self._cmd.close()
+            self.events.close()
+            self._make_process()
+            self.restarts += 1
+        self.start()
 
     @property
     def alive(self) -> bool:

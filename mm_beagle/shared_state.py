@@ -92,6 +92,21 @@ FLAG_SETTINGS_READ = 16
 
 LATE_FACTOR = 1.5
 
+# How long a reader keeps retrying while the poller is mid-write (s). The poller's
+# write takes microseconds; only a stopped or descheduled poller (a busy single-core
+# board: 60 ms stalls) holds the lock longer. The budget bounds how long a service
+# callback can block the executor.
+READ_BUDGET_S = 0.2
+BUSY_MESSAGE = "poller busy (stalled mid-write), try again"
+
+
+class PollerBusyError(RuntimeError):
+    """The poller stayed mid-write for the whole read budget (not a configuration error).
+
+    Deliberately not a TimeoutError: that is an OSError, which the node's
+    ``main`` reports as bad configuration (exit 2).
+    """
+
 
 @dataclass(frozen=True, slots=True)
 class Totals:
@@ -220,10 +235,15 @@ class SharedState:
 
     # --- reader side (the node) --------------------------------------------------------
 
-    def snapshot(self, i: int, timeout_s: float = 0.05) -> Totals:
-        """Consistent totals of sensor ``i``; retries while the poller writes."""
+    def snapshot(self, i: int, timeout_s: float = READ_BUDGET_S) -> Totals:
+        """Consistent totals of sensor ``i``; retries while the poller writes.
+
+        Raises :class:`PollerBusyError` when no consistent copy was possible within
+        ``timeout_s`` seconds (the poller stopped mid-write); nothing is changed.
+        """
         ints, floats = self._ints_v[i], self._floats_v[i]
         deadline = time.monotonic() + timeout_s
+        tries = 0
         while True:
             v1 = ints[I_VERSION]
             if not v1 & 1:
@@ -232,8 +252,11 @@ class SharedState:
                 if ints[I_VERSION] == v1:
                     return Totals(*iv[1:I_RING_FROM], *fv)
             if time.monotonic() > deadline:
-                raise TimeoutError("the poller process holds the shared state (is it hung?)")
-            time.sleep(0)  # let a writer in this process (tests) finish; yields the GIL
+                raise PollerBusyError(f"{BUSY_MESSAGE} (sensor {i}, {timeout_s * 1e3:.0f} ms)")
+            tries += 1
+            # a writer in this process (tests) finishes at once; a stopped one takes
+            # milliseconds: stop spinning then
+            time.sleep(0 if tries < 100 else 0.001)
 
     def samples(
         self, i: int, since_seq: int, max_samples: int

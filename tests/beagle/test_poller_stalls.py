@@ -1,0 +1,193 @@
+"""A poller that stalls (SIGSTOP, what a busy single-core board does) never stops the node.
+
+Real processes: mm-beagle with the sim backend, its spawned poller found as the
+node's child, stopped and continued from here.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import threading
+import time
+
+import psutil
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+
+from mm_beagle.harness import BeagleClient, beagle_process  # noqa: E402
+from mm_beagle.shared_state import BUSY_MESSAGE  # noqa: E402
+
+S0, S1 = "/dev/spidev1.0", "/dev/spidev1.1"
+
+pytestmark = pytest.mark.ros
+
+
+@pytest.fixture(scope="module")
+def client():
+    c = BeagleClient("mm_stall_client")
+    yield c
+    c.close()
+
+
+def poller_pid(node_pid: int, timeout: float = 10.0) -> int:
+    """The node's poller: its child started by multiprocessing.spawn (not the resource tracker)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        for child in psutil.Process(node_pid).children():
+            try:
+                if "spawn_main" in " ".join(child.cmdline()):
+                    return child.pid
+            except psutil.Error:
+                continue
+        time.sleep(0.1)
+    raise AssertionError("no poller process under the node")
+
+
+def start_node(client, tmp_path, **extra):
+    log = tmp_path / "mm_beagle.log"
+    params = {"backend": "sim", "sim_trajectory": "figure_eight", "diagnostics_period": 0.5}
+    return beagle_process({**params, **extra}, env=dict(os.environ), log_path=str(log)), log
+
+
+def wait_up(client, log):
+    assert client.wait(30), f"services did not come up; log:\n{log.read_text()}"
+    deadline = time.monotonic() + 15
+    while time.monotonic() < deadline:
+        if client.call("get_sensor_data", id="").success:
+            return
+        time.sleep(0.2)
+    raise AssertionError(log.read_text())
+
+
+def test_60ms_stop_bursts_never_stop_the_node_and_keep_totals_exact(client, tmp_path):
+    ctx, log = start_node(client, tmp_path)
+    with ctx as proc:
+        wait_up(client, log)
+        pid = poller_pid(proc.pid)
+        done = threading.Event()
+        bursts = [0]
+
+        def stall() -> None:
+            while not done.is_set():
+                os.kill(pid, signal.SIGSTOP)
+                time.sleep(0.06)
+                os.kill(pid, signal.SIGCONT)
+                bursts[0] += 1
+                time.sleep(0.02)
+
+        t = threading.Thread(target=stall, daemon=True)
+        failures, served = [], 0
+        t.start()
+        try:
+            end = time.monotonic() + 5.0
+            while time.monotonic() < end:
+                res = client.call("get_sensor_data", id="", timeout=5.0)
+                if res.success:
+                    served += 1
+                else:
+                    failures.append(res.message)
+                res = client.call("get_samples", id=S0, since_seq=0, max_samples=50)
+                if not res.success:
+                    failures.append(res.message)
+        finally:
+            done.set()
+            t.join(2)
+            os.kill(pid, signal.SIGCONT)
+        assert bursts[0] >= 40
+        assert proc.poll() is None, log.read_text()[-3000:]
+        assert served > 0
+        assert all(m == BUSY_MESSAGE for m in failures), failures
+        # the totals are exact: every count the emulators generated was counted
+        diag = client.diagnostics(time.monotonic())
+        for dev in (S0, S1):
+            assert int(diag[dev]["sim_generated_x_counts"]) == int(diag[dev]["x_total_counts"])
+            assert int(diag[dev]["sim_generated_y_counts"]) == int(diag[dev]["y_total_counts"])
+            assert int(diag[dev]["y_total_counts"]) != 0
+            assert diag[dev]["poller_restarts"] == "0"  # bursts are stalls, not a stuck poller
+        assert proc.poll() is None
+
+
+def test_a_stuck_poller_is_reported_and_restarted(client, tmp_path):
+    """Stopped for longer than POLLER_STUCK_S: ERROR on /diagnostics, a new poller, totals go on."""
+    ctx, log = start_node(client, tmp_path)
+    with ctx as proc:
+        wait_up(client, log)
+        before = {d.id: d for d in client.call("get_sensor_data", id="").data}
+        pid = poller_pid(proc.pid)
+        os.kill(pid, signal.SIGSTOP)
+        try:
+            deadline = time.monotonic() + 15
+            seen_error = False
+            while time.monotonic() < deadline and not seen_error:
+                with client._diag_lock:
+                    msgs = [m for _, m in client._diag]
+                seen_error = any(
+                    s.level == b"\x02" and "stuck" in s.message for m in msgs for s in m.status
+                )
+                time.sleep(0.1)
+            assert seen_error, log.read_text()[-3000:]
+        finally:
+            with contextlib.suppress(ProcessLookupError):  # the node should have killed it
+                os.kill(pid, signal.SIGCONT)
+        assert proc.poll() is None
+        new_pid = poller_pid(proc.pid)
+        assert new_pid != pid
+        wait_up(client, log)
+        after = {d.id: d for d in client.call("get_sensor_data", id="").data}
+        for dev in (S0, S1):
+            assert after[dev].seq > before[dev].seq  # seq and totals carry on, never go back
+        diag = client.diagnostics(time.monotonic())
+        assert all(v["poller_restarts"] == "1" for v in diag.values())
+        assert "restarted" in log.read_text()
+
+
+def test_a_poller_stopped_mid_write_gets_busy_answers_that_change_nothing():
+    """The node in this process; its real poller stopped with the version odd (mid-write)."""
+    from rclpy.parameter import Parameter
+
+    from mm_beagle import shared_state as ss
+    from mm_beagle.node import BeagleNode
+    from mm_interfaces.srv import GetSamples, GetSensorData
+
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    node = BeagleNode(
+        context=ctx, parameter_overrides=[Parameter("backend", value="sim")]
+    )
+    try:
+        ints = node.poller.state.ints
+        req = GetSensorData.Request(id=S0)
+        first = node.on_get_sensor_data(req, GetSensorData.Response())
+        assert first.success, first.message
+        pid = node.poller.process.pid
+        os.kill(pid, signal.SIGSTOP)
+        odd_by_us = not ints[0][ss.I_VERSION] & 1
+        if odd_by_us:  # stopped between writes: make it look stopped inside one
+            ints[0][ss.I_VERSION] += 1
+        try:
+            res = node.on_get_sensor_data(req, GetSensorData.Response())
+            assert (res.success, res.message, list(res.data)) == (False, BUSY_MESSAGE, [])
+            res = node.on_get_samples(
+                GetSamples.Request(id=S0, since_seq=0), GetSamples.Response()
+            )
+            assert (res.success, res.message) == (False, BUSY_MESSAGE)
+            node.publish_diagnostics()  # skips its round, does not raise
+            node.publish_data()
+        finally:
+            if odd_by_us:
+                ints[0][ss.I_VERSION] -= 1
+            os.kill(pid, signal.SIGCONT)
+        time.sleep(0.05)
+        res = node.on_get_sensor_data(req, GetSensorData.Response())
+        assert res.success
+        (d,) = res.data
+        # the refused call moved no cursor: this interval starts where the first one ended
+        assert d.samples == d.seq - first.data[0].seq
+        assert d.x_counts == d.x_total_counts - first.data[0].x_total_counts
+    finally:
+        node.shutdown()
+        node.destroy_node()
+        rclpy.shutdown(context=ctx)
