@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from array import array
 
 import numpy as np
@@ -23,8 +24,17 @@ def _clamp32(v: int) -> int:
     return max(INT32_MIN, min(INT32_MAX, v))
 
 
-def sensor_data(device: str, prev: Totals, now: Totals) -> SensorData:
-    """The displacement between two snapshots of one sensor's totals."""
+def new_instance_id() -> int:
+    """A random non-zero 64-bit node identity (0 means "unknown": a message before it)."""
+    return int.from_bytes(os.urandom(8), "little") or 1
+
+
+def sensor_data(device: str, prev: Totals, now: Totals, instance_id: int = 0) -> SensorData:
+    """The displacement between two snapshots of one sensor's totals.
+
+    ``instance_id``: the node's identity (:func:`new_instance_id`), so a client
+    sees a restart whatever ``seq`` and the totals say.
+    """
     interval = max(0.0, (now.stamp_ns - prev.stamp_ns) / 1e9)
     x_disp = now.x_total_m - prev.x_total_m
     y_disp = now.y_total_m - prev.y_total_m
@@ -53,6 +63,7 @@ def sensor_data(device: str, prev: Totals, now: Totals) -> SensorData:
         y_lift_est_disp=now.y_est_m - prev.y_est_m,
         x_lift_est_total_disp=now.x_est_m,
         y_lift_est_total_disp=now.y_est_m,
+        instance_id=instance_id,
     )
 
 

@@ -67,6 +67,9 @@ class BeagleNode(Node):
             )
         else:
             self.poller = PollerClient(cfg)
+        # Drawn per start: every SensorData and get_samples reply carries it, so a
+        # client sees a restart even when the new node's seq is past the old one's.
+        self.instance_id = messages.new_instance_id()
         start = ss.Totals.zero(time.time_ns())
         # Read-and-clear cursors: one for the services, one for the topic.
         self._served = [start] * len(self.devices)
@@ -271,7 +274,9 @@ class BeagleNode(Node):
                 res.success, res.message = False, ss.BUSY_MESSAGE
                 return res
             for i, now in zip(wanted, nows, strict=True):
-                data.append(messages.sensor_data(self.devices[i], self._served[i], now))
+                data.append(
+                    messages.sensor_data(self.devices[i], self._served[i], now, self.instance_id)
+                )
                 self._served[i] = now
         res.data = data
         res.success = True
@@ -337,6 +342,7 @@ class BeagleNode(Node):
             res.success, res.message = False, ss.BUSY_MESSAGE
             return res
         res.first_seq, res.next_seq, res.dropped = first, nxt, dropped
+        res.instance_id = self.instance_id
         res.cpi = (
             int(arr["cpi"][-1]) if len(arr["cpi"]) else int(self.poller.state.ints[i][ss.I_CPI_Y])
         )
@@ -364,7 +370,7 @@ class BeagleNode(Node):
                     now = self.poller.state.snapshot(i)
                 except ss.PollerBusyError:
                     continue  # this round skipped: the cursor keeps the next interval exact
-                msg = messages.sensor_data(dev, self._published[i], now)
+                msg = messages.sensor_data(dev, self._published[i], now, self.instance_id)
                 self._published[i] = now
                 self.data_pub.publish(msg)
 

@@ -92,6 +92,7 @@ class SensorTotals:
     y_m: float
     x_est_m: float = 0.0
     y_est_m: float = 0.0
+    instance_id: int = 0  # the node's identity: another value = a restarted node
 
     @classmethod
     def from_msg(cls, msg) -> SensorTotals:
@@ -105,6 +106,7 @@ class SensorTotals:
             y_m=float(msg.y_total_disp),
             x_est_m=float(msg.x_lift_est_total_disp),
             y_est_m=float(msg.y_lift_est_total_disp),
+            instance_id=int(getattr(msg, "instance_id", 0)),
         )
 
 
@@ -125,6 +127,7 @@ class PollBatch:
     dx: np.ndarray
     dy: np.ndarray
     flags: np.ndarray
+    instance_id: int = 0  # the node's identity in the reply (0: not given, e.g. a recording)
 
     @classmethod
     def from_reply(cls, res) -> PollBatch:
@@ -150,7 +153,8 @@ class PollBatch:
             )
         if n and cpi <= 0:
             raise ValueError(f"get_samples reply with {n} polls but cpi {cpi}")
-        return cls(first, nxt, dropped, cpi, stamp, dx, dy, flags)
+        instance = int(getattr(res, "instance_id", 0))
+        return cls(first, nxt, dropped, cpi, stamp, dx, dy, flags, instance)
 
     def __len__(self) -> int:
         return len(self.stamp_ns)
@@ -283,6 +287,7 @@ class PollTracker:
     def baseline(self, totals: Sequence[SensorTotals]) -> None:
         """Start (again) from these totals: nothing before them is integrated."""
         self._check_totals(totals)
+        self._instance = [t.instance_id for t in totals]
         self._cursor = [t.seq for t in totals]
         self._acc_counts = [(t.x_counts, t.y_counts) for t in totals]  # totals at the cursor
         self._acc_m = [(t.x_m, t.y_m) for t in totals]
@@ -297,6 +302,26 @@ class PollTracker:
     def _check_totals(self, totals: Sequence[SensorTotals]) -> None:
         if len(totals) != self.n:
             raise ValueError(f"expected totals of {self.n} sensor(s), got {len(totals)}")
+
+    def restart_in(self, totals: Sequence[SensorTotals]) -> str:
+        """Why these totals come from another node run than the baseline's ('' if the same).
+
+        A changed ``instance_id`` is a restart whatever the counters say (a new
+        node that ran longer than the old one has a higher ``seq``); a ``seq``
+        that went back is one too (nodes without an identity).
+        """
+        if self._cursor is None:
+            return ""
+        self._check_totals(totals)
+        for i, t in enumerate(totals):
+            if t.instance_id != self._instance[i]:
+                return f"sensor {i}'s node identity changed: the node restarted"
+            if t.seq < self._cursor[i]:
+                return (
+                    f"sensor {i}'s seq went back ({self._cursor[i]} -> {t.seq}): "
+                    "the node restarted"
+                )
+        return ""
 
     # -- one request ------------------------------------------------------------------
 
@@ -313,12 +338,9 @@ class PollTracker:
         self._check_totals(totals)
         if len(polls) != self.n:
             raise ValueError(f"expected polls of {self.n} sensor(s), got {len(polls)}")
-        for i, t in enumerate(totals):
-            if t.seq < self._cursor[i]:
-                raise ValueError(
-                    f"sensor {i}'s seq went back ({self._cursor[i]} -> {t.seq}): "
-                    "the node restarted; take a new baseline"
-                )
+        restart = self.restart_in(totals)
+        if restart:
+            raise ValueError(f"{restart}; take a new baseline")
         problem = self._why_not_usable(totals, polls)
         if problem:
             return self._gap(totals, problem)
@@ -340,6 +362,8 @@ class PollTracker:
                 continue
             if b is None:
                 return f"sensor {i}: no polls for seq {self._cursor[i]}..{t.seq}"
+            if b.instance_id and t.instance_id and b.instance_id != t.instance_id:
+                return f"sensor {i}: polls from another node run than the totals"
             if b.dropped or b.first_seq != self._cursor[i]:
                 return (
                     f"sensor {i}: {max(b.dropped, b.first_seq - self._cursor[i])} polls "

@@ -205,6 +205,7 @@ _INT_RANGES = {
     "samples": (0, 2**32 - 1),
     "lift_events": (0, 2**32 - 1),
     "seq": (0, 2**64 - 1),
+    "instance_id": (0, 2**64 - 1),
     "lift_events_total": (0, 2**64 - 1),
     "x_total_counts": (-(2**63), 2**63 - 1),
     "y_total_counts": (-(2**63), 2**63 - 1),
@@ -266,6 +267,7 @@ def _serialize_reading(r: Reading) -> bytes:
             lift_events_total=r.lift_events_total,
             x_lift_est_total_disp=r.x_lift_total,
             y_lift_est_total_disp=r.y_lift_total,
+            instance_id=r.instance_id,
         ))  # fmt: skip
     except (AssertionError, TypeError, ValueError, OverflowError, SystemError) as e:
         raise ValueError(

@@ -340,9 +340,10 @@ class OdometryNode(Node):
         data = [by_id[dev] for dev in self.devices]
         totals = [SensorTotals.from_msg(d) for d in data]
         t = self.tracker
-        if not t.started or any(x.seq < t.cursor(i) for i, x in enumerate(totals)):
+        restart = t.restart_in(totals)
+        if not t.started or restart:
             if t.started:
-                self.get_logger().warning("mm-beagle restarted (seq went back): new baseline")
+                self.get_logger().warning(f"mm-beagle restarted ({restart}): new baseline")
             t.baseline(totals)
             return
         fetch = {"data": data, "totals": totals, "polls": [None] * len(self.devices),

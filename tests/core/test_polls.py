@@ -198,6 +198,31 @@ def test_bad_replies_and_a_restart_are_refused():
         tr.step([SensorTotals(11, 2, 0, 0, 0.0, 0.0)] * 2, [None, None])
 
 
+def test_a_new_node_identity_is_a_restart_whatever_seq_says():
+    tr = PollTracker(1)
+    tr.baseline([SensorTotals(10, 1, 0, 0, 0.0, 0.0, instance_id=7)])
+    same = [SensorTotals(10, 2, 0, 0, 0.0, 0.0, instance_id=7)]
+    assert tr.restart_in(same) == ""
+    later = [SensorTotals(50_000, 2, 900, 900, 0.01, 0.01, instance_id=8)]  # ran longer
+    assert "identity changed" in tr.restart_in(later)
+    with pytest.raises(ValueError, match="restarted"):
+        tr.step(later, [None])
+    assert "seq went back" in tr.restart_in([SensorTotals(5, 2, 0, 0, 0.0, 0.0, instance_id=7)])
+    tr.baseline(later)  # what mm-odometry does on a restart
+    assert tr.restart_in(later) == "" and tr.cursor(0) == 50_000
+
+
+def test_polls_from_another_node_run_than_the_totals_are_a_gap():
+    tr = PollTracker(1)
+    tr.baseline([SensorTotals(0, 0, 0, 0, 0.0, 0.0, instance_id=7)])
+    res = SimpleNamespace(first_seq=0, next_seq=2, dropped=0, cpi=1600, stamp_ns=[1, 2],
+                          dx=[0, 0], dy=[1, 1], flags=[0, 0], instance_id=9)
+    b = PollBatch.from_reply(res)
+    assert b.instance_id == 9
+    tr.step([SensorTotals(2, 2, 0, 2, 0.0, 2 * INCH_M / 1600, instance_id=7)], [b])
+    assert tr.gaps == 1
+
+
 def test_flags_agree_with_the_node():
     from mm_beagle import shared_state as ss
     from mm_pc.core import polls

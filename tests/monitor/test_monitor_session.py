@@ -19,7 +19,7 @@ from mm_pc.sim.robot import guided_calibration_steps, integrate_pose, trajectory
 A, B = DEFAULT_DEVICES
 
 
-def reply(seq: int, totals: dict[str, tuple[float, float]], lift=None) -> Reply:
+def reply(seq: int, totals: dict[str, tuple[float, float]], lift=None, node=0) -> Reply:
     lift = lift or {}
     return Reply(
         tuple(
@@ -32,6 +32,7 @@ def reply(seq: int, totals: dict[str, tuple[float, float]], lift=None) -> Reply:
                 x_lift_total=lift.get(d, (0.0, 0.0))[0],
                 y_lift_total=lift.get(d, (0.0, 0.0))[1],
                 cpi=1600,
+                instance_id=node,
             )
             for d, (x, y) in totals.items()
         )
@@ -84,6 +85,30 @@ def test_node_restart_rebaselines_without_a_jump():
     assert s.process(reply(30, {A: (0, 0.011), B: (0, 0.011)}))
     assert s.pose.x == pytest.approx(x_before + 0.01)
     assert any(kind == "restart" for kind, _ in s.stats.events)
+
+
+def test_a_restart_of_a_node_that_ran_longer_is_seen_by_its_identity():
+    """The issue's case: the new node's seq is past the old one's, its totals unrelated."""
+    s = MonitorSession()
+    s.process(reply(0, {A: (0, 0), B: (0, 0)}, node=111))
+    s.process(reply(500, {A: (0, 0.1), B: (0, 0.1)}, node=111))
+    x_before = s.pose.x
+    # a new node, 9000 polls in, 3 m driven (0 m then 3 m as seen by the counters)
+    assert not s.process(reply(9000, {A: (0, 3.0), B: (0, 3.0)}, node=222))
+    assert s.stats.restarts == 1
+    assert s.pose.x == x_before  # no jump of 2.9 m
+    assert s.process(reply(9010, {A: (0, 3.01), B: (0, 3.01)}, node=222))
+    assert s.pose.x == pytest.approx(x_before + 0.01)
+    assert [k for k, _ in s.stats.events].count("restart") == 1
+
+
+def test_without_an_identity_the_longer_run_restart_was_a_jump():
+    """What the identity fixes (and proof the test above can fail): same ids, a jump."""
+    s = MonitorSession()
+    s.process(reply(0, {A: (0, 0), B: (0, 0)}, node=111))
+    s.process(reply(500, {A: (0, 0.1), B: (0, 0.1)}, node=111))
+    assert s.process(reply(9000, {A: (0, 3.0), B: (0, 3.0)}, node=111))
+    assert s.stats.restarts == 0 and s.pose.x == pytest.approx(3.0)
 
 
 def test_a_reply_missing_a_sensor_is_kept_for_later_no_count_lost():

@@ -49,6 +49,9 @@ class Reading:
     y_lift_est_counts: float = 0.0
     x_lift_est_disp: float = 0.0
     y_lift_est_disp: float = 0.0
+    #: the node's random identity drawn at its start (0: unknown, e.g. an old recording);
+    #: a different value is a restart whatever ``seq`` says
+    instance_id: int = 0
 
     @classmethod
     def from_msg(cls, msg) -> Reading:
@@ -78,6 +81,7 @@ class Reading:
             y_lift_est_counts=float(msg.y_lift_est_counts),
             x_lift_est_disp=float(msg.x_lift_est_disp),
             y_lift_est_disp=float(msg.y_lift_est_disp),
+            instance_id=int(getattr(msg, "instance_id", 0)),
         )
 
 

@@ -8,8 +8,10 @@ Every reply of mm_beagle (live, or replayed from a recording) goes through
    estimates when enabled). A slow reply therefore just covers a longer
    interval: nothing is counted twice and nothing is lost, whatever the
    network does; and the monitor takes no counts away from other clients.
-   A ``seq`` that goes back means the node restarted: the reply becomes the
-   new baseline (an event is logged; no jump on the map).
+   A changed node identity (``instance_id``, drawn at each node start) or a
+   ``seq`` that goes back means the node restarted: the reply becomes the new
+   baseline (an event is logged; no jump on the map) -- also when the new node
+   has run longer than the old one, so that its ``seq`` is higher.
 2. **Median filter** per sensor and axis (optional, :mod:`mm_pc.core.filters`).
 3. **Calibration** (mounting angle and scale, :mod:`mm_pc.core.calibration`).
 4. **Pose math** (:mod:`mm_pc.core.odometry`, method selectable; the mounts
@@ -84,6 +86,7 @@ def _totals(r: Reading) -> SensorTotals:
     return SensorTotals(
         seq=r.seq, stamp_ns=r.stamp_ns, x_counts=r.x_total_counts, y_counts=r.y_total_counts,
         x_m=r.x_total, y_m=r.y_total, x_est_m=r.x_lift_total, y_est_m=r.y_lift_total,
+        instance_id=r.instance_id,
     )
 
 
@@ -485,8 +488,8 @@ class MonitorSession:
             return False
         prev = [self._prev.get(d) for d in self.devices]
         if any(p is None for p in prev) or any(
-            r.seq < p.seq for r, p in zip(now, prev, strict=True)
-        ):
+            r.seq < p.seq or r.instance_id != p.instance_id for r, p in zip(now, prev, strict=True)
+        ):  # a new identity is a restart even when the new node's seq is past the old one's
             restarted = all(p is not None for p in prev)
             self._baseline(now, restarted)
             return False
