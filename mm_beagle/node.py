@@ -34,7 +34,7 @@ from mm_pc.ros import spin as ros_spin
 from mm_pc.ros.clock import ClockWatch, node_stamp
 from mm_pc.ros.tf import frame_id_problem
 
-from . import messages
+from . import health, messages
 from . import shared_state as ss
 from .params import NodeSettings, declare
 from .poller_client import PollerClient, PollerError
@@ -80,6 +80,8 @@ class BeagleNode(Node):
         self._last_errors = [""] * len(self.devices)
         self.fatal = ""
         self._diag_errors = [(0, 0)] * len(self.devices)
+        self._diag_stamp = [0] * len(self.devices)  # newest poll seen by the last round (ns)
+        self._diag_overruns = 0
         self._progress = (-1, time.monotonic())  # (G_POLLS, when it last changed)
         self.stuck = ""  # why the poller counts as stuck, '' while it polls
         self.poller.start()
@@ -507,6 +509,10 @@ class BeagleNode(Node):
         seqs = [t.seq for t in snaps]
         polls = int(glob[ss.G_POLLS])
         last, self._diag_last = self._diag_last, (wall, seqs, polls)
+        overruns = int(glob[ss.G_OVERRUNS])
+        overruns_grew = overruns - self._diag_overruns if last else 0
+        self._diag_overruns = overruns
+        now_ns = time.time_ns()
         p50, p99 = state.period_percentiles(0.5, 0.99)
         cpu = self.poller.cpu_percent()
         link = self.poller.link_values()
@@ -545,6 +551,10 @@ class BeagleNode(Node):
                 "last_error": self._last_errors[i],
             }
             values.update(link)
+            level_name, health_text, health_values = self._health(
+                i, t, last, rate, overruns_grew, now_ns
+            )
+            values.update(health_values)
             if self.settings.poller.backend == "sim" or t.gen_x or t.gen_y:
                 values["sim_generated_x_counts"] = t.gen_x
                 values["sim_generated_y_counts"] = t.gen_y
@@ -556,11 +566,16 @@ class BeagleNode(Node):
                 level, text = DiagnosticStatus.ERROR, unavailable
             elif t.state != ss.STATE_UP:
                 level, text = DiagnosticStatus.ERROR, self._down_message(i)
+            elif level_name == "ERROR":
+                level, text = DiagnosticStatus.ERROR, health_text
             elif (t.spi_errors, t.overflows) != self._diag_errors[i]:
                 level, text = (
                     DiagnosticStatus.WARN,
-                    "SPI errors or counter overflows since last report",
+                    "SPI errors or counter overflows since last report"
+                    + (f"; {health_text}" if level_name == "WARN" else ""),
                 )
+            elif level_name == "WARN":
+                level, text = DiagnosticStatus.WARN, health_text
             else:
                 level, text = DiagnosticStatus.OK, "up"
             self._diag_errors[i] = (t.spi_errors, t.overflows)
@@ -568,6 +583,25 @@ class BeagleNode(Node):
             arr.status.append(messages.diagnostic(name, dev, level, text, values))
         self.diag_pub.publish(arr)
         self.stuck = ""  # reported (the restart's own round and this one)
+
+    def _health(self, i, t, last, rate, overruns_grew, now_ns):
+        """health.assess for sensor ``i`` over the polls since the previous round."""
+        prev_seq = last[1][i] if last else t.seq
+        try:
+            _f, _n, _d, arr = self.poller.state.samples(i, prev_seq, 0)
+        except ss.PollerBusyError:
+            arr = None
+        stamps = arr["stamp_ns"] if arr is not None else []
+        if arr is not None and len(stamps):
+            self._diag_stamp[i], prev_ns = int(stamps[-1]), self._diag_stamp[i]
+            gap = health.longest_gap(stamps, arr["dx"], arr["dy"], prev_ns, now_ns)
+        else:
+            gap = health.longest_gap([], [], [], self._diag_stamp[i] or t.stamp_ns, now_ns)
+        if self.settings.poller.backend == "remote" or t.state != ss.STATE_UP:
+            gap = health.Gap(0.0, 0.0, 0.0)  # the link's own values say what is late there
+        return health.assess(
+            rate, self.settings.poller.poll_rate, overruns_grew, gap, t.cpi_y
+        )
 
     def _publish_stuck(self) -> None:
         """ERROR per sensor when no snapshot can be had (the poller stopped mid-write)."""

@@ -191,3 +191,64 @@ def test_a_poller_stopped_mid_write_gets_busy_answers_that_change_nothing():
         node.shutdown()
         node.destroy_node()
         rclpy.shutdown(context=ctx)
+
+
+def _statuses(client, newer_than: float, timeout: float):
+    """Every /diagnostics status received after ``newer_than``, collected for ``timeout`` s.
+
+    The client keeps only its newest 5 messages: read them often.
+    """
+    seen: dict[int, object] = {}
+    deadline = time.monotonic() + timeout
+    while True:
+        with client._diag_lock:
+            for t, m in client._diag:
+                if t > newer_than:
+                    seen[id(m)] = (t, m)
+        if time.monotonic() >= deadline:
+            break
+        time.sleep(0.05)
+    msgs = [m for _, m in sorted(seen.values(), key=lambda tm: tm[0])]
+    return [(s.hardware_id, s.level, s.message, {kv.key: kv.value for kv in s.values})
+            for m in msgs for s in m.status]  # fmt: skip
+
+
+def _wait_level(client, level: bytes, timeout: float = 15.0):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        t0 = time.monotonic()
+        got = _statuses(client, t0, 0.6)
+        if got and all(s[1] == level for s in got):
+            return got
+    raise AssertionError(f"no round at level {level!r}; last: {got}")
+
+
+def test_diagnostics_warn_on_a_stall_error_on_a_wrap_and_back_to_ok(client, tmp_path):
+    ctx, log = start_node(client, tmp_path, diagnostics_period=0.25)
+    with ctx as proc:
+        wait_up(client, log)
+        pid = poller_pid(proc.pid)
+        _wait_level(client, b"\x00")
+        t0 = time.monotonic()
+        os.kill(pid, signal.SIGSTOP)
+        time.sleep(0.3)
+        os.kill(pid, signal.SIGCONT)
+        got = _statuses(client, t0, 1.0)
+        warned = [s for s in got if s[1] == b"\x01" and "stall" in s[2]]
+        assert warned, got
+        assert float(warned[0][3]["longest_poll_gap_ms"]) > 50
+        _wait_level(client, b"\x00")
+        # 4 s without a poll while the robot drives: the 16-bit counter may have wrapped
+        t0 = time.monotonic()
+        os.kill(pid, signal.SIGSTOP)
+        try:
+            during = _statuses(client, t0, 4.0)
+        finally:
+            os.kill(pid, signal.SIGCONT)
+        got = during + _statuses(client, time.monotonic(), 1.5)
+        errors = [s for s in got if s[1] == b"\x02" and "wrapped" in s[2]]
+        assert errors, got
+        assert int(errors[0][3]["est_wrap_loss_counts"]) >= 65_536
+        assert float(errors[0][3]["est_wrap_loss_m"]) > 0.5
+        _wait_level(client, b"\x00")
+        assert proc.poll() is None

@@ -1,0 +1,104 @@
+"""How healthy the polling was over one diagnostics period: the /diagnostics level (no ROS).
+
+Thresholds (docs/beagle-node.md section 4.2):
+
+* WARN when the achieved poll rate over the period is below
+  ``RATE_WARN_FRACTION`` (95 %) of ``poll_rate``, when the poller's overrun
+  count grew, or when a stall happened: two consecutive polls (or the newest
+  poll and now) more than ``STALL_S`` (50 ms) apart.
+* ERROR when a counter may have wrapped: at the speed measured over the
+  period (counts/s, outside the longest gap) the sensor's 16-bit counter
+  collects more than ``COUNTER_LIMIT`` (32 767) counts in the longest gap.
+  Each wrap loses 65 536 counts; the estimate is in the values (counts and
+  metres at the CPI in force).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pln2033 import INCH_M
+
+STALL_S = 0.05
+RATE_WARN_FRACTION = 0.95
+COUNTER_LIMIT = 32_767  # int16: a poll gap collecting more than this wraps the counter
+WRAP_COUNTS = 65_536
+
+
+@dataclass(frozen=True)
+class Gap:
+    """The longest time without a poll in a period (s) and the speed outside it (counts/s)."""
+
+    seconds: float
+    speed_x: float
+    speed_y: float
+
+
+def longest_gap(stamps_ns: np.ndarray, dx: np.ndarray, dy: np.ndarray, prev_ns: int,
+                now_ns: int) -> Gap:  # fmt: skip
+    """The longest gap among the polls ``stamps_ns`` (with their counts ``dx``, ``dy``).
+
+    ``prev_ns``: the newest poll before them (0: none); ``now_ns``: now, so that a
+    stall still going on counts. The speed leaves out the gap and the poll that
+    ends it (whose counts may have wrapped).
+    """
+    t = np.asarray(stamps_ns, dtype=np.int64)
+    head = np.array([prev_ns] if prev_ns else [], dtype=np.int64)  # int64: ns since 1970
+    edges = np.concatenate([head, t, np.array([now_ns], dtype=np.int64)])
+    if len(edges) < 2:
+        return Gap(0.0, 0.0, 0.0)
+    diffs = np.diff(edges)
+    k = int(np.argmax(diffs))
+    gap_s = max(0.0, float(diffs[k]) / 1e9)
+    # the poll ending the gap is edges[k + 1]: t[k] after a prev stamp, else t[k + 1]
+    # (none when the gap runs up to now)
+    end = k if prev_ns else k + 1
+    keep = np.ones(len(t), dtype=bool)
+    if 0 <= end < len(t):
+        keep[end] = False
+    span_s = max(0.0, float(edges[-1] - edges[0]) / 1e9 - gap_s)
+    if span_s <= 0 or not keep.any():
+        return Gap(gap_s, 0.0, 0.0)
+    sx = float(np.abs(np.asarray(dx)[keep].sum()))
+    sy = float(np.abs(np.asarray(dy)[keep].sum()))
+    return Gap(gap_s, sx / span_s, sy / span_s)
+
+
+def assess(rate_hz: float, poll_rate: float, overruns_grew: int, gap: Gap,
+           cpi: int) -> tuple[str, str, dict[str, object]]:  # fmt: skip
+    """('OK'|'WARN'|'ERROR', message, values for /diagnostics) for one sensor's period.
+
+    ``rate_hz``: achieved polls per second (nan: no previous period, not judged);
+    ``overruns_grew``: skipped poll slots since the previous period.
+    """
+    est_x, est_y = gap.speed_x * gap.seconds, gap.speed_y * gap.seconds
+    wraps = int((max(est_x, est_y) + WRAP_COUNTS / 2) // WRAP_COUNTS)
+    values: dict[str, object] = {
+        "longest_poll_gap_ms": f"{gap.seconds * 1e3:.1f}",
+        "gap_est_counts": f"{max(est_x, est_y):.0f}",
+    }
+    if max(est_x, est_y) > COUNTER_LIMIT:
+        wraps = max(wraps, 1)
+        loss = wraps * WRAP_COUNTS
+        metres = loss * INCH_M / cpi if cpi > 0 else float("nan")
+        values["est_wrap_loss_counts"] = loss
+        values["est_wrap_loss_m"] = f"{metres:.3f}"
+        return (
+            "ERROR",
+            f"counter may have wrapped: no poll for {gap.seconds:.2f} s at "
+            f"{max(gap.speed_x, gap.speed_y):.0f} counts/s, about {loss} counts "
+            f"({metres:.2f} m) lost",
+            values,
+        )
+    why = []
+    if rate_hz == rate_hz and rate_hz < RATE_WARN_FRACTION * poll_rate:
+        why.append(f"achieved {rate_hz:.0f} Hz < {RATE_WARN_FRACTION:.0%} of {poll_rate:g} Hz")
+    if overruns_grew > 0:
+        why.append(f"{overruns_grew} overruns")
+    if gap.seconds > STALL_S:
+        why.append(f"stall: no poll for {gap.seconds * 1e3:.0f} ms (> {STALL_S * 1e3:.0f} ms)")
+    if why:
+        return "WARN", "; ".join(why), values
+    return "OK", "up", values
