@@ -252,3 +252,43 @@ def test_diagnostics_warn_on_a_stall_error_on_a_wrap_and_back_to_ok(client, tmp_
         assert float(errors[0][3]["est_wrap_loss_m"]) > 0.5
         _wait_level(client, b"\x00")
         assert proc.poll() is None
+
+
+EXIT_CODE_SCRIPT = """
+import sys
+from mm_beagle import node
+from mm_pc.ros import spin
+
+class Fake:
+    fatal = ""
+    def __init__(self, *a, **k):
+        if sys.argv[1] == "config":
+            raise ValueError("'backend' is 'foo'; allowed: spidev, sim")
+    def shutdown(self): pass
+    def destroy_node(self): pass
+
+def spin_until(n, stop):
+    raise TimeoutError("the poller process holds the shared state")
+
+node.BeagleNode = Fake
+spin.spin_until = spin_until
+sys.exit(node.main([]))
+"""
+
+
+@pytest.mark.parametrize(("case", "code", "text"), [
+    ("config", 2, "mm-beagle: 'backend' is 'foo'"),
+    ("runtime", 1, "stopped by an error at run time: TimeoutError"),
+])  # fmt: skip
+def test_exit_code_2_only_for_bad_configuration(case, code, text):
+    """A TimeoutError (an OSError) at run time is not reported as bad configuration."""
+    import subprocess
+    import sys
+
+    r = subprocess.run(
+        [sys.executable, "-c", EXIT_CODE_SCRIPT, case],
+        capture_output=True, text=True, timeout=60, env=dict(os.environ),
+    )  # fmt: skip
+    assert r.returncode == code, r.stderr
+    assert text in r.stderr
+    assert "Traceback" not in r.stderr
