@@ -38,6 +38,7 @@ from . import messages
 from . import shared_state as ss
 from .params import NodeSettings, declare
 from .poller_client import PollerClient, PollerError
+from .read_and_clear import ClientCursors
 from .remote import RemoteAgent
 from .services import service_types
 
@@ -65,6 +66,7 @@ class BeagleNode(Node):
         # Read-and-clear cursors: one for the services, one for the topic.
         self._served = [start] * len(self.devices)
         self._published = [start] * len(self.devices)
+        self._client_cursors = ClientCursors(len(self.devices), start)  # request.client
         self._lock = threading.Lock()
         self._diag_last: tuple[float, list[int], int] | None = None
         self._states = [ss.STATE_STARTING] * len(self.devices)
@@ -232,7 +234,11 @@ class BeagleNode(Node):
     # --- services ------------------------------------------------------------------------
 
     def on_get_sensor_data(self, req, res):
-        """Read-and-clear sums since this service's previous call, per sensor."""
+        """Read-and-clear sums since this service's previous call, per sensor.
+
+        With ``req.client`` set: since that client's acknowledged ``ack_seq``
+        (:mod:`mm_beagle.read_and_clear`; a repeated ack gets the same interval).
+        """
         if self._unavailable(res):
             return res
         if req.id:
@@ -257,10 +263,24 @@ class BeagleNode(Node):
             res.message = f"down: {', '.join(down)}" if down else ""
         data = []
         with self._lock:
-            for i in wanted:
-                now = self.poller.state.snapshot(i)
-                data.append(messages.sensor_data(self.devices[i], self._served[i], now))
-                self._served[i] = now
+            if req.client or len(req.ack_seq):
+                intervals, problem = self._client_cursors.serve(
+                    req.client,
+                    wanted,
+                    list(req.ack_seq),
+                    self.poller.state.snapshot,
+                    one_id=bool(req.id),
+                )
+                if problem:
+                    res.success, res.message = False, problem
+                    return res
+                for i, (prev, now) in zip(wanted, intervals, strict=True):
+                    data.append(messages.sensor_data(self.devices[i], prev, now))
+            else:
+                for i in wanted:
+                    now = self.poller.state.snapshot(i)
+                    data.append(messages.sensor_data(self.devices[i], self._served[i], now))
+                    self._served[i] = now
         res.data = data
         res.success = True
         return res

@@ -90,3 +90,23 @@ def test_bench_rejects_bad_arguments():
     )
     assert out.returncode == 2
     assert "--seconds >= 3" in out.stderr
+
+
+@pytest.mark.parametrize(
+    "args, text",
+    [
+        (["--clients", "0"], "1 <= --clients <= 64"),
+        (["--clients", "65"], "1 <= --clients <= 64"),
+        (["--rate", "-1"], "--rate >= 0"),
+        (["--cursor", "bogus"], "invalid choice: 'bogus'"),
+    ],
+)
+def test_bench_poll_rejects_bad_client_options(args, text):
+    out = subprocess.run(
+        [sys.executable, "-m", "mm_beagle.bench", "poll", *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert out.returncode == 2
+    assert text in out.stderr and "Traceback" not in out.stderr
