@@ -105,9 +105,14 @@ class RegisterMap:
             data = yaml.safe_load(text) or {}
         except yaml.YAMLError as exc:
             raise RegisterMapError(f"register map {path} is not valid YAML: {exc}") from exc
+        except RecursionError:  # the parser recurses per nesting level
+            raise RegisterMapError(f"register map {path} is nested too deeply") from None
         if not isinstance(data, dict):
             raise RegisterMapError(f"register map {path} must be a YAML mapping")
-        return cls.from_dict(data)
+        try:
+            return cls.from_dict(data)
+        except RegisterMapError as exc:
+            raise RegisterMapError(f"register map {path}: {exc}") from None
 
     @classmethod
     def from_dict(cls, override: dict[str, Any]) -> RegisterMap:

@@ -448,6 +448,8 @@ class Calibration:
             data = yaml.safe_load(text)
         except yaml.YAMLError as e:
             raise ValueError(f"calibration: not valid YAML: {e}") from None
+        except RecursionError:  # the parser recurses per nesting level
+            raise ValueError("calibration: nested too deeply to be a calibration") from None
         return cls.from_dict(data)
 
     def save(self, path: str | Path) -> None:
