@@ -27,17 +27,19 @@ ISOLATED_MARK = "MM_ISOLATED_ROS_DOMAIN"  # set once a process has its private d
 ISOLATED_DOMAINS = range(1, 102)
 
 
-def isolated_ros_env(domain_id: int | None = None) -> dict[str, str]:
+def isolated_ros_env(domain_id: int | None = None, keep_user_domain: bool = True) -> dict[str, str]:
     """This process's environment with a private domain and localhost-only discovery.
 
     A process that already has one (a test session, the demo) keeps it: a second,
     different domain would cut it off from the nodes it already talks to. A
     ROS_DOMAIN_ID the user set is kept too (their nodes live there); only without
-    one is a random id of :data:`ISOLATED_DOMAINS` chosen.
+    one (or with ``keep_user_domain=False``: the test suite, which must not meet
+    a user's live nodes) is a random id of :data:`ISOLATED_DOMAINS` chosen.
     """
     env = dict(os.environ)
     if domain_id is None:
-        kept = env.get(ISOLATED_MARK) or env.get("ROS_DOMAIN_ID", "").strip()
+        user = env.get("ROS_DOMAIN_ID", "").strip() if keep_user_domain else ""
+        kept = env.get(ISOLATED_MARK) or user
         domain_id = int(kept) if kept.isdigit() else random.choice(ISOLATED_DOMAINS)
     env["ROS_DOMAIN_ID"] = env[ISOLATED_MARK] = str(domain_id)
     env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
@@ -46,9 +48,11 @@ def isolated_ros_env(domain_id: int | None = None) -> dict[str, str]:
     return env
 
 
-def use_isolated_ros_env(domain_id: int | None = None) -> dict[str, str]:
+def use_isolated_ros_env(
+    domain_id: int | None = None, keep_user_domain: bool = True
+) -> dict[str, str]:
     """Apply :func:`isolated_ros_env` to this process (before rclpy.init)."""
-    env = isolated_ros_env(domain_id)
+    env = isolated_ros_env(domain_id, keep_user_domain)
     for key in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", ISOLATED_MARK):
         os.environ[key] = env[key]
     os.environ.pop("ROS_STATIC_PEERS", None)

@@ -34,6 +34,9 @@ def test_without_one_the_private_domain_is_in_1_to_101(monkeypatch):
     assert min(ids) >= 1 and max(ids) <= 101 and len(ids) > 50
     monkeypatch.setenv("ROS_DOMAIN_ID", "")  # set but empty: none
     assert 1 <= int(isolated_ros_env()["ROS_DOMAIN_ID"]) <= 101
+    monkeypatch.setenv("ROS_DOMAIN_ID", "42")  # the test suite's choice: never the user's
+    picked = {isolated_ros_env(keep_user_domain=False)["ROS_DOMAIN_ID"] for _ in range(20)}
+    assert picked != {"42"}
 
 
 PARENT = textwrap.dedent(
