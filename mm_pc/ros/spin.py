@@ -29,7 +29,7 @@ def params_file_problems(argv: Sequence[str]) -> list[str]:
 
     rcl would report these as a multi-line RCLError (exit 1) from rclpy.init.
     """
-    import yaml
+    from mm_pc.core.yaml_text import parse_yaml
 
     problems = []
     in_ros_args = False
@@ -54,13 +54,9 @@ def params_file_problems(argv: Sequence[str]) -> list[str]:
                 problems.append(f"{where}: cannot read it ({e.strerror or e})")
                 continue
             try:
-                data = yaml.safe_load(text)
-            except yaml.YAMLError as e:
-                first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-                problems.append(f"{where}: not valid YAML ({first})")
-                continue
-            except RecursionError:
-                problems.append(f"{where}: nested too deeply to be a parameter file")
+                data = parse_yaml(text)
+            except ValueError as e:
+                problems.append(f"{where}: {e}")
                 continue
             if not isinstance(data, dict):
                 problems.append(

@@ -95,12 +95,14 @@ def test_register_map_errors_name_the_file(tmp_path):
         ("deep.yaml", DEEP, "nested too deeply"),
         ("typo.yaml", "registerz: {}\n", "unknown key 'registerz'"),
         ("value.yaml", "cpi: {min: -1}\n", "'cpi.min' must be an integer"),
+        ("broken.yaml", "cpi: [1,\n", "not valid YAML"),
     ):
         p = tmp_path / name
         p.write_text(text)
         with pytest.raises(RegisterMapError) as err:
             RegisterMap.load(p)
         assert str(p) in str(err.value) and says in str(err.value)
+        assert "\n" not in str(err.value)
 
 
 @pytest.mark.parametrize("prog", ["mm-beagle", "mm-odometry"])
