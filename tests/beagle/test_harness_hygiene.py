@@ -3,6 +3,7 @@ a user's ROS_DOMAIN_ID is respected; the private domain range is the safe one.""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -79,3 +80,58 @@ def test_a_child_stops_when_its_parent_with_sigint_ignored_is_killed(tmp_path):
             parent.wait(5)
         if child is not None and child.is_running():
             child.kill()
+
+
+NODE_PARENT = textwrap.dedent(
+    """
+    import signal, sys, time
+    signal.signal(signal.SIGINT, signal.SIG_IGN)   # what `nohup ... &` hands down
+    sys.path.insert(0, {root!r})
+    from mm_beagle.harness import beagle_process, isolated_ros_env
+    params = {{"backend": "sim", "devices": ["/dev/spidev1.0"]}}
+    with beagle_process(params, isolated_ros_env(), {log!r}, namespace="/orphan") as proc:
+        print(proc.pid, flush=True)
+        time.sleep(120)
+    """
+)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux")
+@pytest.mark.parametrize("when", ["starting", "polling"])
+def test_a_real_node_and_its_poller_stop_when_a_nohup_parent_is_killed(when, tmp_path):
+    """The issue's case: a monitor in the background dies; its mm-beagle must not stay.
+    ``starting``: the parent dies while the node still imports rclpy (before the node's
+    own SIGINT handler: an inherited SIG_IGN would swallow the parent-death signal)."""
+    root = os.path.dirname(os.path.dirname(harness.__file__))
+    log = tmp_path / "node.log"
+    parent = subprocess.Popen(
+        [sys.executable, "-c", NODE_PARENT.format(root=root, log=str(log))],
+        stdout=subprocess.PIPE, text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )  # fmt: skip
+    procs: list[psutil.Process] = []
+    try:
+        node = psutil.Process(int(parent.stdout.readline()))
+        procs = [node]
+        if when == "polling":
+            deadline = time.monotonic() + 30
+            while not node.children() and time.monotonic() < deadline:
+                time.sleep(0.1)  # the poller is up
+            procs += node.children(recursive=True)
+            assert len(procs) >= 2, log.read_text()
+        else:
+            time.sleep(0.3)
+        parent.send_signal(signal.SIGKILL)
+        parent.wait(5)
+        time.sleep(1.0)  # anything the node starts meanwhile is found and watched too
+        with contextlib.suppress(psutil.Error):
+            procs += node.children(recursive=True)
+        _, alive = psutil.wait_procs(procs, timeout=15)
+        assert not alive, f"still running after the parent's SIGKILL: {alive}"
+        assert "Traceback" not in log.read_text()
+    finally:
+        if parent.poll() is None:
+            parent.kill()
+            parent.wait(5)
+        for p in procs:
+            with contextlib.suppress(psutil.Error):
+                p.kill()
