@@ -535,7 +535,7 @@ class BeagleNode(Node):
 
 
 def main(argv: list[str] | None = None) -> int:
-    stop = ros_spin.init(argv)
+    stop = ros_spin.init(argv, "mm-beagle")
     node = None
     code = 0
     try:

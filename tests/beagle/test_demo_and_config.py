@@ -56,6 +56,8 @@ def test_demo_runs_and_shows_both_sensors():
     assert "/dev/spidev1.0       up" in out.stdout
     assert "/dev/spidev1.1       up" in out.stdout
     assert "SensorData messages received" in out.stdout
+    log = Path(out.stdout.split("node log: ", 1)[1].split()[0])  # a private folder, printed
+    assert log.stat().st_size > 0 and (log.parent.stat().st_mode & 0o777) == 0o700
 
 
 @pytest.mark.ros
