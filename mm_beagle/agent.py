@@ -152,15 +152,34 @@ class AgentLink:
                 raise link.LinkError(f"'cpi' must be an integer, got {cpi!r}")
             status, body = poller.serve_command(("set_cpi", i, cpi))
         elif cmd == "load_patch":
-            i, words = self._sensor(msg), msg.get("words")
-            if not isinstance(words, list):
-                raise link.LinkError("'words' must be a list of 16-bit integers")
+            i, words = self._sensor(msg), self._patch_words(msg)
             status, body = poller.serve_command(("load_patch", i, words))
         else:
             known = "info, settings, set_cpi, load_patch"
             raise link.LinkError(f"unknown command {cmd!r}; known: {known}")
         seqs = [ch.seq for ch in poller.channels]
         return json.dumps({"status": status, "payload": body, "seq": seqs}).encode()
+
+    def _patch_words(self, msg: dict) -> list[int]:
+        """The words of the patch file ``msg["file"]`` names in this agent's patch_dir.
+
+        A peer names a file; it never sends a path elsewhere or the code itself."""
+        from pln2033 import read_patch_file
+        from pln2033.errors import PatchError
+
+        from .patches import PatchPathError, resolve_patch_file
+
+        if "words" in msg:
+            raise link.LinkError(
+                "load_patch takes 'file' (a patch file in the agent's --patch-dir), not 'words'"
+            )
+        name = msg.get("file")
+        if not isinstance(name, str) or not name:
+            raise link.LinkError("load_patch needs 'file': a patch file in the agent's --patch-dir")
+        try:
+            return read_patch_file(resolve_patch_file(self.poller.cfg.patch_dir, name))
+        except (PatchPathError, PatchError) as exc:
+            raise link.LinkError(str(exc)) from None
 
     def answer_history(self, payload: bytes) -> bytes:
         """Polls ``since`` onwards of one sensor (at most ``max``): a batch frame numbered
@@ -320,7 +339,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--poll-rate", type=float, help="polls per second (10..2000, default 1000)")
     p.add_argument("--spi-speed-hz", type=int)
     p.add_argument("--register-map", help="YAML overriding the assumed register map")
-    p.add_argument("--patch-file", help="vendor patch code loaded at every bring-up")
+    p.add_argument(
+        "--patch-file", help="vendor patch code loaded at every bring-up (in --patch-dir)"
+    )
+    p.add_argument(
+        "--patch-dir",
+        help="the only directory patch files are loaded from, at start or by a peer's "
+        "load_patch command (default '': patch loading off)",
+    )
     p.add_argument("--realtime-priority", type=int, help="SCHED_FIFO priority (0 = off)")
     p.add_argument("--retry-interval", type=float)
     p.add_argument("--ring-seconds", type=float, help="single polls kept (s, >= 60)")
@@ -356,6 +382,7 @@ DEFAULTS = {
     "spi_speed_hz": 3_000_000,
     "register_map": "",
     "patch_file": "",
+    "patch_dir": "",
     "realtime_priority": 50,
     "retry_interval": 1.0,
     "ring_seconds": 65.536,

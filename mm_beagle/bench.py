@@ -22,11 +22,13 @@ mm-bench agent [--seconds S] [--drops N] [--drop-seconds D] --json
     link bandwidth and latency, counts lost over N forced link drops.
     See mm_beagle.bench_agent.
 
-mm-bench poll --seconds S --json
-    mm-beagle on emulated sensors (separate process) while two client
-    processes call get_sensor_data at 100 Hz each. Reports the poll rate and
-    period, the poller's CPU use, count conservation per client and the
-    service round-trip time. Also a bare sleep loop measured in the same run
+mm-bench poll --seconds S [--clients N] [--rate HZ] [--cursor ack|shared] --json
+    mm-beagle on emulated sensors (separate process) while N (2) client
+    processes call get_sensor_data at HZ (100; 0 = flat out) each. Reports the
+    poll rate and period, the poller's CPU use, count conservation per client
+    (totals, and read-and-clear: each client's own with --cursor ack, the sum
+    over clients with shared), replies lost (none within 5 s), node exits and
+    the service round-trip time. Also a bare sleep loop measured in the same run
     (``baseline_sleep_p99_us``): on a virtual machine the wake-up latency of
     an idle vCPU dominates the period tail, and the ratio tells code from host.
 """
@@ -34,6 +36,7 @@ mm-bench poll --seconds S --json
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import multiprocessing as mp
 import os
@@ -62,26 +65,41 @@ def sleep_loop_periods(seconds: float, period_s: float = 0.001) -> np.ndarray:
     return np.array(periods) / 1e3
 
 
-def _client(name: str, seconds: float, rate: float, conn) -> None:
-    """One client process: get_sensor_data(id='') at ``rate`` Hz, then a final read."""
+def _client(name: str, seconds: float, rate: float, cursor: str, conn) -> None:
+    """One client process: get_sensor_data(id='') at ``rate`` Hz (0: flat out), then a final read.
+
+    ``cursor`` 'ack': its own read-and-clear cursor (mm_beagle.read_and_clear), a
+    lost reply asked for again with the same ack; 'shared': the node's one cursor.
+    A reply that does not come within 5 s counts as lost.
+    """
     import rclpy
+
+    from .read_and_clear import AckedReader
 
     client = BeagleClient(name)
     client.wait(20)
-    rtts, sums, totals, seqs, failures = [], {}, {}, [], 0
+    reader = AckedReader(name, client.get_parameters("devices")[0]) if cursor == "ack" else None
+    rtts, sums, totals, seqs, failures, lost = [], {}, {}, [], 0, 0
     conn.send("ready")
     conn.recv()  # start together
-    period = 1.0 / rate
+    period = 1.0 / rate if rate > 0 else 0.0
     t_next = time.monotonic()
     end = t_next + seconds
 
     def one_call() -> None:
-        nonlocal failures
+        nonlocal failures, lost
+        fields = reader.fields("") if reader else {"id": ""}
         t0 = time.perf_counter()
-        res = client.call("get_sensor_data", id="")
+        try:
+            res = client.call("get_sensor_data", timeout=5.0, **fields)
+        except TimeoutError:
+            lost += 1
+            return
         rtts.append((time.perf_counter() - t0) * 1e3)
         if not res.success:
             failures += 1
+        if reader:
+            reader.received(res)
         for d in res.data:
             sx, sy = sums.get(d.id, (0, 0))
             sums[d.id] = (sx + d.x_counts, sy + d.y_counts)
@@ -91,19 +109,24 @@ def _client(name: str, seconds: float, rate: float, conn) -> None:
 
     while time.monotonic() < end:
         one_call()
-        t_next += period
-        time.sleep(max(0.0, t_next - time.monotonic()))
+        if period:
+            t_next += period
+            time.sleep(max(0.0, t_next - time.monotonic()))
     (t_a, seq_a), (t_b, seq_b) = seqs[0], seqs[-1]
     conn.send("done")
     conn.recv()  # final read once the robot stands still
-    one_call()
-    rtts.pop()
+    n = len(rtts)
+    # ack: the first may repeat a lost interval, the second then ends now
+    for _ in range(2 if reader else 1):
+        one_call()
+    del rtts[n:]
     conn.send(
         {
             "rtts": rtts,
             "sums": sums,
             "totals": totals,
             "failures": failures,
+            "replies_lost": lost,
             "rate_hz": (seq_b - seq_a) / (t_b - t_a),
         }
     )
@@ -114,7 +137,7 @@ def _client(name: str, seconds: float, rate: float, conn) -> None:
 def _echo_server(seconds: float) -> None:
     """A trivial GetSensorData server: the round-trip floor of rclpy on this host."""
     import rclpy
-    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
     from mm_interfaces.srv import GetSensorData
 
@@ -128,10 +151,12 @@ def _echo_server(seconds: float) -> None:
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     end = time.monotonic() + seconds
-    while time.monotonic() < end:
-        executor.spin_once(timeout_sec=0.1)
+    with contextlib.suppress(ExternalShutdownException):  # terminate() ends it early
+        while time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.1)
     node.destroy_node()
-    rclpy.shutdown()
+    if rclpy.ok():
+        rclpy.shutdown()
 
 
 def baseline_rtt(n: int = 300, rate: float = 100.0) -> np.ndarray:
@@ -163,7 +188,7 @@ def _poller_process(node_pid: int) -> psutil.Process:
     raise RuntimeError("the poller process of mm_beagle was not found")
 
 
-def bench_poll(seconds: float, rate: float, n_clients: int) -> dict:
+def bench_poll(seconds: float, rate: float, n_clients: int, cursor: str = "ack") -> dict:
     import rclpy
 
     baseline = sleep_loop_periods(2.0)
@@ -179,7 +204,7 @@ def bench_poll(seconds: float, rate: float, n_clients: int) -> dict:
         pipes, procs = [], []
         for k in range(n_clients):
             a, b = ctx.Pipe()
-            p = ctx.Process(target=_client, args=(f"mm_bench_client_{k}", seconds, rate, b))
+            p = ctx.Process(target=_client, args=(f"mm_bench_client_{k}", seconds, rate, cursor, b))
             p.start()
             pipes.append(a)
             procs.append(p)
@@ -199,6 +224,7 @@ def bench_poll(seconds: float, rate: float, n_clients: int) -> dict:
         for p in procs:
             p.join(10)
         final = client.diagnostics(newer_than=time.monotonic())
+        node_exits = 0 if proc.poll() is None else 1
         client.close()
         rclpy.shutdown()
 
@@ -214,16 +240,23 @@ def bench_poll(seconds: float, rate: float, n_clients: int) -> dict:
     def lost(served: dict) -> int:
         return sum(abs(generated[d][k] - served[d][k]) for d in devices for k in (0, 1))
 
-    rc_sum = {
-        d: tuple(sum(r["sums"].get(d, (0, 0))[k] for r in results) for k in (0, 1)) for d in devices
-    }
+    if cursor == "ack":  # each client's own read-and-clear sum must match what was generated
+        rc_lost = sum(lost({d: tuple(r["sums"].get(d, (0, 0))) for d in devices}) for r in results)
+    else:  # one shared cursor: only the sum over all clients can
+        rc_lost = lost(
+            {
+                d: tuple(sum(r["sums"].get(d, (0, 0))[k] for r in results) for k in (0, 1))
+                for d in devices
+            }
+        )
     rtts = np.array([x for r in results for x in r["rtts"]])
     base_p50, base_p99 = np.percentile(baseline, [50, 99])
     return {
         "benchmark": "poll",
         "seconds": seconds,
         "clients": n_clients,
-        "client_rate_hz": rate,
+        "client_rate_hz": rate if rate > 0 else "flat out",
+        "cursor": cursor,
         "rate_hz": round(min(r["rate_hz"] for r in results), 1),
         "period_p50_us": float(final[devices[0]]["period_p50_us"]),
         "period_p99_us": float(final[devices[0]]["period_p99_us"]),
@@ -235,7 +268,9 @@ def bench_poll(seconds: float, rate: float, n_clients: int) -> dict:
         "counts_generated": sum(abs(v) for g in generated.values() for v in g),
         "counts_served": [sum(abs(v) for s in served_by(r).values() for v in s) for r in results],
         "counts_lost": max(lost(served_by(r)) for r in results),
-        "read_and_clear_counts_lost": lost(rc_sum),
+        "counts_lost_read_and_clear": rc_lost,
+        "replies_lost": sum(r["replies_lost"] for r in results),
+        "node_exits": node_exits,
         "failed_requests": sum(r["failures"] for r in results),
         "requests": len(rtts),
         "service_rtt_p50_ms": round(float(np.percentile(rtts, 50)), 3),
@@ -258,8 +293,16 @@ def main(argv: list[str] | None = None) -> int:
     sub = parser.add_subparsers(dest="what", required=True)
     poll = sub.add_parser("poll", help="the 1 kHz poller under two 100 Hz clients")
     poll.add_argument("--seconds", type=float, default=10.0)
-    poll.add_argument("--rate", type=float, default=100.0, help="requests per second per client")
+    poll.add_argument(
+        "--rate", type=float, default=100.0, help="requests per second per client (0: flat out)"
+    )
     poll.add_argument("--clients", type=int, default=2)
+    poll.add_argument(
+        "--cursor",
+        choices=("ack", "shared"),
+        default="ack",
+        help="read-and-clear per client with ack_seq (default), or the node's shared cursor",
+    )
     poll.add_argument("--json", action="store_true", help="print JSON only (the default)")
     pose = sub.add_parser("pose", help="accuracy and speed of every odometry method (simulated)")
     pose.add_argument("--json", action="store_true", help="print JSON only (the default)")
@@ -298,9 +341,9 @@ def main(argv: list[str] | None = None) -> int:
 
         result = bench_pose()
     elif args.what == "poll":
-        if not args.seconds >= 3 or not args.rate > 0 or args.clients < 1:
-            parser.error("need --seconds >= 3, --rate > 0, --clients >= 1")
-        result = bench_poll(args.seconds, args.rate, args.clients)
+        if not args.seconds >= 3 or not args.rate >= 0 or not 1 <= args.clients <= 64:
+            parser.error("need --seconds >= 3, --rate >= 0 (0: flat out), 1 <= --clients <= 64")
+        result = bench_poll(args.seconds, args.rate, args.clients, args.cursor)
     print(json.dumps(result, indent=None if args.json else 2))
     return 0
 

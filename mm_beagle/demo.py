@@ -24,7 +24,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.duration < 0:
         parser.error("--duration must be >= 0")
     env = use_isolated_ros_env()
-    log = os.path.join(tempfile.gettempdir(), "mm_beagle_demo.log")
+    log = os.path.join(tempfile.mkdtemp(prefix="mm-demo-"), "mm_beagle.log")  # private: mode 700
     print(
         f"Starting mm-beagle on emulated sensors (trajectory {args.trajectory}, "
         f"ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}); node log: {log}",

@@ -1,8 +1,9 @@
 """Run mm-beagle as a separate process and talk to it over real ROS 2 services.
 
-Used by the demo, the benchmarks and the integration tests. Every run gets its
-own ROS_DOMAIN_ID and localhost-only discovery, so nothing leaves this machine
-and parallel runs do not see each other.
+Used by the demo, the benchmarks and the integration tests. Every run gets
+localhost-only discovery and, unless the user set ROS_DOMAIN_ID, its own random
+domain (1..101), so nothing leaves this machine and parallel runs do not see
+each other.
 """
 
 from __future__ import annotations
@@ -21,16 +22,25 @@ from .services import service_types
 ISOLATED_MARK = "MM_ISOLATED_ROS_DOMAIN"  # set once a process has its private domain
 
 
-def isolated_ros_env(domain_id: int | None = None) -> dict[str, str]:
+#: private domains are drawn from here: inside 0..101, which the ROS 2 docs call safe on
+#: Linux (higher ids reach into the ephemeral port range), and not 0, every ROS 2's default
+ISOLATED_DOMAINS = range(1, 102)
+
+
+def isolated_ros_env(domain_id: int | None = None, keep_user_domain: bool = True) -> dict[str, str]:
     """This process's environment with a private domain and localhost-only discovery.
 
     A process that already has one (a test session, the demo) keeps it: a second,
-    different domain would cut it off from the nodes it already talks to.
+    different domain would cut it off from the nodes it already talks to. A
+    ROS_DOMAIN_ID the user set is kept too (their nodes live there); only without
+    one (or with ``keep_user_domain=False``: the test suite, which must not meet
+    a user's live nodes) is a random id of :data:`ISOLATED_DOMAINS` chosen.
     """
     env = dict(os.environ)
     if domain_id is None:
-        kept = env.get(ISOLATED_MARK)
-        domain_id = int(kept) if kept and kept.isdigit() else random.randint(120, 220)
+        user = env.get("ROS_DOMAIN_ID", "").strip() if keep_user_domain else ""
+        kept = env.get(ISOLATED_MARK) or user
+        domain_id = int(kept) if kept.isdigit() else random.choice(ISOLATED_DOMAINS)
     env["ROS_DOMAIN_ID"] = env[ISOLATED_MARK] = str(domain_id)
     env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     env.pop("ROS_STATIC_PEERS", None)
@@ -38,9 +48,11 @@ def isolated_ros_env(domain_id: int | None = None) -> dict[str, str]:
     return env
 
 
-def use_isolated_ros_env(domain_id: int | None = None) -> dict[str, str]:
+def use_isolated_ros_env(
+    domain_id: int | None = None, keep_user_domain: bool = True
+) -> dict[str, str]:
     """Apply :func:`isolated_ros_env` to this process (before rclpy.init)."""
-    env = isolated_ros_env(domain_id)
+    env = isolated_ros_env(domain_id, keep_user_domain)
     for key in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", ISOLATED_MARK):
         os.environ[key] = env[key]
     os.environ.pop("ROS_STATIC_PEERS", None)
@@ -67,11 +79,21 @@ def _stop_with_parent() -> None:
     """In the child before exec: SIGINT when the parent dies (PR_SET_PDEATHSIG, Linux).
 
     A test run or demo that is killed (or aborts) then leaves no node running
-    in the background; SIGINT gives the node its clean shutdown.
+    in the background; SIGINT gives the node its clean shutdown. An ignored
+    signal stays ignored across exec, and a background job (``nohup ... &``)
+    starts with SIGINT ignored, so SIGINT and SIGTERM are first reset to their
+    default action and unblocked (libc calls: Python's ``signal`` works in the
+    main thread only, and a child may be forked from another).
     """
     import ctypes
 
-    ctypes.CDLL(None).prctl(1, signal.SIGINT, 0, 0, 0)  # PR_SET_PDEATHSIG
+    libc = ctypes.CDLL(None, use_errno=True)
+    libc.signal.restype = ctypes.c_void_p
+    libc.signal.argtypes = (ctypes.c_int, ctypes.c_void_p)
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        libc.signal(int(sig), None)  # SIG_DFL
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})
+    libc.prctl(1, int(signal.SIGINT), 0, 0, 0)  # PR_SET_PDEATHSIG
 
 
 @contextmanager

@@ -38,6 +38,7 @@ from . import health, messages
 from . import shared_state as ss
 from .params import NodeSettings, declare
 from .poller_client import PollerClient, PollerError
+from .read_and_clear import ClientCursors
 from .remote import RemoteAgent
 from .services import service_types
 
@@ -74,6 +75,7 @@ class BeagleNode(Node):
         # Read-and-clear cursors: one for the services, one for the topic.
         self._served = [start] * len(self.devices)
         self._published = [start] * len(self.devices)
+        self._client_cursors = ClientCursors(len(self.devices), start)  # request.client
         self._lock = threading.Lock()
         self._diag_last: tuple[float, list[int], int] | None = None
         self._states = [ss.STATE_STARTING] * len(self.devices)
@@ -245,7 +247,11 @@ class BeagleNode(Node):
     # --- services ------------------------------------------------------------------------
 
     def on_get_sensor_data(self, req, res):
-        """Read-and-clear sums since this service's previous call, per sensor."""
+        """Read-and-clear sums since this service's previous call, per sensor.
+
+        With ``req.client`` set: since that client's acknowledged ``ack_seq``
+        (:mod:`mm_beagle.read_and_clear`; a repeated ack gets the same interval).
+        """
         if self._unavailable(res):
             return res
         if req.id:
@@ -270,16 +276,31 @@ class BeagleNode(Node):
             res.message = f"down: {', '.join(down)}" if down else ""
         data = []
         with self._lock:
-            try:  # every snapshot first: a busy poller moves no cursor
-                nows = [self.poller.state.snapshot(i) for i in wanted]
+            # every snapshot before any cursor moves: a busy poller changes nothing
+            # (ClientCursors.serve also takes its snapshots before it changes a cursor)
+            try:
+                if req.client or len(req.ack_seq):
+                    intervals, problem = self._client_cursors.serve(
+                        req.client,
+                        wanted,
+                        list(req.ack_seq),
+                        self.poller.state.snapshot,
+                        one_id=bool(req.id),
+                    )
+                    if problem:
+                        res.success, res.message = False, problem
+                        return res
+                else:
+                    nows = [self.poller.state.snapshot(i) for i in wanted]
+                    intervals = []
+                    for i, now in zip(wanted, nows, strict=True):
+                        intervals.append((self._served[i], now))
+                        self._served[i] = now
             except ss.PollerBusyError:
                 res.success, res.message = False, ss.BUSY_MESSAGE
                 return res
-            for i, now in zip(wanted, nows, strict=True):
-                data.append(
-                    messages.sensor_data(self.devices[i], self._served[i], now, self.instance_id)
-                )
-                self._served[i] = now
+            for i, (prev, now) in zip(wanted, intervals, strict=True):
+                data.append(messages.sensor_data(self.devices[i], prev, now, self.instance_id))
         res.data = data
         res.success = True
         return res
@@ -623,7 +644,7 @@ class BeagleNode(Node):
 
 def main(argv: list[str] | None = None) -> int:
     """Exit 0 on a clean stop, 2 for bad configuration (found while starting), else 1."""
-    stop = ros_spin.init(argv)
+    stop = ros_spin.init(argv, "mm-beagle")
     node = None
     code = 0
     try:
@@ -648,6 +669,7 @@ def main(argv: list[str] | None = None) -> int:
         if rclpy.ok():
             rclpy.shutdown()
     return code
+
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -70,7 +70,14 @@ PARAMETERS = {
     "poll_rate": (1000.0, _float("sensor polls per second (Hz)", 10.0, 2000.0)),
     "spi_speed_hz": (3_000_000, _int("SPI clock (Hz)", 100_000, 8_000_000)),
     "register_map": ("", _plain("YAML file overriding the assumed register map ('' = defaults)")),
-    "patch_file": ("", _plain("vendor patch code to load into the DSP RAM ('' = none)")),
+    "patch_file": (
+        "",
+        _plain("vendor patch code to load into the DSP RAM, a file in patch_dir ('' = none)"),
+    ),
+    "patch_dir": (
+        "",
+        _plain("the only directory patch files are loaded from ('' = patch loading off)"),
+    ),
     "realtime_priority": (
         50,
         _int("SCHED_FIFO priority of the poller process (0 = normal scheduling)", 0, 99),

@@ -28,6 +28,7 @@ from pln2033.errors import InvalidCpiError, PatchError
 
 from . import shared_state as ss
 from .lift_gap import LiftGapEstimator
+from .patches import resolve_patch_file
 from .sim_backend import SimConfig
 
 ERRORS_BEFORE_DOWN = 3  # consecutive failed polls before a sensor is declared down
@@ -42,7 +43,8 @@ class PollerConfig:
     poll_rate: float = 1000.0
     spi_speed_hz: int = 3_000_000
     register_map: str = ""
-    patch_file: str = ""
+    patch_file: str = ""  # resolved inside patch_dir (see patches.py), '' = none
+    patch_dir: str = ""  # where patch files may come from ('' = patch loading off)
     realtime_priority: int = 0
     retry_interval: float = 1.0
     ring_size: int = 65536
@@ -57,14 +59,19 @@ COMMON_FIELDS = (
     "spi_speed_hz",
     "register_map",
     "patch_file",
+    "patch_dir",
     "realtime_priority",
     "retry_interval",
 )
 
 
 def poller_config(values: dict, ring_size: int, sim: SimConfig) -> PollerConfig:
-    """A PollerConfig from checked settings named as its fields (the node's, the agent's)."""
-    return PollerConfig(**{k: values[k] for k in COMMON_FIELDS}, ring_size=ring_size, sim=sim)
+    """A PollerConfig from checked settings named as its fields (the node's, the agent's).
+
+    Raises ValueError (PatchPathError) when patch_file is not a file inside patch_dir."""
+    common = {k: values[k] for k in COMMON_FIELDS}
+    common["patch_file"] = resolve_patch_file(values["patch_dir"], values["patch_file"])
+    return PollerConfig(**common, ring_size=ring_size, sim=sim)
 
 
 def _open_spidev(dev: str, cfg: PollerConfig) -> object:

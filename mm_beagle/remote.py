@@ -141,8 +141,8 @@ class RemoteAgent:
         msg: dict = {"cmd": kind, "sensor": self.cfg.devices[i]}
         if kind == "set_cpi":
             msg["cpi"] = args[0]
-        elif kind == "load_patch":
-            msg["words"] = list(args[0])  # type: ignore[call-overload]
+        elif kind == "load_patch":  # a file in the agent's patch_dir, never the code
+            msg["file"] = str(args[0])
         reply = self._query(self.keys["cmd"], json.dumps(msg).encode(), timeout)
         if reply is None:
             raise PollerError(

@@ -42,6 +42,7 @@ EXTRA_MODULES = {
 }
 
 EXIT_MISSING = 2
+EXIT_INTERRUPTED = 0
 
 
 def is_ros_module(name: str | None) -> bool:
@@ -95,6 +96,13 @@ def _program() -> str:
 
 def _hook(previous):
     def hook(exc_type, exc, tb):
+        if issubclass(exc_type, KeyboardInterrupt):
+            # Ctrl-C before a program installed its own handler (a node still importing
+            # rclpy): a stop like any other, no traceback; 0 as the nodes' Ctrl-C gives.
+            sys.stderr.write(f"{_program()}: stopped by Ctrl-C\n")
+            sys.stderr.flush()
+            sys.stdout.flush()
+            os._exit(EXIT_INTERRUPTED)
         if issubclass(exc_type, ModuleNotFoundError) and exc.name:
             text = message(_program(), exc.name.partition(".")[0])
             if text is not None:

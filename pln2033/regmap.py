@@ -103,11 +103,19 @@ class RegisterMap:
             raise RegisterMapError(f"cannot read register map {path}: {exc.strerror}") from exc
         try:
             data = yaml.safe_load(text) or {}
-        except yaml.YAMLError as exc:
-            raise RegisterMapError(f"register map {path} is not valid YAML: {exc}") from exc
+        except yaml.YAMLError as exc:  # one line: what and where (the full text spans 5)
+            mark = getattr(exc, "problem_mark", None)
+            where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark else ""
+            what = getattr(exc, "problem", None) or type(exc).__name__
+            raise RegisterMapError(f"register map {path} is not valid YAML: {what}{where}") from exc
+        except RecursionError:  # the parser recurses per nesting level
+            raise RegisterMapError(f"register map {path} is nested too deeply") from None
         if not isinstance(data, dict):
             raise RegisterMapError(f"register map {path} must be a YAML mapping")
-        return cls.from_dict(data)
+        try:
+            return cls.from_dict(data)
+        except RegisterMapError as exc:
+            raise RegisterMapError(f"register map {path}: {exc}") from None
 
     @classmethod
     def from_dict(cls, override: dict[str, Any]) -> RegisterMap:

@@ -13,7 +13,9 @@ from hypothesis import settings
 
 from mm_beagle.harness import use_isolated_ros_env
 
-use_isolated_ros_env()  # the harness's one definition (domain, localhost, no static peers)
+# the harness's one definition (domain, localhost, no static peers); a private domain
+# even if the shell has a ROS_DOMAIN_ID: tests must not meet the user's live nodes
+use_isolated_ros_env(keep_user_domain=False)
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 
 # Hypothesis: the same examples on every run by default ("repeatable"), so CI on a

@@ -20,6 +20,7 @@ import yaml
 from mm_pc.core.angles import wrap_pi
 from mm_pc.core.checks import finite
 from mm_pc.core.geometry import SensorMount
+from mm_pc.core.yaml_text import parse_yaml
 
 __all__ = [
     "CALIBRATION_METHODS",
@@ -445,9 +446,9 @@ class Calibration:
     def from_yaml(cls, text: str) -> Calibration:
         """Parse :meth:`to_yaml` output; ValueError with a message on any bad input."""
         try:
-            data = yaml.safe_load(text)
-        except yaml.YAMLError as e:
-            raise ValueError(f"calibration: not valid YAML: {e}") from None
+            data = parse_yaml(text)
+        except ValueError as e:
+            raise ValueError(f"calibration: {e}") from None
         return cls.from_dict(data)
 
     def save(self, path: str | Path) -> None:

@@ -142,6 +142,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.record is not None and (problem := _record_problem(args)):
         print(f"mm-monitor: --record {args.record}: {problem}", file=sys.stderr)
         return 2
+    for problem in (_beagle_problem(args.beagle), _calibration_problem(args),
+                    _screenshot_problem(args)):  # fmt: skip
+        if problem:
+            print(f"mm-monitor: {problem}", file=sys.stderr)
+            return 2
     headless = args.headless
     if not headless and not _has_display() and os.environ.get("QT_QPA_PLATFORM") != "offscreen":
         duration = args.duration or 20.0
@@ -186,6 +191,56 @@ def _record_problem(args) -> str:
     return ""
 
 
+def _beagle_problem(beagle: str) -> str:
+    """Why ``--beagle`` is not a node name its services can live under ('' if it is)."""
+    from rclpy.exceptions import InvalidServiceNameException, InvalidTopicNameException
+    from rclpy.validate_full_topic_name import validate_full_topic_name
+
+    name = "/" + beagle.strip("/") if beagle.strip("/") else "/mm_beagle"
+    try:
+        validate_full_topic_name(f"{name}/get_sensor_data", is_service=True)
+    except (InvalidServiceNameException, InvalidTopicNameException) as e:
+        reason = str(e).splitlines()[0].rstrip(":")
+        return (
+            f"--beagle {beagle!r} is not a ROS node name ({reason}); allowed: letters, digits "
+            "and _ in /-separated parts that do not start with a digit, e.g. /robot1/mm_beagle"
+        )
+    return ""
+
+
+def _calibration_problem(args) -> str:
+    """Why the ``--calibration`` file cannot be loaded ('' if it can, or none was given)."""
+    if args.calibration is None:
+        return ""
+    from mm_pc.core.calibration import Calibration
+
+    try:
+        Calibration.load(args.calibration)
+    except (OSError, ValueError) as e:
+        return f"--calibration: {e}"
+    return ""
+
+
+def _screenshot_problem(args) -> str:
+    """Why ``--screenshot`` must not write its path ('' if it may): it is one of the inputs."""
+    import os.path
+
+    if args.screenshot is None or not args.screenshot.exists():
+        return ""
+    inputs = [("--replay", args.replay), ("--calibration", args.calibration)]
+    if args.sim and args.sim.startswith("file:"):
+        inputs.append(("--sim", Path(args.sim[len("file:") :])))
+    if args.replay is not None and args.replay.name == "metadata.yaml":  # a rosbag2 folder
+        inputs += [("--replay", f) for f in args.replay.parent.iterdir()]
+    for name, given in inputs:
+        if given is not None and given.exists() and os.path.samefile(args.screenshot, given):
+            return (
+                f"--screenshot {args.screenshot}: that is the {name} input; "
+                "write the screenshot to another path"
+            )
+    return ""
+
+
 def _quiet_qt_messages() -> None:
     """Drop the offscreen plugin's harmless 'propagateSizeHints' warning; keep the rest."""
     from PySide6.QtCore import qInstallMessageHandler
@@ -211,16 +266,19 @@ def _run(args, headless: bool) -> int:
     if args.calibration is not None:
         config.calibration_file = args.calibration
     with ExitStack() as stack:
+        node = None
         if args.sim:
+            import tempfile
+
             env = use_isolated_ros_env()
-            log = Path(os.environ.get("TMPDIR", "/tmp")) / "mm_monitor_sim_beagle.log"
+            log = Path(tempfile.mkdtemp(prefix="mm-monitor-")) / "sim_beagle.log"  # mode 700
             chain = "mm-beagle-agent + mm-beagle backend:=remote" if args.agent else "mm-beagle"
             print(
                 f"mm-monitor: starting {chain} on emulated sensors ({args.sim}, "
                 f"ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}); node log: {log}",
                 flush=True,
             )
-            stack.enter_context(emulated_sensors(args.sim, env, str(log), args.agent))
+            node = stack.enter_context(emulated_sensors(args.sim, env, str(log), args.agent))
         app = QApplication.instance() or QApplication([sys.argv[0]])
         app.setApplicationName("Mouse Monitor")
         bridge = None
@@ -235,8 +293,10 @@ def _run(args, headless: bool) -> int:
             if window.tabs.tabText(i).lower() == args.tab.lower():
                 window.tabs.setCurrentIndex(i)
         ctx.load_calibration()
-        if ctx.calibration_error:
+        if ctx.calibration_error:  # checked in main(); changed since
             print(f"mm-monitor: {ctx.calibration_error}", file=sys.stderr)
+            window.close()
+            return 2
         window.show()
         if bridge is not None:
             bridge.start()
@@ -254,7 +314,15 @@ def _run(args, headless: bool) -> int:
         if args.replay is not None:
             from mm_pc.monitor.replay import start_replay
 
-            start_replay(window, args.replay)
+            replayer = start_replay(window, args.replay)
+            if replayer is None:  # the status bar says why
+                print(f"mm-monitor: --replay {args.replay}: "
+                      f"{window.statusBar().currentMessage().removeprefix('replay: ')}",
+                      file=sys.stderr)  # fmt: skip
+                window.close()
+                return 2
+            if headless and not args.duration:  # nothing else would end the run
+                _quit_after(replayer, app)
         # Python signal handlers run only between bytecodes: wake the interpreter regularly.
         signal.signal(signal.SIGINT, lambda *_: app.quit())
         signal.signal(signal.SIGTERM, lambda *_: app.quit())
@@ -264,9 +332,16 @@ def _run(args, headless: bool) -> int:
         started = time.monotonic()
         if args.duration:
             QTimer.singleShot(int(args.duration * 1000), app.quit)
+        node_exit: list[str] = []
+        if node is not None:
+            tick.timeout.connect(lambda: _check_node(node, log, node_exit, app))
         app.exec()
         seconds = time.monotonic() - started
         code = 0
+        if node_exit:
+            print(f"mm-monitor: --sim: {node_exit[0]}", file=sys.stderr)
+            window.close()
+            return 2
         if args.screenshot is not None:
             window.tabs.setCurrentIndex(window.tabs.currentIndex())
             window.frame()
@@ -280,6 +355,34 @@ def _run(args, headless: bool) -> int:
             print(summary(window, seconds), flush=True)
         window.close()
     return code
+
+
+def _quit_after(replayer, app) -> None:
+    """Quit ``app`` once ``replayer`` has fed its last reply (after its own on_end)."""
+    ended = replayer.on_end
+
+    def then_quit() -> None:
+        if ended is not None:
+            ended()
+        app.quit()
+
+    replayer.on_end = then_quit
+
+
+def _check_node(node, log: Path, node_exit: list[str], app) -> None:
+    """If the --sim node has exited, keep its reason (the log's last line) and quit."""
+    if node_exit or node.poll() is None:
+        return
+    try:
+        lines = [ln for ln in log.read_text(errors="replace").splitlines() if ln.strip()]
+    except OSError:
+        lines = []
+    said = [ln for ln in lines if ln.startswith("mm-beagle: ") and "shutting down" not in ln]
+    reason = (said or lines or ["no output"])[0]
+    node_exit.append(
+        f"the emulated mm-beagle exited (code {node.returncode}): {reason} (log {log})"
+    )
+    app.quit()
 
 
 def _report_recording(window, recorder, stop_recording) -> None:

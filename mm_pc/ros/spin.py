@@ -2,23 +2,93 @@
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from pathlib import Path
 
 import rclpy
 from rclpy.exceptions import NameValidationException, ParameterException
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
+
+RCLError = _rclpy.RCLError
 
 #: errors of a node's set-up that mean "bad configuration": exit 2 with the message
 SETUP_ERRORS = (ValueError, ParameterException, NameValidationException, OSError)
 
 
-def init(argv: list[str] | None) -> threading.Event:
+def params_file_problems(argv: Sequence[str]) -> list[str]:
+    """What is wrong with each ``--params-file PATH`` in ``argv``'s ``--ros-args``
+    sections ([] when nothing): missing or unreadable, not YAML (also nesting too
+    deep for the parser), or not a mapping of node names. Each message names the file.
+
+    rcl would report these as a multi-line RCLError (exit 1) from rclpy.init.
+    """
+    from mm_pc.core.yaml_text import parse_yaml
+
+    problems = []
+    in_ros_args = False
+    args = list(argv)
+    for i, arg in enumerate(args):
+        if arg == "--ros-args":
+            in_ros_args = True
+        elif arg == "--":
+            in_ros_args = False
+        elif in_ros_args and arg == "--params-file":
+            if i + 1 >= len(args):
+                problems.append("--params-file needs a YAML file after it")
+                continue
+            path = Path(args[i + 1])
+            where = f"--params-file {path}"
+            try:
+                text = path.read_text(encoding="utf-8")
+            except UnicodeDecodeError:
+                problems.append(f"{where}: not a text file (a YAML parameter file is expected)")
+                continue
+            except OSError as e:
+                problems.append(f"{where}: cannot read it ({e.strerror or e})")
+                continue
+            try:
+                data = parse_yaml(text)
+            except ValueError as e:
+                problems.append(f"{where}: {e}")
+                continue
+            if not isinstance(data, dict):
+                problems.append(
+                    f"{where}: expected a mapping 'node_name: {{ros__parameters: {{...}}}}', "
+                    f"got {type(data).__name__}"
+                )
+            elif problem := _layout_problem(data):
+                problems.append(f"{where}: {problem}")
+    return problems
+
+
+def _layout_problem(tree: dict, path: str = "") -> str:
+    """Why ``tree`` is not ``node: {ros__parameters: {name: value}}`` ('' if it is)."""
+    for key, value in tree.items():
+        where = f"{path}{key}"
+        if not isinstance(value, dict):
+            what = "parameters" if key == "ros__parameters" else "a node or namespace"
+            return (
+                f"'{where}' must be a mapping ({what}), got {type(value).__name__}; "
+                "allowed layout: node_name: {ros__parameters: {name: value}}"
+            )
+        if key != "ros__parameters" and (problem := _layout_problem(value, where + ".")):
+            return problem
+    return ""
+
+
+def init(argv: list[str] | None, prog: str = "") -> threading.Event:
     """rclpy.init without rclpy's signal handlers; SIGINT/SIGTERM set the returned event.
+
+    A bad ``--params-file`` (:func:`params_file_problems`, or any other argument
+    rcl refuses) prints ``prog: what is wrong`` (one line) and exits 2
+    (SystemExit), before any node exists.
 
     The handler must not call into rclpy: it can run while the main thread
     holds the context's lock (inside Context.ok()), and try_shutdown() would
@@ -26,9 +96,22 @@ def init(argv: list[str] | None) -> threading.Event:
     either, since it re-raises KeyboardInterrupt later, possibly in the middle
     of a node's clean-up.
     """
-    rclpy.init(
-        args=argv if argv is not None else sys.argv, signal_handler_options=SignalHandlerOptions.NO
-    )
+    args = argv if argv is not None else sys.argv
+    prog = prog or Path(sys.argv[0]).name
+    if problems := params_file_problems(args):
+        _config_exit(prog, "; ".join(problems))
+    refused = ""
+    with _stderr_held() as held:  # rcl logs its own "[ERROR] ... Failed to parse" first
+        try:
+            rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+        except RCLError as e:  # an argument rcl refuses: its first line says which
+            refused = f"bad --ros-args: {_first_line(str(e))}"
+        except _rclpy.UnknownROSArgsError as e:
+            refused = f"unknown --ros-args {e}"
+        if refused:
+            held.drop()
+    if refused:
+        _config_exit(prog, refused)
     stop = threading.Event()
 
     def handler(_signum, _frame) -> None:
@@ -37,6 +120,44 @@ def init(argv: list[str] | None) -> threading.Event:
     signal.signal(signal.SIGINT, handler)
     signal.signal(signal.SIGTERM, handler)
     return stop
+
+
+class _stderr_held:  # noqa: N801 - used as a context manager
+    """Hold what C code writes to fd 2 inside the block; pass it on at the end unless dropped."""
+
+    def __enter__(self):
+        import tempfile
+
+        sys.stderr.flush()
+        self._file = tempfile.TemporaryFile()
+        self._saved = os.dup(2)
+        os.dup2(self._file.fileno(), 2)
+        self._keep = True
+        return self
+
+    def drop(self) -> None:
+        self._keep = False
+
+    def __exit__(self, *_exc) -> None:
+        sys.stderr.flush()
+        os.dup2(self._saved, 2)
+        os.close(self._saved)
+        if self._keep:
+            self._file.seek(0)
+            sys.stderr.buffer.write(self._file.read())
+            sys.stderr.flush()
+        self._file.close()
+
+
+def _first_line(text: str) -> str:
+    """rcl's message without its source locations (", at /.../parse.c:818")."""
+    lines = [ln.strip() for ln in text.strip().splitlines() if ln.strip()]
+    return lines[0].split(", at /")[0] if lines else "refused by rcl"
+
+
+def _config_exit(prog: str, message: str) -> None:
+    print(f"{prog}: {message}", file=sys.stderr, flush=True)
+    raise SystemExit(2)
 
 
 def stopping() -> None:
@@ -80,7 +201,7 @@ def run(
     end ``body`` through the stop event; the node is destroyed and rclpy shut
     down whatever happened.
     """
-    stop = init(argv)
+    stop = init(argv, prog)
     node = None
     code = 0
     try:

@@ -75,6 +75,9 @@ def test_make_credentials_writes_a_private_file_and_never_overwrites(creds):
         (["--credentials", "/nonexistent"], "cannot read credentials"),
         (["--sim-fail-windows", "nope"], "DEVICE@START-END"),
         (["--realtime-priority", "100"], "0..99"),
+        (["--patch-file", "/etc/hostname"], "patch loading is off"),
+        (["--patch-dir", "/", "--patch-file", "/nonexistent.patch"], "not a file"),
+        (["--patch-dir", "/nonexistent", "--patch-file", "x.patch"], "cannot be used"),
     ],
 )
 def test_bad_configuration_exits_2_with_a_message(args, expect):
@@ -145,7 +148,13 @@ def command(session, **msg) -> dict:
 def agent(tmp_path_factory):
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     log = tmp_path_factory.mktemp("agent") / "agent.log"
-    with agent_process({"backend": "sim", "listen": [endpoint]}, str(log)) as proc:
+    patches = tmp_path_factory.mktemp("patches")
+    (patches / "ok.patch").write_text("0x12, 0x34, 0xAB, 0xCD  // two 16-bit words\n")
+    outside = tmp_path_factory.mktemp("elsewhere") / "evil.patch"
+    outside.write_text("0xDE, 0xAD\n")
+    (patches / "link.patch").symlink_to(outside)
+    opts = {"backend": "sim", "listen": [endpoint], "patch_dir": str(patches)}
+    with agent_process(opts, str(log)) as proc:
         s = session_to(endpoint)
         deadline = time.monotonic() + 20
         while time.monotonic() < deadline:
@@ -170,9 +179,14 @@ def cpis(session) -> list[int]:
         (b'{"cmd": "set_cpi", "sensor": "/dev/spidev1.0", "cpi": true}', "integer"),
         (b'{"cmd": "set_cpi", "sensor": "/dev/spidev1.0", "cpi": 801}', "100..6400"),
         (b'{"cmd": "set_cpi", "sensor": "/dev/spidev1.0", "cpi": 0}', "100..6400"),
-        (b'{"cmd": "load_patch", "sensor": "/dev/spidev1.0", "words": "ab"}', "list"),
-        (b'{"cmd": "load_patch", "sensor": "/dev/spidev1.0", "words": []}', "empty"),
-        (b'{"cmd": "load_patch", "sensor": "/dev/spidev1.0", "words": [70000]}', "16-bit"),
+        # patch code: never sent over the network, only named in the agent's patch_dir
+        (b'{"cmd": "load_patch", "sensor": "/dev/spidev1.0", "words": [4660]}', "not 'words'"),
+        (b'{"cmd": "load_patch", "sensor": "/dev/spidev1.0"}', "needs 'file'"),
+        (b'{"cmd": "load_patch", "sensor": "/dev/spidev1.0", "file": 7}', "needs 'file'"),
+        (b'{"cmd": "load_patch", "sensor": "/dev/spidev1.0", "file": "../e.patch"}', "outside"),
+        (b'{"cmd": "load_patch", "sensor": "/dev/spidev1.0", "file": "/etc/passwd"}', "outside"),
+        (b'{"cmd": "load_patch", "sensor": "/dev/spidev1.0", "file": "link.patch"}', "outside"),
+        (b'{"cmd": "load_patch", "sensor": "/dev/spidev1.0", "file": "nope.patch"}', "not a file"),
     ],
 )
 def test_bad_commands_are_refused_with_a_message_and_change_nothing(agent, msg, expect):
@@ -234,8 +248,8 @@ def test_good_commands_answer_and_set_cpi_reads_back(agent):
     assert reply["status"] == "ok" and reply["payload"] == 3200
     assert cpis(s) == [1600, 3200]
     assert command(s, cmd="set_cpi", sensor=S1, cpi=1600)["status"] == "ok"
-    patch = command(s, cmd="load_patch", sensor=S0, words=[0x1234, 0xABCD])
-    assert patch["status"] == "ok" and patch["payload"] == 2
+    patch = command(s, cmd="load_patch", sensor=S0, file="ok.patch")
+    assert patch["status"] == "ok" and patch["payload"] == 2  # words of the file in patch_dir
 
 
 # --- who may talk to the agent ------------------------------------------------------------

@@ -56,6 +56,8 @@ def test_demo_runs_and_shows_both_sensors():
     assert "/dev/spidev1.0       up" in out.stdout
     assert "/dev/spidev1.1       up" in out.stdout
     assert "SensorData messages received" in out.stdout
+    log = Path(out.stdout.split("node log: ", 1)[1].split()[0])  # a private folder, printed
+    assert log.stat().st_size > 0 and (log.parent.stat().st_mode & 0o777) == 0o700
 
 
 @pytest.mark.ros
@@ -90,3 +92,23 @@ def test_bench_rejects_bad_arguments():
     )
     assert out.returncode == 2
     assert "--seconds >= 3" in out.stderr
+
+
+@pytest.mark.parametrize(
+    "args, text",
+    [
+        (["--clients", "0"], "1 <= --clients <= 64"),
+        (["--clients", "65"], "1 <= --clients <= 64"),
+        (["--rate", "-1"], "--rate >= 0"),
+        (["--cursor", "bogus"], "invalid choice: 'bogus'"),
+    ],
+)
+def test_bench_poll_rejects_bad_client_options(args, text):
+    out = subprocess.run(
+        [sys.executable, "-m", "mm_beagle.bench", "poll", *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert out.returncode == 2
+    assert text in out.stderr and "Traceback" not in out.stderr

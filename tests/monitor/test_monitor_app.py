@@ -184,6 +184,8 @@ def test_headless_cli_runs_against_the_sim_and_writes_a_screenshot(tmp_path):
     assert shot.stat().st_size > 10_000
     assert "was connected to /mm_beagle" in out.stdout
     assert "the robot (exact) travelled" in out.stdout
+    log = Path(out.stdout.split("node log: ", 1)[1].split()[0])  # a private folder, printed
+    assert log.stat().st_size > 0 and (log.parent.stat().st_mode & 0o777) == 0o700
 
 
 def test_headless_cli_with_agent_runs_the_bbb_chain(tmp_path):
