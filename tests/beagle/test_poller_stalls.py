@@ -170,6 +170,9 @@ def test_a_poller_stopped_mid_write_gets_busy_answers_that_change_nothing():
         try:
             res = node.on_get_sensor_data(req, GetSensorData.Response())
             assert (res.success, res.message, list(res.data)) == (False, BUSY_MESSAGE, [])
+            token = GetSensorData.Request(id=S0, client="stall-test")  # the per-client cursors
+            res = node.on_get_sensor_data(token, GetSensorData.Response())
+            assert (res.success, res.message) == (False, BUSY_MESSAGE)
             res = node.on_get_samples(
                 GetSamples.Request(id=S0, since_seq=0), GetSamples.Response()
             )
@@ -187,6 +190,9 @@ def test_a_poller_stopped_mid_write_gets_busy_answers_that_change_nothing():
         # the refused call moved no cursor: this interval starts where the first one ended
         assert d.samples == d.seq - first.data[0].seq
         assert d.x_counts == d.x_total_counts - first.data[0].x_total_counts
+        # the refused client request left no cursor behind: it starts as a new client
+        res = node.on_get_sensor_data(token, GetSensorData.Response())
+        assert res.success, res.message
     finally:
         node.shutdown()
         node.destroy_node()
