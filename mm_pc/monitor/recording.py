@@ -592,7 +592,7 @@ def read_replies(path: str | Path) -> list[Reply]:
         )
     try:
         readings = [
-            (m.sequence, m.log_time, Reading.from_msg(deserialize_message(m.data, SensorData)))
+            (m.sequence, m.log_time, Reading.from_msg(_deserialize_appended(m.data, SensorData)))
             for c, m in sensor
             if c.message_encoding == "cdr"
         ]
@@ -628,6 +628,22 @@ def read_replies(path: str | Path) -> list[Reply]:
     return [Reply(tuple(v), received_s=t / 1e9) for t, v in sorted(by_time.items())]
 
 
+def _deserialize_appended(data: bytes, msg_type):
+    """``data`` as ``msg_type``; also a recording made before ``instance_id`` was appended.
+
+    SensorData and GetSamples' response end with a uint64 ``instance_id`` since
+    issue 13; older CDR bytes lack it, so they get the padding to the next 8-byte
+    boundary of the CDR body (after its 4-byte header) and a zero: that field
+    reads 0 ("unknown").
+    """
+    ros = _ros()
+    try:
+        return ros.deserialize(data, msg_type)
+    except Exception:  # rclpy raises RMWError for bytes that end early
+        data = bytes(data)
+        return ros.deserialize(data + bytes((-(len(data) - 4)) % 8 + 8), msg_type)
+
+
 def _decode_polls(schema: str, data: bytes):
     """A SensorPolls, or a GetSamples response of a recording made before SensorPolls
     (both have the fields the pose needs); ValueError for another type."""
@@ -635,7 +651,7 @@ def _decode_polls(schema: str, data: bytes):
     if schema == POLLS_TYPE:
         return ros.deserialize(data, ros.SensorPolls)
     if schema == LEGACY_POLLS_TYPE:
-        return ros.deserialize(data, ros.GetSamplesResponse)
+        return _deserialize_appended(data, ros.GetSamplesResponse)
     raise ValueError(f"single polls of type {schema!r}, expected {POLLS_TYPE}")
 
 

@@ -650,3 +650,26 @@ def test_recorded_polls_replay_to_the_same_per_poll_pose(tmp_path, qtbot):
     assert "pose per poll" in pose_source(back)
     old = [Reply(r.readings, r.received_s, r.rtt_s) for r in back]
     assert "no single polls" in pose_source(old)
+
+
+def test_recordings_made_before_the_node_identity_still_decode():
+    """SensorData / GetSamples' response bytes from before instance_id was appended."""
+    from rclpy.serialization import serialize_message
+
+    from mm_interfaces.msg import SensorData
+    from mm_interfaces.srv import GetSamples
+    from mm_pc.monitor import recording
+
+    new = serialize_message(SensorData(id="/dev/spidev1.0", seq=42, y_total_disp=0.5,
+                                       instance_id=99))  # fmt: skip
+    assert recording._deserialize_appended(new, SensorData).instance_id == 99
+    old = recording._deserialize_appended(new[:-8], SensorData)
+    assert (old.id, old.seq, old.y_total_disp, old.instance_id) == ("/dev/spidev1.0", 42, 0.5, 0)
+    res = serialize_message(GetSamples.Response(success=True, first_seq=3, next_seq=4, dx=[5],
+                                                flags=[1, 2, 9], instance_id=7))  # fmt: skip
+    assert recording._deserialize_appended(res, GetSamples.Response).instance_id == 7
+    # the old layout ended with the flags (not 8-aligned): no padding, no instance_id
+    old_bytes = res[: res.rfind(bytes([1, 2, 9])) + 3]
+    assert len(res) - len(old_bytes) > 8
+    old = recording._deserialize_appended(old_bytes, GetSamples.Response)
+    assert (old.first_seq, list(old.dx), list(old.flags), old.instance_id) == (3, [5], [1, 2, 9], 0)
