@@ -32,7 +32,7 @@ from rclpy.qos import qos_profile_sensor_data
 from mm_interfaces.msg import SensorData
 from mm_pc.ros import spin as ros_spin
 from mm_pc.ros.clock import ClockWatch, node_stamp
-from mm_pc.ros.tf import frame_id_problem
+from mm_pc.ros.tf import frame_ids_problem
 
 from . import health, messages
 from . import shared_state as ss
@@ -187,11 +187,9 @@ class BeagleNode(Node):
         CPI); it is refused as a whole if a sensor is down or refuses it.
         """
         changes = {p.name: p.value for p in params}
-        for frame in ("odom_frame", "base_frame"):
-            problem = frame_id_problem(frame, changes[frame]) if frame in changes else ""
-            if problem:
-                self.get_logger().warning(f"parameter {frame} not changed: {problem}")
-                return SetParametersResult(successful=False, reason=problem)
+        if problem := frame_ids_problem(changes, ("odom_frame", "base_frame")):
+            self.get_logger().warning(f"parameters not changed: {problem}")
+            return SetParametersResult(successful=False, reason=problem)
         if "cpi" in changes:
             problem = self._set_cpi_everywhere(int(changes["cpi"]))
             if problem:

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.node import Node
 
-from mm_pc.ros.tf import frame_id_problem, sensor_frame_names
+from mm_pc.ros.tf import frame_ids_problem, sensor_frame_names
 
 from . import link
 from .poller import PollerConfig, poller_config
@@ -234,10 +234,8 @@ def declare(node: Node) -> NodeSettings:
         sensor_frames=tuple(p["sensor_frames"]),
     )
     if odometry.rate > 0:  # checked before the poller starts
-        for frame in ("odom_frame", "base_frame"):
-            problem = frame_id_problem(frame, p[frame])
-            if problem:
-                raise ValueError(problem)
+        if problem := frame_ids_problem(p, ("odom_frame", "base_frame")):
+            raise ValueError(problem)
         sensor_frame_names(devices, odometry.sensor_frames)
     remote = RemoteSettings(
         p["agent"], p["agent_name"], p["agent_credentials"], p["agent_clock_sync"]

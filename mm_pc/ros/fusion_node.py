@@ -91,7 +91,7 @@ from mm_pc.core.uncertainty import (
 )
 from mm_pc.ros import spin as ros_spin
 from mm_pc.ros.reset import create_reset_service
-from mm_pc.ros.tf import TfPublisher, frame_id_problem, planar_transform
+from mm_pc.ros.tf import TfPublisher, frame_ids_problem, planar_transform
 from mm_pc.ros.throttle import WarnThrottle
 
 COMPASS_INPUTS = ("imu", "heading", "none")
@@ -300,10 +300,8 @@ class FusionNode(Node):
             if p["beacon_topic"]
             else ()
         )
-        for frame in ("map_frame", "base_frame"):
-            problem = frame_id_problem(frame, p[frame])
-            if problem:
-                raise ValueError(problem)
+        if problem := frame_ids_problem(p, ("map_frame", "base_frame")):
+            raise ValueError(problem)
         x0 = _triple("initial_pose", p["initial_pose"])
         s0 = _triple("initial_sigma", p["initial_sigma"], positive=True)
         self.x0, self.s0 = x0, s0
@@ -385,11 +383,9 @@ class FusionNode(Node):
         rclpy has already checked the read-only flags and the ranges.
         """
         changes = {p.name: p.value for p in params}
-        for frame in ("map_frame", "base_frame"):
-            problem = frame_id_problem(frame, changes[frame]) if frame in changes else ""
-            if problem:
-                self.get_logger().warning(f"parameter {frame} not changed: {problem}")
-                return SetParametersResult(successful=False, reason=problem)
+        if problem := frame_ids_problem(changes, ("map_frame", "base_frame")):
+            self.get_logger().warning(f"parameters not changed: {problem}")
+            return SetParametersResult(successful=False, reason=problem)
         self.p.update(changes)
         for name, callback in self._timed().items():
             if name in changes:

@@ -58,7 +58,7 @@ from mm_pc.ros.clock import ClockWatch, node_stamp
 from mm_pc.ros.reset import create_reset_service
 from mm_pc.ros.tf import (
     TfPublisher,
-    frame_id_problem,
+    frame_ids_problem,
     mount_transforms,
     planar_transform,
     sensor_frame_names,
@@ -193,10 +193,8 @@ class OdometryNode(Node):
         self.mounts = mounts
         self.odometry = Odometry(mounts, method=p["method"], sensor=p["sensor"])
         self.uncertainty = PoseUncertainty()
-        for frame in ("odom_frame", "base_frame"):
-            problem = frame_id_problem(frame, p[frame])
-            if problem:
-                raise ValueError(problem)
+        if problem := frame_ids_problem(p, ("odom_frame", "base_frame")):
+            raise ValueError(problem)
         self.sensor_frames = sensor_frame_names(devices, p["sensor_frames"])
         self.client = self.create_client(GetSensorData, f"{p['beagle']}/get_sensor_data")
         self.samples_client = self.create_client(GetSamples, f"{p['beagle']}/get_samples")
@@ -252,10 +250,7 @@ class OdometryNode(Node):
         rclpy has already checked the read-only flags and the ranges.
         """
         changes = {p.name: p.value for p in params}
-        problem = ""
-        for frame in ("odom_frame", "base_frame"):
-            if frame in changes:
-                problem = problem or frame_id_problem(frame, changes[frame])
+        problem = frame_ids_problem(changes, ("odom_frame", "base_frame"))
         if "method" in changes and changes["method"] not in METHODS:
             problem = f"unknown method '{changes['method']}'; known: {', '.join(sorted(METHODS))}"
         if problem:

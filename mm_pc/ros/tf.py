@@ -28,6 +28,7 @@ __all__ = [
     "STATIC_QOS",
     "TfPublisher",
     "frame_id_problem",
+    "frame_ids_problem",
     "mount_transforms",
     "planar_transform",
     "sensor_frame_names",
@@ -57,6 +58,15 @@ def frame_id_problem(name: str, value: object) -> str:
             f"'{name}' is '{v}': a TF frame id starts with a letter or '_' and holds only "
             "letters, digits, '_', '.', '/', '-'"
         )
+    return ""
+
+
+def frame_ids_problem(values: dict, names: tuple[str, ...]) -> str:
+    """The first :func:`frame_id_problem` among ``names`` present in ``values`` (a node's
+    parameters, or the changes of one ``ros2 param set``), else ''."""
+    for name in names:
+        if name in values and (problem := frame_id_problem(name, values[name])):
+            return problem
     return ""
 
 
