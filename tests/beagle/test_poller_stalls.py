@@ -219,14 +219,20 @@ def _statuses(client, newer_than: float, timeout: float):
             for m in msgs for s in m.status]  # fmt: skip
 
 
-def _wait_level(client, level: bytes, timeout: float = 15.0):
+def _wait_clear(client, timeout: float = 15.0):
+    """The first round in which no status reports a stall or a wrap (and none is ERROR).
+
+    A loaded machine may still WARN for overruns: that is not what these tests watch.
+    """
+    got = []
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         t0 = time.monotonic()
         got = _statuses(client, t0, 0.6)
-        if got and all(s[1] == level for s in got):
+        if got and all(s[1] != b"\x02" and "stall" not in s[2] and "wrapped" not in s[2]
+                       for s in got):  # fmt: skip
             return got
-    raise AssertionError(f"no round at level {level!r}; last: {got}")
+    raise AssertionError(f"the stall or wrap never cleared; last: {got}")
 
 
 def test_diagnostics_warn_on_a_stall_error_on_a_wrap_and_back_to_ok(client, tmp_path):
@@ -234,7 +240,7 @@ def test_diagnostics_warn_on_a_stall_error_on_a_wrap_and_back_to_ok(client, tmp_
     with ctx as proc:
         wait_up(client, log)
         pid = poller_pid(proc.pid)
-        _wait_level(client, b"\x00")
+        _wait_clear(client)
         t0 = time.monotonic()
         os.kill(pid, signal.SIGSTOP)
         time.sleep(0.3)
@@ -243,7 +249,7 @@ def test_diagnostics_warn_on_a_stall_error_on_a_wrap_and_back_to_ok(client, tmp_
         warned = [s for s in got if s[1] == b"\x01" and "stall" in s[2]]
         assert warned, got
         assert float(warned[0][3]["longest_poll_gap_ms"]) > 50
-        _wait_level(client, b"\x00")
+        _wait_clear(client)
         # 4 s without a poll while the robot drives: the 16-bit counter may have wrapped
         t0 = time.monotonic()
         os.kill(pid, signal.SIGSTOP)
@@ -256,7 +262,7 @@ def test_diagnostics_warn_on_a_stall_error_on_a_wrap_and_back_to_ok(client, tmp_
         assert errors, got
         assert int(errors[0][3]["est_wrap_loss_counts"]) >= 65_536
         assert float(errors[0][3]["est_wrap_loss_m"]) > 0.5
-        _wait_level(client, b"\x00")
+        _wait_clear(client)
         assert proc.poll() is None
 
 
