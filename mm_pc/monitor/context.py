@@ -8,7 +8,6 @@ the raw reply to a recorder if one is attached, and announces it.
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -18,14 +17,14 @@ from mm_pc.core.calibration import Calibration
 from mm_pc.core.geometry import DEFAULT_GEOMETRY, RobotGeometry
 from mm_pc.monitor.model.readings import Reply
 from mm_pc.monitor.model.session import MonitorSession
+from mm_pc.monitor.settings import config_dir
 
 __all__ = ["MonitorConfig", "MonitorContext", "default_calibration_path"]
 
 
 def default_calibration_path() -> Path:
     """Where the wizard saves and the monitor loads the calibration by default."""
-    base = os.environ.get("XDG_CONFIG_HOME") or os.path.join(os.path.expanduser("~"), ".config")
-    return Path(base) / "mouse-monitor" / "calibration.yaml"
+    return config_dir() / "calibration.yaml"
 
 
 @dataclass
