@@ -41,7 +41,8 @@ STATE_TEXT = {
     "waiting": ("waiting for {beagle}", "#a66f00"),
     "connected": ("connected to {beagle}", "#1b7a1b"),
     "lost": ("lost {beagle} (retrying)", "#b00020"),
-    "offline": ("offline (replay)", "#555555"),
+    "offline": ("offline (no node)", "#555555"),
+    "replay": ("REPLAY {name}", "#6a1b9a"),
 }
 
 
@@ -223,11 +224,17 @@ class MainWindow(QMainWindow):
         self.record_action.triggered.connect(self.toggle_recording)
         file_menu.addAction(self.record_action)
         replay = QAction("Re&play…", self)
+        replay.setToolTip("replay a recording (MCAP file or rosbag2 folder) as a mode of its own")
         replay.triggered.connect(self.open_replay)
         file_menu.addAction(replay)
-        stop_replay = QAction("S&top replay", self)
-        stop_replay.triggered.connect(self.stop_replay)
-        file_menu.addAction(stop_replay)
+        self.stop_replay_action = QAction("S&top replay", self)
+        self.stop_replay_action.setEnabled(False)  # only while a replay runs or is paused
+        self.stop_replay_action.triggered.connect(self.stop_replay)
+        file_menu.addAction(self.stop_replay_action)
+        self.live_action = QAction("Back to &live (new path)", self)
+        self.live_action.setEnabled(False)  # only in replay mode
+        self.live_action.triggered.connect(self.leave_replay)
+        file_menu.addAction(self.live_action)
         export = QAction("&Export view as PNG…", self)
         export.setShortcut(QKeySequence("Ctrl+E"))
         export.triggered.connect(self.export_png)
@@ -261,9 +268,17 @@ class MainWindow(QMainWindow):
         self.frame_ms.append((time.perf_counter() - t0) * 1e3)
 
     def _on_state(self, state: str) -> None:
+        bar = getattr(self, "replay_bar", None)
+        if state != "replay":
+            self.link_state = state
+            if bar is not None and bar.active:
+                return  # replay mode: the link state shows again when it is left
         text, colour = STATE_TEXT.get(state, (state, "#000000"))
-        self.state_label.setText(text.format(beagle=self.ctx.config.beagle))
+        name = bar.name if bar is not None else ""
+        self.state_label.setText(text.format(beagle=self.ctx.config.beagle, name=name))
         self.state_label.setStyleSheet(f"color: {colour}; font-weight: bold")
+        for label in (self.rtt_label, self.rate_label):  # the link's figures: not the replay's
+            label.setVisible(state != "replay")
 
     def _on_stats(self, stats) -> None:
         if stats.rtt_p50_s == stats.rtt_p50_s:  # not NaN
@@ -339,13 +354,21 @@ class MainWindow(QMainWindow):
         open_replay(self)
 
     def stop_replay(self) -> None:
-        """Stop a running replay (live polling resumes if it was on)."""
-        replayer = getattr(self, "replayer", None)
-        if replayer is None or replayer.done:
+        """Stop a running or paused replay; its path stays, live data waits for Back to live."""
+        bar = getattr(self, "replay_bar", None)
+        if bar is None or not bar.replaying:
             self.statusBar().showMessage("no replay is running", 3000)
             return
-        replayer.stop()
-        self.statusBar().showMessage("replay stopped", 3000)
+        bar.stop()
+        self.statusBar().showMessage(
+            "replay stopped; File > Back to live starts a new path for the live data", 5000
+        )
+
+    def leave_replay(self) -> None:
+        """Leave replay mode: live data starts a new path (see replay.leave_replay)."""
+        from mm_pc.monitor.replay import leave_replay
+
+        leave_replay(self)
 
     def export_png(self) -> None:
         from mm_pc.monitor.export import export_current_view

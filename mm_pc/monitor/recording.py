@@ -68,6 +68,7 @@ from mm_pc.monitor.bag_format import (
     write_metadata,
 )
 from mm_pc.monitor.model.readings import Reading, Reply
+from mm_pc.monitor.settings import last_folder, remember_folder
 
 __all__ = [
     "LEGACY_POLLS_TYPE",
@@ -752,9 +753,12 @@ def toggle_recording(window) -> None:
     if window.ctx.recorder is not None:
         stop_recording(window)
         return
-    default = datetime.now().strftime("mouse-monitor-%Y%m%d-%H%M%S.mcap")
+    default = Path(last_folder("recording")) / datetime.now().strftime(
+        "mouse-monitor-%Y%m%d-%H%M%S.mcap"
+    )
     name, _ = QFileDialog.getSaveFileName(
-        window, "Record replies to", default, "MCAP recordings (*.mcap);;All files (*)"
+        window, "Record replies to", str(default), "MCAP recordings (*.mcap);;All files (*)"
     )
     if name:
+        remember_folder("recording", name)
         start_recording(window, name)

@@ -1,28 +1,35 @@
-"""Replay a recording into the monitor: the same processing as live, at 1x or faster.
+"""Replay a recording into the monitor: a mode of its own, the same processing as live.
 
-:func:`start_replay` reads the whole file first (a bad file changes nothing),
-then prepares the window:
+:func:`start_replay` / File > Replay read and check the whole file first (a bad
+file changes nothing; the reason goes to a dialog, the status bar and the log:
+logger ``mm_pc.monitor.replay``). Nothing is asked before that; the speed is
+chosen on the replay bar (:mod:`~.widgets.replay_bar`), also while it runs.
+Entering replay mode prepares the window:
 
 * a live bridge stops feeding the session: its polling is paused and its
   ``data_received`` is disconnected from the context (a reply still in
   flight must not land between recorded ones);
 * the session is reset (path, graphs, pose back to the origin) and its
-  baselines are forgotten, so the first recorded reply is a fresh baseline
-  and the map shows only the recording. When the recording names other
-  sensors than the session, a new session with the same settings (method,
-  mounts, calibration, filters, lift estimates) takes its place.
+  baselines and time origin are forgotten, so the first recorded reply is a
+  fresh baseline at t = 0 s: the Data list and CSV times run from 0 of the
+  recording. When the recording names other sensors than the session, a new
+  session with the same settings (method, mounts, calibration, filters, lift
+  estimates) takes its place;
+* the status bar's link state says ``REPLAY name`` (RTT and rate are hidden).
 
 A :class:`Replayer` then feeds ``ctx.on_reply`` on a Qt timer, at the pace of
 the readings' stamps times ``speed`` (``math.inf`` = as fast as the GUI allows,
-in batches of ~20 ms so the window stays responsive). When it ends (or is
-stopped), the baselines are forgotten again (the live node's totals are not
-the recording's) and a live bridge is reconnected and resumes polling if it
-was polling before; the replayed path stays on screen.
+in batches of ~20 ms so the window stays responsive). When it ends or is
+stopped the replayed path stays on screen and live data is *not* added to it:
+the window stays in replay mode until **Back to live** (:func:`leave_replay`),
+which starts a new path (times from 0 again) and reconnects a live bridge,
+resuming its polling if it was polling before the replay.
 """
 
 from __future__ import annotations
 
 import concurrent.futures
+import logging
 import math
 import time
 import warnings
@@ -30,13 +37,19 @@ from pathlib import Path
 
 import numpy as np
 from PySide6.QtCore import QObject, Qt, QTimer, Signal
-from PySide6.QtWidgets import QFileDialog, QInputDialog
+from PySide6.QtWidgets import QFileDialog, QMessageBox
 
 from mm_pc.monitor.model.readings import Reply
 from mm_pc.monitor.model.session import MonitorSession
 from mm_pc.monitor.recording import read_replies
+from mm_pc.monitor.settings import last_folder, open_settings, remember_folder
 
-__all__ = ["SPEEDS", "Replayer", "open_replay", "parse_speed", "pose_source", "start_replay"]
+__all__ = [
+    "SPEEDS", "Replayer", "leave_replay", "open_replay", "parse_speed", "pose_source",
+    "speed_name", "start_replay",
+]  # fmt: skip
+
+log = logging.getLogger(__name__)
 
 #: choices of the replay dialog
 SPEEDS = ("1x", "2x", "5x", "10x", "max")
@@ -58,6 +71,11 @@ def parse_speed(value) -> float:
     if not speed > 0:  # also NaN
         raise ValueError(f"replay speed must be > 0 or 'max', got {value!r}")
     return speed
+
+
+def speed_name(speed: float) -> str:
+    """inf -> ``"max"``, 2.0 -> ``"2x"`` (the replay bar's names)."""
+    return "max" if math.isinf(speed) else f"{speed:g}x"
 
 
 def reply_times(replies: list[Reply]) -> np.ndarray:
@@ -109,6 +127,28 @@ class Replayer(QObject):
     def done(self) -> bool:
         return self._done
 
+    @property
+    def total_s(self) -> float:
+        """Length of the recording (s, from its first reply's stamps to its last)."""
+        return float(self.times[-1]) if len(self.times) else 0.0
+
+    @property
+    def played_s(self) -> float:
+        """Recorded time of the last reply fed (s from the first reply); 0 before any."""
+        return float(self.times[self.position - 1]) if self.position else 0.0
+
+    def set_speed(self, speed) -> None:
+        """Go on at ``speed`` from the current position (running or paused); ValueError
+        for a bad speed (nothing changes)."""
+        new = parse_speed(speed)
+        if math.isinf(self.speed):
+            self._elapsed = self.played_s
+        else:
+            self._elapsed = self._played()
+        self._started = time.perf_counter() if self._started is not None else None
+        self.speed = new
+        self.timer.setInterval(0 if math.isinf(new) else 5)
+
     def start(self) -> None:
         """Start, or resume after :meth:`pause`."""
         if self._done:
@@ -129,7 +169,7 @@ class Replayer(QObject):
 
     def _played(self) -> float:
         if math.isinf(self.speed):
-            return math.inf
+            return math.inf if self._started is not None else self.played_s
         if self._started is None:
             return self._elapsed
         return self._elapsed + (time.perf_counter() - self._started) * self.speed
@@ -205,14 +245,28 @@ def _reattach_bridge(ctx, polling: bool, connected: bool) -> None:
     bridge = ctx.bridge
     if bridge is None:
         return
-    ctx.session.forget_baselines(keep_t0=True)
     if connected:
         bridge.data_received.connect(ctx.on_reply)
     if polling:
         bridge.set_polling(True)
 
 
-# -- the window's File > Replay -----------------------------------------------------------------
+def _new_live_path(ctx, devices_before: tuple[str, ...]) -> None:
+    """A new path for the live data: times from 0 again, no delta against recorded totals.
+
+    When the replay had put a session for other sensors in place (or the
+    window had seen no live sensors yet), a session with the same settings that
+    learns its sensors from the first live reply takes its place.
+    """
+    if devices_before and tuple(ctx.session.devices) == tuple(devices_before):
+        ctx.reset()
+        ctx.session.forget_baselines(keep_t0=False)
+        return
+    ctx.session = _session_like(ctx.session)
+    ctx.session_reset.emit()
+
+
+# -- the window's replay mode ---------------------------------------------------------------------
 
 
 def pose_source(replies: list[Reply]) -> str:
@@ -233,68 +287,164 @@ def load_recording(path: str | Path, speed=1.0) -> tuple[float, list]:
     return parse_speed(speed), read_replies(Path(path))
 
 
-def start_replay(window, path: str | Path, speed=1.0) -> Replayer | None:
+def refuse(window, message: str, dialog: bool) -> None:
+    """A replay that cannot start: the reason in the status bar (``replay: ...``), the log
+    and, with ``dialog``, a warning box (window-modal, not blocking; ``window.replay_error``)."""
+    log.warning("replay: %s", message)
+    window.statusBar().showMessage(f"replay: {message}", 15000)
+    if not dialog:
+        return
+    text = f"The recording cannot be replayed; nothing was changed.\n\n{message}"
+    box = QMessageBox(QMessageBox.Warning, "Replay", text, QMessageBox.Ok, window)
+    box.setAttribute(Qt.WA_DeleteOnClose)
+    window.replay_error = box
+    box.destroyed.connect(lambda *_: setattr(window, "replay_error", None))
+    box.open()
+
+
+def replay_bar(window):
+    """The window's :class:`~.widgets.replay_bar.ReplayBar` (made at the first replay)."""
+    bar = getattr(window, "replay_bar", None)
+    if bar is None:
+        from mm_pc.monitor.widgets.replay_bar import ReplayBar
+
+        bar = ReplayBar(window)
+        window.addToolBar(Qt.TopToolBarArea, bar)
+        bar.left.connect(lambda: leave_replay(window))
+        bar.speed_changed.connect(_remember_speed)
+        window.replay_bar = bar
+    return bar
+
+
+def _remember_speed(speed: float) -> None:
+    s = open_settings()
+    s.setValue("replay/speed", speed_name(speed))
+    s.sync()
+
+
+def remembered_speed() -> float:
+    """The speed last chosen on the replay bar (1x at first or when unreadable)."""
+    try:
+        return parse_speed(open_settings().value("replay/speed", "1x"))
+    except ValueError:
+        return 1.0
+
+
+def _set_mode_controls(window, replaying: bool) -> None:
+    """File > Stop replay enabled only while a replay runs or is paused, Back to live only
+    in replay mode; Pause polling has no meaning in replay mode."""
+    bar = getattr(window, "replay_bar", None)
+    in_mode = bar is not None and bar.active
+    for name, on in (("stop_replay_action", replaying), ("live_action", in_mode)):
+        action = getattr(window, name, None)
+        if action is not None:
+            action.setEnabled(on)
+    button = getattr(window, "pause_button", None)
+    if button is not None:
+        button.setEnabled(window.ctx.bridge is not None and not in_mode)
+
+
+def _set_time_base(window, text: str, prefix: str) -> None:
+    data = getattr(window, "views", {}).get("Data")
+    if data is not None and hasattr(data, "set_time_base"):
+        data.set_time_base(text, prefix)
+
+
+def start_replay(window, path: str | Path, speed=1.0, dialog: bool = False) -> Replayer | None:
     """Replay ``path`` into ``window`` at ``speed`` (1.0 = recorded pace, ``"max"``/inf).
 
     Reads the file on the calling thread (the command line and tests);
     File > Replay reads it in the background instead (:func:`open_replay`).
     Returns the running :class:`Replayer`, or None when the file or the speed
-    is bad: then the reason is in the status bar and nothing changed.
+    is bad: then the reason is in the status bar and the log (and a dialog with
+    ``dialog``), and nothing changed.
     """
     try:
         speed, replies = load_recording(path, speed)
     except ValueError as e:
-        window.statusBar().showMessage(f"replay: {e}", 15000)
+        refuse(window, str(e), dialog)
         return None
-    return begin_replay(window, Path(path), replies, speed)
+    return begin_replay(window, Path(path), replies, speed, dialog)
 
 
-def begin_replay(window, path: Path, replies: list, speed: float) -> Replayer | None:
-    """Start replaying ``replies`` (read from ``path``); None (status bar says why) if unfit."""
+def begin_replay(
+    window, path: Path, replies: list, speed: float, dialog: bool = False
+) -> Replayer | None:
+    """Enter replay mode with ``replies`` (read from ``path``); None (and why, see
+    :func:`refuse`) if they cannot be shown."""
     devices = next((tuple(r.id for r in rep.readings) for rep in replies if rep.readings), ())
     if not devices:
-        window.statusBar().showMessage(f"replay: {path} holds no sensor readings", 15000)
+        refuse(window, f"{path} holds no sensor readings", dialog)
         return None
     ctx = window.ctx
     try:
         MonitorSession(devices=devices, mounts=ctx.session.mounts)  # can the geometry take them?
     except ValueError as e:
-        window.statusBar().showMessage(f"replay: {path} cannot be shown: {e}", 15000)
+        refuse(window, f"{path} cannot be shown: {e}", dialog)
         return None
+    bar = replay_bar(window)
     old = getattr(window, "replayer", None)
     if old is not None and not old.done:
         old.stop()
-    polling, connected = _detach_bridge(ctx)
+    if not bar.active:  # from live: detach; from another replay: the live state is kept
+        polling, connected = _detach_bridge(ctx)
+        window.replay_live = (polling, connected, tuple(ctx.session.devices))
     _prepare_session(ctx, devices)
     replayer = Replayer(ctx, replies, speed, parent=window)
-    pace = "max speed" if math.isinf(speed) else f"{speed:g}x"
-    seconds = float(replayer.times[-1]) if len(replayer.times) else 0.0
 
     def ended() -> None:
-        _reattach_bridge(ctx, polling, connected)
         st = ctx.session.stats
         window.statusBar().showMessage(
             f"replay of {path.name} ended: {replayer.position} of {len(replies)} replies; "
             f"pose from {st.polls} single polls, {st.per_reply} replies per reply, "
-            f"{st.gaps} gap(s)",
+            f"{st.gaps} gap(s); live data waits for Back to live",
             10000,
         )
+        _set_mode_controls(window, False)
 
     replayer.on_end = ended
     window.replayer = replayer
+    bar.attach(replayer, path.name, has_live=ctx.bridge is not None)
+    window._on_state("replay")
+    _set_mode_controls(window, True)
+    _set_time_base(window, f"t: seconds from the first reply of the recording {path.name}",
+                   path.stem)  # fmt: skip
     window.statusBar().showMessage(
-        f"replaying {path.name}: {len(replies)} replies, {seconds:.1f} s at {pace}; "
-        + pose_source(replies)
+        f"replaying {path.name}: {len(replies)} replies, {replayer.total_s:.1f} s at "
+        f"{'max speed' if math.isinf(speed) else speed_name(speed)}; " + pose_source(replies)
     )
     replayer.start()
     return replayer
 
 
-def load_in_background(window, path: str | Path, speed) -> concurrent.futures.Future:
+def leave_replay(window) -> None:
+    """Leave replay mode: live data starts a new path; the bridge feeds and polls again."""
+    bar = getattr(window, "replay_bar", None)
+    if bar is not None and bar.active:
+        bar.leave()  # emits left, which calls this again with the bar inactive
+        return
+    live = getattr(window, "replay_live", None)
+    if live is None:
+        return
+    window.replay_live = None
+    ctx = window.ctx
+    polling, connected, devices_before = live
+    if ctx.bridge is not None:
+        _new_live_path(ctx, devices_before)
+        _reattach_bridge(ctx, polling, connected)
+        window.statusBar().showMessage("back to live: the live data starts a new path", 8000)
+        _set_time_base(window, "t: seconds from the first live reply of this path", "")
+    state = ctx.bridge.state if ctx.bridge is not None else "offline"
+    window._on_state(getattr(window, "link_state", None) or state)
+    _set_mode_controls(window, False)
+
+
+def load_in_background(window, path: str | Path, speed, dialog: bool = True):
     """Read the recording on a worker thread, then start it on the GUI thread.
 
     An hour's recording takes tens of seconds to decode; the window stays
-    responsive meanwhile (the status bar says the file is being read).
+    responsive meanwhile (the status bar says the file is being read). A bad
+    file is reported (see :func:`refuse`) and changes nothing.
     """
     path = Path(path)
     pool = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="mm-replay-load")
@@ -311,9 +461,9 @@ def load_in_background(window, path: str | Path, speed) -> concurrent.futures.Fu
         try:
             speed_, replies = future.result()
         except ValueError as e:
-            window.statusBar().showMessage(f"replay: {e}", 15000)
+            refuse(window, str(e), dialog)
             return
-        begin_replay(window, path, replies, speed_)
+        begin_replay(window, path, replies, speed_, dialog)
 
     timer.timeout.connect(check)
     timer.start(100)
@@ -321,16 +471,15 @@ def load_in_background(window, path: str | Path, speed) -> concurrent.futures.Fu
 
 
 def open_replay(window) -> None:
-    """File > Replay: choose a recording (an MCAP file, or a rosbag2 folder's metadata.yaml)
-    and a speed (1x, 2x, 5x, 10x, max), then replay (the file is read in the background)."""
+    """File > Replay: choose a recording (an MCAP file, or a rosbag2 folder's metadata.yaml);
+    it is read and checked in the background, then replayed at the speed last chosen on the
+    replay bar (no other question)."""
     name, _ = QFileDialog.getOpenFileName(
-        window, "Replay a recording", "",
+        window, "Replay a recording", last_folder("recording"),
         "Recordings (*.mcap metadata.yaml);;MCAP recordings (*.mcap);;All files (*)",
-    )
+    )  # fmt: skip
     if not name:
         return None
-    choice, ok = QInputDialog.getItem(window, "Replay speed", "Speed", list(SPEEDS), 0, False)
-    if not ok:
-        return None
-    load_in_background(window, name, choice)
+    remember_folder("recording", name)
+    load_in_background(window, name, remembered_speed())
     return None

@@ -324,32 +324,48 @@ def test_single_polls_fetched_while_recording_go_into_the_file(qtbot, tmp_path):
     assert device == "/dev/spidev1.0" and list(back.dx) == [4] and back.next_seq == 2
 
 
-def test_menu_actions_ask_for_the_file_and_speed(qtbot, tmp_path, monkeypatch, recording):
+def test_menu_actions_ask_for_the_file_only_and_remember_the_folders(
+    qtbot, tmp_path, monkeypatch, recording
+):
     import mm_pc.monitor.recording as recording_mod
     import mm_pc.monitor.replay as replay_mod
+    from mm_pc.monitor.settings import last_folder
 
     window = make_window(qtbot, tmp_path)
-    path = tmp_path / "menu.mcap"
-    monkeypatch.setattr(
-        recording_mod.QFileDialog, "getSaveFileName", lambda *a, **k: (str(path), "")
-    )
+    folder = tmp_path / "runs"
+    folder.mkdir()
+    path = folder / "menu.mcap"
+    starts = []
+
+    def save(_parent, _title, start, _filter):
+        starts.append(start)
+        return str(path), ""
+
+    monkeypatch.setattr(recording_mod.QFileDialog, "getSaveFileName", save)
     window.record_action.trigger()  # File > Record…
     assert window.ctx.recorder is not None and window.ctx.recorder.path == path
     window.record_action.trigger()  # File > Stop recording
     assert window.ctx.recorder is None and read_replies(path) == []
-    monkeypatch.setattr(
-        replay_mod.QFileDialog, "getOpenFileName", lambda *a, **k: (str(recording[0]), "")
-    )
-    monkeypatch.setattr(replay_mod.QInputDialog, "getItem", lambda *a, **k: ("max", True))
+    assert last_folder("recording") == str(folder)
+    assert not starts[0].startswith(str(folder))  # the first dialog: home, never the repo
+    opened = []
+
+    def open_(_parent, _title, start, _filter):
+        opened.append(start)
+        return str(recording[0]), ""
+
+    monkeypatch.setattr(replay_mod.QFileDialog, "getOpenFileName", open_)
+    assert not hasattr(replay_mod, "QInputDialog")  # no question besides the file
     window.open_replay()  # File > Replay… (read in the background, then started)
+    assert opened == [str(folder)]
     qtbot.waitUntil(lambda: getattr(window, "replayer", None) is not None, timeout=10_000)
     replayer = window.replayer
-    assert replayer.speed == math.inf
-    qtbot.waitUntil(lambda: replayer.done, timeout=10_000)
-    assert window.ctx.session.stats.replies == len(recording[1])
-    monkeypatch.setattr(replay_mod.QInputDialog, "getItem", lambda *a, **k: ("1x", False))
-    window.open_replay()  # speed dialog cancelled: nothing starts
-    qtbot.wait(300)
+    assert replayer.speed == 1.0  # nothing chosen on the bar yet
+    assert last_folder("recording") == str(recording[0].parent)
+    replayer.stop()
+    monkeypatch.setattr(replay_mod.QFileDialog, "getOpenFileName", lambda *a, **k: ("", ""))
+    window.open_replay()  # file dialog cancelled: nothing starts
+    qtbot.wait(200)
     assert window.replayer is replayer
 
 
@@ -529,13 +545,18 @@ def test_live_bridge_is_paused_and_disconnected_while_replaying(qtbot, tmp_path,
     replayer.start()
     with qtbot.waitSignal(replayer.finished, timeout=10_000):
         pass
-    assert bridge.polling
-    pose = window.ctx.session.pose
+    assert not bridge.polling  # ended: the replayed path stays, live data waits
     rows = len(window.ctx.session.history)
-    bridge.data_received.emit(live[21])  # live again: a new baseline, no jump
+    bridge.data_received.emit(live[21])
+    assert len(window.ctx.session.history) == rows  # never added to the replayed path
+    window.leave_replay()  # Back to live: a new path
+    assert bridge.polling
+    assert len(window.ctx.session.history) == 0
+    bridge.data_received.emit(live[21])  # a new baseline at t = 0, no jump
     bridge.data_received.emit(live[22])
-    assert len(window.ctx.session.history) == rows + 1
-    assert window.ctx.session.pose.x == pytest.approx(pose.x + 0.004 * math.cos(pose.yaw), abs=2e-5)
+    assert len(window.ctx.session.history) == 1
+    assert window.ctx.session.history.column("t")[0] == pytest.approx(0.02)
+    assert window.ctx.session.pose.x == pytest.approx(0.004, abs=2e-5)
 
 
 def test_stop_ends_the_replay_early(qtbot, tmp_path, recording):

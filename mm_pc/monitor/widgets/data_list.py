@@ -29,6 +29,7 @@ from PySide6.QtWidgets import (
 
 from mm_pc.monitor.model.history import History
 from mm_pc.monitor.model.session import sensor_columns
+from mm_pc.monitor.settings import last_folder, remember_folder
 from mm_pc.monitor.widgets.style import ERROR_STYLE
 
 __all__ = ["COLUMNS", "MAX_ROWS", "DataListView", "HistoryTableModel", "export_csv"]
@@ -91,9 +92,13 @@ def export_csv(history: History | None, sensor_index: int, path: str | Path) -> 
 class HistoryTableModel(QAbstractTableModel):
     """One sensor's history rows, newest first, read in place from the session's History."""
 
-    def __init__(self, session, sensor_index: int, max_rows: int = MAX_ROWS, parent=None) -> None:
+    def __init__(
+        self, session, sensor_index: int, max_rows: int = MAX_ROWS, parent=None, ctx=None
+    ) -> None:
         super().__init__(parent)
-        self.session = session
+        self._session = session
+        #: with a context, the model follows ``ctx.session`` (a replay may put a new one in place)
+        self.ctx = ctx
         self.sensor_index = sensor_index
         self.max_rows = max_rows
         self._names = [_column_name(sensor_index, f) for _h, f, _s, _f in COLUMNS]
@@ -104,6 +109,10 @@ class HistoryTableModel(QAbstractTableModel):
         self._version = -1
         self._cols: list = []  # column views of the history, taken at the last sync
         self._cache: dict[int, tuple[str, ...]] = {}
+
+    @property
+    def session(self):
+        return self.ctx.session if self.ctx is not None else self._session
 
     def rowCount(self, parent=QModelIndex()) -> int:  # noqa: B008, N802 - Qt API
         return 0 if parent.isValid() else self._rows
@@ -232,7 +241,9 @@ class SensorTable(QWidget):
         super().__init__(parent)
         self.ctx = ctx
         self.sensor_index = sensor_index
-        self.model = HistoryTableModel(ctx.session, sensor_index, parent=self)
+        self.model = HistoryTableModel(ctx.session, sensor_index, parent=self, ctx=ctx)
+        #: the CSV file name's prefix (the replayed recording's name; "" = live)
+        self.csv_prefix = ""
         self.table = _CopyTableView()
         self.table.setModel(self.model)
         self.table.setSelectionBehavior(QAbstractItemView.SelectRows)
@@ -276,10 +287,13 @@ class SensorTable(QWidget):
 
     def choose_export(self) -> None:
         dev = self.ctx.session.devices[self.sensor_index].strip("/").replace("/", "_")
+        name = f"{self.csv_prefix}_{dev}.csv" if self.csv_prefix else f"{dev}.csv"
         path, _ = QFileDialog.getSaveFileName(
-            self, "Export CSV", f"{dev}.csv", "CSV files (*.csv);;All files (*)"
-        )
+            self, "Export CSV", str(Path(last_folder("csv")) / name),
+            "CSV files (*.csv);;All files (*)",
+        )  # fmt: skip
         if path:
+            remember_folder("csv", path)
             self.export_to(path)
 
     def export_to(self, path: str | Path) -> bool:
@@ -309,9 +323,17 @@ class DataListView(QWidget):
             "dX/dY: filtered and calibrated; raw: as the node served them (sensor frame)."
         )
         self.note.setWordWrap(True)
+        self.time_base = QLabel("t: seconds from the first live reply of this path")
+        self.time_base.setWordWrap(True)
+        self.time_base.setToolTip(
+            "a replay's times run from 0 at the recording's first reply; back to live, a new "
+            "path starts at 0 again (live and recorded rows are never mixed)"
+        )
+        self.csv_prefix = ""
         self.waiting = QLabel("waiting for the first reply")
         lay = QVBoxLayout(self)
         lay.addWidget(self.note)
+        lay.addWidget(self.time_base)
         lay.addWidget(self.waiting)
         lay.addWidget(self.tabs, 1)
         ctx.devices_known.connect(self._build)
@@ -320,17 +342,29 @@ class DataListView(QWidget):
             self._build(ctx.session.devices)
 
     def _build(self, devices: tuple[str, ...]) -> None:
-        if len(self.tables) == len(devices):
+        shown = tuple(self.tabs.tabText(i) for i in range(self.tabs.count()))
+        if len(self.tables) == len(devices) and shown == tuple(devices):
             return
         self.tabs.clear()
         self.tables = []
         for k, dev in enumerate(devices):
             table = SensorTable(self.ctx, k, self)
+            table.csv_prefix = self.csv_prefix
             self.tables.append(table)
             self.tabs.addTab(table, dev)
         self.waiting.hide()
 
+    def set_time_base(self, text: str, csv_prefix: str = "") -> None:
+        """Say what the t column counts from; ``csv_prefix`` starts the CSV file names (the
+        replayed recording's name, "" for live data)."""
+        self.time_base.setText(text)
+        self.csv_prefix = csv_prefix
+        for t in self.tables:
+            t.csv_prefix = csv_prefix
+
     def _on_reset(self) -> None:
+        if self.ctx.session.devices:  # a replay of other sensors: their tabs
+            self._build(self.ctx.session.devices)
         for t in self.tables:
             t.model.reset()
 
