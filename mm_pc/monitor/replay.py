@@ -288,12 +288,15 @@ def load_recording(path: str | Path, speed=1.0) -> tuple[float, list]:
 
 
 def refuse(window, message: str, dialog: bool) -> None:
-    """A replay that cannot start: the reason in the status bar (``replay: ...``), the log
-    and, with ``dialog``, a warning box (window-modal, not blocking; ``window.replay_error``)."""
-    log.warning("replay: %s", message)
+    """A replay that cannot start: the reason in the status bar (``replay: ...``) and, with
+    ``dialog`` (File > Replay), in a warning box (window-modal, not blocking;
+    ``window.replay_error``) and the log (warning of logger ``mm_pc.monitor.replay``:
+    stderr unless the application configures logging). Without ``dialog`` the caller
+    reports it (``mm-monitor --replay`` prints one line and exits 2)."""
     window.statusBar().showMessage(f"replay: {message}", 15000)
     if not dialog:
         return
+    log.warning("replay: %s", message)
     text = f"The recording cannot be replayed; nothing was changed.\n\n{message}"
     box = QMessageBox(QMessageBox.Warning, "Replay", text, QMessageBox.Ok, window)
     box.setAttribute(Qt.WA_DeleteOnClose)
@@ -404,7 +407,7 @@ def begin_replay(
 
     replayer.on_end = ended
     window.replayer = replayer
-    bar.attach(replayer, path.name, has_live=ctx.bridge is not None)
+    bar.attach(replayer, path.name, ctx.bridge is not None, SPEEDS, speed_name(speed))
     window._on_state("replay")
     _set_mode_controls(window, True)
     _set_time_base(window, f"t: seconds from the first reply of the recording {path.name}",

@@ -88,20 +88,21 @@ class ReplayBar(QToolBar):
 
     # -- mode ---------------------------------------------------------------------------------
 
-    def attach(self, replayer, name: str, has_live: bool) -> None:
+    def attach(
+        self, replayer, name: str, has_live: bool, speeds: tuple[str, ...], current: str
+    ) -> None:
         """Show ``replayer`` (running) as the replay of ``name``; ``has_live``: a node to go
-        back to (the last button reads Back to live, else Close)."""
-        from mm_pc.monitor.replay import SPEEDS, speed_name
-
+        back to (the last button reads Back to live, else Close); ``speeds``: the choices
+        (``"2x"``, ``"max"``), ``current`` the one in force. (The replay module passes them:
+        a widget never imports the recording code, which needs ROS message types.)"""
         self.replayer = replayer
         self.name = name
         self.has_live = has_live
         self.active = True
         self.speed_box.blockSignals(True)
         self.speed_box.clear()
-        self.speed_box.addItems(list(SPEEDS))
-        current = speed_name(replayer.speed)
-        if current not in SPEEDS:  # e.g. 3x from the command line
+        self.speed_box.addItems(list(speeds))
+        if current not in speeds:  # e.g. 3x from the command line
             self.speed_box.addItem(current)
         self.speed_box.setCurrentText(current)
         self.speed_box.blockSignals(False)
