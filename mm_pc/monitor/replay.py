@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 from PySide6.QtCore import QObject, Qt, QTimer, Signal
-from PySide6.QtWidgets import QFileDialog, QMessageBox
+from PySide6.QtWidgets import QFileDialog, QMessageBox, QProgressBar
 
 from mm_pc.monitor.model.readings import Reply
 from mm_pc.monitor.model.session import MonitorSession
@@ -454,6 +454,12 @@ def load_in_background(window, path: str | Path, speed, dialog: bool = True):
     future = pool.submit(load_recording, path, speed)
     pool.shutdown(wait=False)
     window.statusBar().showMessage(f"reading {path.name} …")
+    busy = QProgressBar()  # a busy indicator while the file is read (it can take seconds)
+    busy.setRange(0, 0)
+    busy.setMaximumWidth(120)
+    busy.setToolTip(f"reading and checking {path.name}")
+    window.statusBar().addPermanentWidget(busy)
+    window.replay_reading = busy
     timer = QTimer(window)
 
     def check() -> None:
@@ -461,6 +467,9 @@ def load_in_background(window, path: str | Path, speed, dialog: bool = True):
             return
         timer.stop()
         timer.deleteLater()
+        window.statusBar().removeWidget(busy)
+        busy.deleteLater()
+        window.replay_reading = None
         try:
             speed_, replies = future.result()
         except ValueError as e:

@@ -239,6 +239,7 @@ def test_a_bad_file_is_reported_in_a_dialog_and_the_log_before_anything_changes(
     session, rows = window.ctx.session, len(window.ctx.session.history)
     with caplog.at_level(logging.WARNING, logger="mm_pc.monitor.replay"):
         load_in_background(window, bad, 1.0)  # what File > Replay does after the file dialog
+        assert window.replay_reading is not None  # busy while the file is read
         qtbot.waitUntil(lambda: getattr(window, "replay_error", None) is not None, timeout=10_000)
     box = window.replay_error
     assert isinstance(box, QMessageBox) and why in box.text() and str(bad) in box.text()
@@ -246,6 +247,7 @@ def test_a_bad_file_is_reported_in_a_dialog_and_the_log_before_anything_changes(
     assert window.statusBar().currentMessage().startswith("replay: ")
     assert window.ctx.session is session and len(session.history) == rows
     assert bridge.polling and getattr(window, "replayer", None) is None
+    assert window.replay_reading is None
     assert window.state_label.text() != "REPLAY bad.mcap"
     assert not window.stop_replay_action.isEnabled()
     box.done(0)
@@ -275,3 +277,30 @@ def test_the_bar_never_widens_the_window(qtbot, tmp_path, run4):
     assert window.replay_bar.minimumSizeHint().width() < 400
     replayer.stop()
     assert math.isfinite(window.replay_bar.replayer.total_s)
+
+
+def test_a_second_replay_keeps_the_live_state_of_before_the_first(qtbot, tmp_path, run4):
+    bridge = unused_bridge("mm_monitor_replay_twice")
+    window = make_window(qtbot, tmp_path, bridge)
+    for r in sim_replies("straight", 50.0, 0.5, start_ns=LIVE_NS):
+        bridge.data_received.emit(r)
+    first = start_replay(window, run4, 1.0)
+    assert not bridge.polling
+    other = tmp_path / "other.mcap"
+    rec = McapRecorder(other)
+    for r in sim_replies("straight", 50.0, 1.0):
+        rec.write_reply(r)
+    rec.close()
+    second = start_replay(window, other, "max")  # while the first still runs
+    assert first.done and second is not first
+    qtbot.waitUntil(lambda: second.done, timeout=10_000)
+    assert window.replay_bar.label.text() == "REPLAY other.mcap 1.0/1.0 s ended"
+    assert window.ctx.session.pose.x == pytest.approx(0.2, abs=1e-4)  # only the second's path
+    assert not bridge.polling
+    leave_replay(window)
+    assert bridge.polling  # as before the first replay
+    assert len(window.ctx.session.history) == 0  # a new path
+    for r in list(sim_replies("straight", 50.0, 1.0, start_ns=LIVE_NS))[30:33]:
+        bridge.data_received.emit(r)  # live feeds again: a baseline and two steps
+    assert len(window.ctx.session.history) == 2
+    assert window.ctx.session.pose.x == pytest.approx(0.008, abs=1e-4)

@@ -107,6 +107,9 @@ class ReplayBar(QToolBar):
         self.speed_box.setCurrentText(current)
         self.speed_box.blockSignals(False)
         self.live_button.setText("Back to live" if has_live else "Close")
+        total = getattr(replayer, "total_s", 0.0)
+        widest = replay_text(name, total, total, "stopped")  # the label never jumps while it runs
+        self.label.setMinimumWidth(min(self.label.fontMetrics().horizontalAdvance(widest) + 8, 360))
         replayer.finished.connect(self.update_view)
         self.show()
         self.timer.start()
