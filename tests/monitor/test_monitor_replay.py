@@ -304,3 +304,30 @@ def test_a_second_replay_keeps_the_live_state_of_before_the_first(qtbot, tmp_pat
         bridge.data_received.emit(r)  # live feeds again: a baseline and two steps
     assert len(window.ctx.session.history) == 2
     assert window.ctx.session.pose.x == pytest.approx(0.008, abs=1e-4)
+
+
+def test_the_csv_dialog_starts_in_the_remembered_folder_with_the_recording_name(
+    qtbot, tmp_path, run4, monkeypatch
+):
+    import mm_pc.monitor.widgets.data_list as data_list
+    from mm_pc.monitor.settings import last_folder
+
+    window = make_window(qtbot, tmp_path)
+    replayer = start_replay(window, run4, "max")
+    qtbot.waitUntil(lambda: replayer.done, timeout=10_000)
+    table = window.views["Data"].tables[1]
+    out = tmp_path / "csvs"
+    out.mkdir()
+    starts = []
+
+    def save(_parent, _title, start, _filter):
+        starts.append(start)
+        return str(out / "s2.csv"), ""
+
+    monkeypatch.setattr(data_list.QFileDialog, "getSaveFileName", save)
+    table.choose_export()
+    assert starts[-1].endswith("run4_dev_spidev1.1.csv")
+    assert (out / "s2.csv").read_text().startswith("t_s,dx_mm")
+    assert last_folder("csv") == str(out)
+    table.choose_export()
+    assert starts[-1] == str(out / "run4_dev_spidev1.1.csv")
