@@ -26,21 +26,21 @@ __all__ = [
 #: pose method key (mm_pc.core.odometry.METHODS) -> (plain name, one-sentence explanation)
 METHOD_LABELS: dict[str, tuple[str, str]] = {
     "exact": (
-        "One sensor, exact arc (default)",
+        "Exact arc, 1 sensor",
         "Turns each interval into an arc from one sensor's forward and sideways counts; "
         "assumes the robot does not slip sideways. The default.",
     ),
     "two-sensor": (
-        "Two sensors, least squares",
+        "Least squares, 2 sensors",
         "Fits the robot's motion to both sensors at once; also shows how well they agree "
         "(the residual in the Health tab).",
     ),
     "seed-approach1": (
-        "Original formula 1 (to compare)",
+        "Original formula 1",
         "The original monitor's first formula, kept to compare with; less accurate on curves.",
     ),
     "seed-approach2": (
-        "Original formula 2 (to compare)",
+        "Original formula 2",
         "The original monitor's second formula, kept to compare with.",
     ),
 }

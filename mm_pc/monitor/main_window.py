@@ -39,7 +39,7 @@ __all__ = ["ACHIEVED_OK", "DEFAULT_SIZE", "FRAME_HZ", "MainWindow", "RateEditor"
 
 FRAME_HZ = 30.0
 #: the Control dock's width (px); with the Direction dock and the tabs the window fits 1024 px
-CONTROL_DOCK_WIDTH = 280
+CONTROL_DOCK_WIDTH = 255
 #: the window's size on a first start (clamped to the screen)
 DEFAULT_SIZE = (1280, 800)
 #: below this share of the requested rate the achieved rate is shown in the warning colour

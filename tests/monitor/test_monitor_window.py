@@ -58,6 +58,9 @@ def test_every_tab_fits_1024_by_700_even_after_a_long_poll_summary(make_window, 
         settle(qapp, w)
         assert (w.width(), w.height()) == (1024, 700), w.tabs.tabText(i)
     assert w.control_dock.isVisible() and w.direction_dock.isVisible()
+    for dock in (w.control_dock, w.direction_dock):  # the docks' content is not cut off
+        scroll = dock.widget()
+        assert scroll.widget().minimumSizeHint().width() <= scroll.viewport().width()
 
 
 def test_layout_tab_rate_and_method_are_remembered_and_reset(make_window, qapp, tmp_path):

@@ -52,9 +52,10 @@ class _SensorRow:
         self.device = device
         self.edit = QLineEdit()
         self.edit.setPlaceholderText(f"{CPI_MIN}..{CPI_MAX}")
-        self.edit.setMinimumWidth(70)
+        self.edit.setMinimumWidth(60)
         self.edit.setToolTip(f"counts per inch of both axes, {ALLOWED} (Enter sets)")
         self.set_button = QPushButton("Set")
+        self.set_button.setMaximumWidth(48)  # the dock is narrow (1024 px screens)
         self.set_button.setToolTip("ask the node to set this CPI; it reads the register back")
         self.current = QLabel("now: –")
         self.current.setToolTip("the CPI in force, from the newest reply")
