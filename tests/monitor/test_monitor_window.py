@@ -201,3 +201,44 @@ def test_remembered_rate_and_method_are_the_command_line_defaults(monkeypatch):
     s.remove("sampling")
     s.remove("pose")
     s.sync()
+
+
+def test_controls_that_need_it_have_a_tooltip(make_window, feed):
+    from mm_pc.monitor.widgets.calibration_wizard import CalibrationWizard
+
+    w = make_window()
+    feed(w.ctx, rate_hz=50.0, seconds=0.5)
+    row = next(iter(w.resolution_panel.rows.values()))
+    wizard = CalibrationWizard(w.ctx, w)
+    drive, distance, save = wizard.drive_page, wizard.distance_page, wizard.save_page
+    for widget in (w.rate_editor.edit, w.rate_editor.now, w.method_box, w.pause_button,
+                   row.edit, row.set_button, row.current, drive.straight_button,
+                   drive.spin_button, drive.stop_button, drive.discard_button, distance.edit,
+                   distance.spin_edit, wizard.results_page.use_box, save.path_edit,
+                   save.save_button):  # fmt: skip
+        assert widget.toolTip(), widget
+    wizard.reject()
+
+
+def test_calibration_save_dialog_starts_in_the_remembered_folder(make_window, monkeypatch,
+                                                                  tmp_path):
+    from PySide6.QtWidgets import QFileDialog
+
+    from mm_pc.monitor.settings import remember_folder
+    from mm_pc.monitor.widgets.calibration_wizard import FOLDER_KIND, CalibrationWizard
+
+    w = make_window()
+    folder = tmp_path / "cals"
+    folder.mkdir()
+    remember_folder(FOLDER_KIND, folder / "old.yaml")
+    asked = []
+    chosen = tmp_path / "elsewhere" / "mine.yaml"
+    chosen.parent.mkdir()
+    monkeypatch.setattr(QFileDialog, "getSaveFileName",
+                        lambda *a, **k: (asked.append(a[2]), (str(chosen), ""))[1])
+    wizard = CalibrationWizard(w.ctx, w)
+    wizard.save_page._browse()
+    assert asked == [str(folder / "cal.yaml")]  # the remembered folder, the file's name
+    assert wizard.save_page.path_edit.text() == str(chosen)
+    assert last_folder(FOLDER_KIND) == str(chosen.parent)
+    wizard.reject()
