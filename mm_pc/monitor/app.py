@@ -35,8 +35,12 @@ def _parser() -> argparse.ArgumentParser:
 
     p = argparse.ArgumentParser(prog="mm-monitor", description=__doc__.split("\n\n")[0])
     p.add_argument("--beagle", default="/mm_beagle", help="namespace/name of the mm_beagle node")
-    p.add_argument("--rate", type=float, default=15.0, help="sample rate, 1..500 Hz (default 15)")
-    p.add_argument("--method", default="exact", choices=sorted(METHODS), help="pose method")
+    p.add_argument("--rate", type=float, default=None,
+                   help="sample rate, 1..500 Hz (default: the last one used, else 15)")
+    p.add_argument("--method", default=None, choices=sorted(METHODS),
+                   help="pose method (default: the last one used, else exact)")
+    p.add_argument("--reset-settings", action="store_true",
+                   help="forget the remembered window layout, rate, method and folders")
     p.add_argument("--calibration", type=Path, default=None, help="calibration YAML to load")
     p.add_argument("--headless", action="store_true", help="no window on screen (offscreen)")
     p.add_argument("--duration", type=float, default=0.0, help="seconds, then exit (0 = never)")
@@ -57,7 +61,8 @@ def _parser() -> argparse.ArgumentParser:
         help="record from the start: PATH.mcap = one MCAP file, any other PATH = a new "
         "rosbag2 folder with metadata.yaml (replies, single polls, live topics)",
     )  # fmt: skip
-    p.add_argument("--tab", default="Map", help="tab to show first (Map, Graphs, Data, ...)")
+    p.add_argument("--tab", default=None,
+                   help="tab to show first (Map, Graphs, Data, ...; default: the last one)")
     return p
 
 
@@ -116,6 +121,11 @@ def summary(window, seconds: float) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
+    if args.reset_settings:
+        from mm_pc.monitor.settings import settings_path
+
+        settings_path().unlink(missing_ok=True)
+    _remembered_defaults(args)
     try:
         from mm_pc.core.calibration import Calibration  # noqa: F401 - fail early on a broken install
         from mm_pc.monitor.ros_bridge import validate_rate
@@ -167,6 +177,24 @@ def main(argv: list[str] | None = None) -> int:
             print(f"mm-monitor: {missing}", file=sys.stderr)
             return 2
     return _run(args, headless)
+
+
+def _remembered_defaults(args) -> None:
+    """Rate and method not given: the ones remembered from the last run (a remembered value
+    that is no longer valid is ignored), else 15 Hz and exact."""
+    from mm_pc.core.odometry import METHODS
+    from mm_pc.monitor.ros_bridge import validate_rate
+    from mm_pc.monitor.settings import open_settings
+
+    s = open_settings()
+    if args.rate is None:
+        try:
+            args.rate = validate_rate(s.value("sampling/rate_hz", 15.0))
+        except ValueError:
+            args.rate = 15.0
+    if args.method is None:
+        method = s.value("pose/method", "exact")
+        args.method = method if method in METHODS else "exact"
 
 
 def _record_problem(args) -> str:
@@ -261,6 +289,7 @@ def _run(args, headless: bool) -> int:
     from mm_pc.monitor.export import grab_png
     from mm_pc.monitor.main_window import MainWindow
     from mm_pc.monitor.model.session import MonitorSession
+    from mm_pc.monitor.settings import open_settings
 
     config = MonitorConfig(beagle=args.beagle, rate_hz=args.rate, method=args.method)
     if args.calibration is not None:
@@ -288,9 +317,9 @@ def _run(args, headless: bool) -> int:
             bridge = RosBridge(args.beagle, args.rate)
         session = MonitorSession(method=args.method)
         ctx = MonitorContext(session, bridge, config)
-        window = MainWindow(ctx)
+        window = MainWindow(ctx, open_settings())
         for i in range(window.tabs.count()):
-            if window.tabs.tabText(i).lower() == args.tab.lower():
+            if args.tab is not None and window.tabs.tabText(i).lower() == args.tab.lower():
                 window.tabs.setCurrentIndex(i)
         ctx.load_calibration()
         if ctx.calibration_error:  # checked in main(); changed since

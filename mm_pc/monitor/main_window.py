@@ -11,8 +11,8 @@ from __future__ import annotations
 import time
 from collections import deque
 
-from PySide6.QtCore import Qt, QTimer
-from PySide6.QtGui import QAction, QKeySequence
+from PySide6.QtCore import QEvent, QObject, QSettings, Qt, QTimer
+from PySide6.QtGui import QAction, QGuiApplication, QKeyEvent, QKeySequence
 from PySide6.QtWidgets import (
     QComboBox,
     QDockWidget,
@@ -31,11 +31,21 @@ from PySide6.QtWidgets import (
 
 from mm_pc.core.odometry import METHODS
 from mm_pc.monitor.context import MonitorContext
+from mm_pc.monitor.help import METHOD_LABELS, method_label, method_tooltip
 from mm_pc.monitor.ros_bridge import validate_rate
+from mm_pc.monitor.widgets.style import ERROR_STYLE
 
-__all__ = ["FRAME_HZ", "MainWindow"]
+__all__ = ["ACHIEVED_OK", "DEFAULT_SIZE", "FRAME_HZ", "MainWindow", "RateEditor"]
 
 FRAME_HZ = 30.0
+#: the Control dock's width (px); with the Direction dock and the tabs the window fits 1024 px
+CONTROL_DOCK_WIDTH = 255
+#: the window's size on a first start (clamped to the screen)
+DEFAULT_SIZE = (1280, 800)
+#: below this share of the requested rate the achieved rate is shown in the warning colour
+ACHIEVED_OK = 0.9
+#: style of a figure that is below what was asked (orange: not an error, a warning)
+WARNING_STYLE = "color: #b35900; font-weight: bold"
 
 STATE_TEXT = {
     "waiting": ("waiting for {beagle}", "#a66f00"),
@@ -47,18 +57,33 @@ STATE_TEXT = {
 
 
 class RateEditor(QWidget):
-    """The sample rate field: 1..500 Hz; 0 or junk is refused with a message beside it."""
+    """The sample rate field: 1..500 Hz; 0 or junk is refused with a message beside it.
+
+    Under the field: the rate in force and the rate achieved (replies per second, from
+    the bridge's stats), e.g. "now: 500 Hz (achieved 250 Hz)", in the warning colour
+    when fewer than ``ACHIEVED_OK`` of the requests are answered in time.
+    """
 
     def __init__(self, ctx: MonitorContext, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.ctx = ctx
         self.edit = QLineEdit(f"{ctx.config.rate_hz:g}")
-        self.edit.setToolTip("requests per second to the Beagle node, 1..500 Hz (Enter applies)")
+        self.edit.setToolTip(
+            "<p>How often the monitor asks the Beagle node for the sensors' sums, 1..500 "
+            "requests per second (Enter applies). The pose uses every 1 kHz poll whatever "
+            "the rate: a higher rate only makes the map and graphs move more often.</p>"
+        )
         self.edit.setMaximumWidth(70)
         self.edit.returnPressed.connect(self.apply)
         self.error = QLabel("")
-        self.error.setStyleSheet("color: #b00020")
+        self.error.setStyleSheet(ERROR_STYLE)
         self.error.setWordWrap(True)
+        self.now = QLabel("")
+        self.now.setWordWrap(True)
+        self.now.setToolTip(
+            "<p>The rate in force and the replies per second that actually arrived in the "
+            "last 2 s; orange when fewer than 90 % arrive (a slow link or a busy PC).</p>"
+        )
         row = QHBoxLayout()
         row.setContentsMargins(0, 0, 0, 0)
         row.addWidget(self.edit)
@@ -67,33 +92,86 @@ class RateEditor(QWidget):
         lay = QVBoxLayout(self)
         lay.setContentsMargins(0, 0, 0, 0)
         lay.addLayout(row)
+        lay.addWidget(self.now)
         lay.addWidget(self.error)
         self.error.hide()
+        self.achieved_hz: float | None = None
+        self.show_achieved(None)
 
     def apply(self) -> bool:
-        """Apply the typed rate; False (rate unchanged, error shown) when it is refused."""
+        """Apply the typed rate; False when it is refused: the error is shown and the field
+        shows the rate still in force again."""
+        typed = self.edit.text().strip()
         try:
-            hz = validate_rate(self.edit.text().strip())
+            hz = validate_rate(typed)
         except ValueError as e:
-            self.error.setText(str(e))
+            self.error.setText(f"{e}; still {self.ctx.config.rate_hz:g} Hz")
             self.error.show()
+            self.edit.setText(f"{self.ctx.config.rate_hz:g}")
             return False
         self.error.hide()
         self.ctx.config.rate_hz = hz
+        self.edit.setText(f"{hz:g}")
         if self.ctx.bridge is not None:
             self.ctx.bridge.set_rate(hz)
         self.ctx.status_message.emit(f"sample rate {hz:g} Hz")
+        self.show_achieved(self.achieved_hz)
         return True
+
+    def show_achieved(self, achieved_hz: float | None) -> bool:
+        """Show the rate in force and ``achieved_hz`` (None: not known, e.g. offline).
+
+        True when the achieved rate is below ``ACHIEVED_OK`` of the requested one (the
+        warning colour is on).
+        """
+        self.achieved_hz = achieved_hz
+        wanted = self.ctx.config.rate_hz
+        if achieved_hz is None:
+            self.now.setText(f"now: {wanted:g} Hz")
+            self.now.setStyleSheet("")
+            return False
+        low = achieved_hz < ACHIEVED_OK * wanted
+        self.now.setText(f"now: {wanted:g} Hz (achieved {achieved_hz:.0f} Hz)")
+        self.now.setStyleSheet(WARNING_STYLE if low else "")
+        return low
+
+
+class _ExportShortcut(QObject):
+    """Lets the window's Ctrl+E through while a text field has the focus.
+
+    A QLineEdit claims Ctrl+E (move to the end of the line, on X11) through a
+    ShortcutOverride event, so the menu's shortcut would never fire there.
+    """
+
+    def __init__(self, window: MainWindow) -> None:
+        super().__init__(window)
+        self._main = window
+
+    def eventFilter(self, obj, event) -> bool:  # noqa: N802 - Qt API
+        if (
+            event.type() == QEvent.ShortcutOverride
+            and isinstance(event, QKeyEvent)
+            and isinstance(obj, QLineEdit)
+            and obj.window() is self._main
+        ):
+            keys = QKeySequence(event.keyCombination())
+            if keys.matches(self._main.export_action.shortcut()) == QKeySequence.ExactMatch:
+                event.ignore()  # not the field's: the shortcut map takes it
+                return True
+        return False
 
 
 class MainWindow(QMainWindow):
     """Mouse Monitor main window."""
 
-    def __init__(self, ctx: MonitorContext) -> None:
+    def __init__(self, ctx: MonitorContext, settings: QSettings | None = None) -> None:
+        """``settings``: where geometry, dock layout, tab, rate, method are remembered
+        (``settings.open_settings()`` in mm-monitor); None remembers nothing (tests)."""
         super().__init__()
         self.ctx = ctx
+        self.settings = settings
         self.setWindowTitle(f"Mouse Monitor — {ctx.config.beagle}")
-        self.resize(1280, 800)
+        self.resize(*self.default_size())
         self.frame_ms: deque[float] = deque(maxlen=100_000)
         self.views: dict[str, QWidget] = {}
         self.tabs = QTabWidget()
@@ -103,6 +181,11 @@ class MainWindow(QMainWindow):
         self._build_direction_dock()
         self._build_menu()
         self._build_status_bar()
+        self._default_state = self.saveState()
+        self._export_filter = _ExportShortcut(self)
+        app = QGuiApplication.instance()
+        if app is not None:
+            app.installEventFilter(self._export_filter)
         ctx.status_message.connect(lambda m: self.statusBar().showMessage(m, 5000))
         if ctx.bridge is not None:
             ctx.bridge.data_received.connect(ctx.on_reply)
@@ -117,6 +200,7 @@ class MainWindow(QMainWindow):
         self.frame_timer.setInterval(int(1000 / FRAME_HZ))
         self.frame_timer.timeout.connect(self.frame)
         self.frame_timer.start()
+        self.restore_layout()
 
     # -- construction -------------------------------------------------------------------
 
@@ -140,7 +224,16 @@ class MainWindow(QMainWindow):
         ):
             view = cls(self.ctx, self)
             self.views[title] = view
-            self.tabs.addTab(view, title)
+            # a view wider or taller than the space left scrolls: it never widens the window
+            scroll = QScrollArea()
+            scroll.setWidgetResizable(True)
+            scroll.setFrameShape(QScrollArea.NoFrame)
+            scroll.setWidget(view)
+            self.tabs.addTab(scroll, title)
+
+    def current_view(self) -> QWidget | None:
+        """The view of the tab shown (inside its scroll area)."""
+        return self.views.get(self.tabs.tabText(self.tabs.currentIndex()))
 
     def _build_control_dock(self) -> None:
         from mm_pc.monitor.widgets.resolution_panel import ResolutionPanel
@@ -156,8 +249,12 @@ class MainWindow(QMainWindow):
         self.pause_button.setCheckable(True)
         self.pause_button.toggled.connect(self.set_paused)
         self.pause_button.setEnabled(self.ctx.bridge is not None)
+        self.pause_button.setToolTip("stop (or resume) the periodic requests; the node keeps "
+                                     "counting, nothing is lost")
         form.addRow(self.pause_button)
         reset = QPushButton("Reset path and values")
+        reset.setToolTip("clear the paths, graphs and the pose (back to the origin); "
+                         "counting goes on")
         reset.clicked.connect(self.ctx.reset)
         form.addRow(reset)
         lay.addWidget(link)
@@ -165,16 +262,21 @@ class MainWindow(QMainWindow):
         pose = QGroupBox("Pose")
         pform = QFormLayout(pose)
         self.method_box = QComboBox()
-        self.method_box.addItems(sorted(METHODS))
-        self.method_box.setCurrentText(self.ctx.session.method)
-        self.method_box.setToolTip(
-            "exact: one sensor, no slip (default); two-sensor: least squares with residual; "
-            "seed-approach1/2: the original's formulas, to compare"
+        for key in METHOD_LABELS:
+            if key in METHODS:
+                self.method_box.addItem(method_label(key), key)
+                self.method_box.setItemData(self.method_box.count() - 1, method_tooltip(key),
+                                            Qt.ToolTipRole)
+        self.method_box.setCurrentIndex(self.method_box.findData(self.ctx.session.method))
+        self.method_box.setToolTip(method_tooltip())
+        self.method_box.setSizeAdjustPolicy(QComboBox.AdjustToMinimumContentsLengthWithIcon)
+        self.method_box.setMinimumContentsLength(12)
+        self.method_box.currentIndexChanged.connect(
+            lambda i: self.set_method(self.method_box.itemData(i))
         )
-        self.method_box.currentTextChanged.connect(self.set_method)
         pform.addRow("Method", self.method_box)
         self.method_error = QLabel("")
-        self.method_error.setStyleSheet("color: #b00020")
+        self.method_error.setStyleSheet(ERROR_STYLE)
         self.method_error.setWordWrap(True)
         self.method_error.hide()
         pform.addRow(self.method_error)
@@ -182,13 +284,17 @@ class MainWindow(QMainWindow):
 
         self.calibration_panel = CalibrationPanel(self.ctx, self)
         pform.addRow(self.calibration_panel)
-        for text, slot in (
-            ("Calibration wizard…", self.open_calibration_wizard),
-            ("Median filters…", self.open_filter_dialog),
-            ("Robot geometry…", self.open_geometry_dialog),
-            ("Log…", self.open_log_dialog),
+        for text, slot, tip in (
+            ("Calibration wizard…", self.open_calibration_wizard,
+             "fit every sensor's mounting angle, scales and position from a guided run"),
+            ("Median filters…", self.open_filter_dialog,
+             "per sensor and axis, a median filter over 1..999 samples"),
+            ("Robot geometry…", self.open_geometry_dialog,
+             "where the sensors sit on the robot, the axle length, the sensor in use"),
+            ("Log…", self.open_log_dialog, "the raw and processed values of every reply"),
         ):
             b = QPushButton(text)
+            b.setToolTip(tip)
             b.clicked.connect(slot)
             pform.addRow(b)
         lay.addWidget(pose)
@@ -199,22 +305,27 @@ class MainWindow(QMainWindow):
         scroll = QScrollArea()
         scroll.setWidgetResizable(True)
         scroll.setWidget(panel)
-        # wide enough for the CPI rows with their read-back (no horizontal scroll bar)
-        scroll.setMinimumWidth(310)
+        # wide enough for the CPI rows (labels wrap; no horizontal scroll bar)
+        scroll.setMinimumWidth(CONTROL_DOCK_WIDTH)
         scroll.setHorizontalScrollBarPolicy(Qt.ScrollBarAlwaysOff)
         dock = QDockWidget("Control", self)
         dock.setObjectName("control_dock")
         dock.setWidget(scroll)
-        dock.setFeatures(QDockWidget.DockWidgetMovable | QDockWidget.DockWidgetFloatable)
+        self.control_dock = dock
         self.addDockWidget(Qt.LeftDockWidgetArea, dock)
 
     def _build_direction_dock(self) -> None:
         from mm_pc.monitor.widgets.direction_widget import DirectionPanel
 
         self.direction_panel = DirectionPanel(self.ctx, self)
+        scroll = QScrollArea()
+        scroll.setWidgetResizable(True)
+        scroll.setWidget(self.direction_panel)
+        scroll.setHorizontalScrollBarPolicy(Qt.ScrollBarAlwaysOff)
         dock = QDockWidget("Direction", self)
         dock.setObjectName("direction_dock")
-        dock.setWidget(self.direction_panel)
+        dock.setWidget(scroll)
+        self.direction_dock = dock
         self.addDockWidget(Qt.RightDockWidgetArea, dock)
 
     def _build_menu(self) -> None:
@@ -237,19 +348,51 @@ class MainWindow(QMainWindow):
         file_menu.addAction(self.live_action)
         export = QAction("&Export view as PNG…", self)
         export.setShortcut(QKeySequence("Ctrl+E"))
+        export.setShortcutContext(Qt.WindowShortcut)
         export.triggered.connect(self.export_png)
         file_menu.addAction(export)
+        self.export_action = export
         file_menu.addSeparator()
         quit_action = QAction("&Quit", self)
         quit_action.setShortcut(QKeySequence.Quit)
         quit_action.triggered.connect(self.close)
         file_menu.addAction(quit_action)
+        self.quit_action = quit_action
+
+        view_menu = self.menuBar().addMenu("&View")
+        for dock in (self.control_dock, self.direction_dock):
+            view_menu.addAction(dock.toggleViewAction())
+        view_menu.addSeparator()
+        for i in range(self.tabs.count()):
+            act = QAction(self.tabs.tabText(i), self)
+            act.setShortcut(QKeySequence(f"Ctrl+{i + 1}"))
+            act.triggered.connect(lambda _c=False, k=i: self.tabs.setCurrentIndex(k))
+            view_menu.addAction(act)
+        view_menu.addSeparator()
+        self.reset_layout_action = QAction("&Reset layout", self)
+        self.reset_layout_action.setToolTip("default window size, both docks back in place")
+        self.reset_layout_action.triggered.connect(self.reset_layout)
+        view_menu.addAction(self.reset_layout_action)
+
+        help_menu = self.menuBar().addMenu("&Help")
+        guide = QAction("&User guide", self)
+        guide.setShortcut(QKeySequence.HelpContents)
+        guide.triggered.connect(self.open_user_guide)
+        help_menu.addAction(guide)
+        keys = QAction("&Keyboard shortcuts", self)
+        keys.triggered.connect(self.show_shortcuts)
+        help_menu.addAction(keys)
+        about = QAction("&About Mouse Monitor", self)
+        about.triggered.connect(self.show_about)
+        help_menu.addAction(about)
 
     def _build_status_bar(self) -> None:
         self.state_label = QLabel()
         self.rtt_label = QLabel("RTT –")
         self.rate_label = QLabel("– Hz")
         self.rows_label = QLabel("")
+        self.rtt_label.setToolTip("round-trip time of a data request, median of the last ones")
+        self.rate_label.setToolTip("replies per second achieved (the last 2 s)")
         for w in (self.state_label, self.rtt_label, self.rate_label, self.rows_label):
             self.statusBar().addPermanentWidget(w)
 
@@ -258,7 +401,7 @@ class MainWindow(QMainWindow):
     def frame(self) -> None:
         """Redraw the visible views (each does nothing when its data did not change)."""
         t0 = time.perf_counter()
-        current = self.tabs.currentWidget()
+        current = self.current_view()
         if current is not None and hasattr(current, "refresh"):
             current.refresh()
         self.direction_panel.refresh()
@@ -284,6 +427,8 @@ class MainWindow(QMainWindow):
         if stats.rtt_p50_s == stats.rtt_p50_s:  # not NaN
             self.rtt_label.setText(f"RTT {stats.rtt_p50_s * 1e3:.1f} ms")
         self.rate_label.setText(f"{stats.rate_hz:.1f} Hz")
+        low = self.rate_editor.show_achieved(stats.rate_hz if stats.replies else None)
+        self.rate_label.setStyleSheet(WARNING_STYLE if low else "")
 
     def _on_data_failed(self, message: str) -> None:
         self.statusBar().showMessage(f"data request: {message}", 3000)
@@ -302,18 +447,26 @@ class MainWindow(QMainWindow):
             self.ctx.bridge.set_polling(not paused)
         self.pause_button.setText("Resume polling" if paused else "Pause polling")
 
-    def set_method(self, method: str) -> None:
+    def set_method(self, method: str) -> bool:
+        """Use pose method ``method`` (a key of METHODS); False (message shown, the box
+        back on the method in force) when the session refuses it."""
         try:
             self.ctx.session.configure_odometry(method=method)
         except ValueError as e:
             self.method_error.setText(str(e))
             self.method_error.show()
-            self.method_box.blockSignals(True)
-            self.method_box.setCurrentText(self.ctx.session.method)
-            self.method_box.blockSignals(False)
-            return
+            self._show_method(self.ctx.session.method)
+            return False
         self.method_error.hide()
+        self._show_method(method)
+        self.ctx.config.method = method
         self.ctx.odometry_changed.emit()
+        return True
+
+    def _show_method(self, method: str) -> None:
+        self.method_box.blockSignals(True)
+        self.method_box.setCurrentIndex(self.method_box.findData(method))
+        self.method_box.blockSignals(False)
 
     @staticmethod
     def _open_dialog(dialog) -> None:
@@ -375,8 +528,102 @@ class MainWindow(QMainWindow):
 
         export_current_view(self)
 
+    # -- help -------------------------------------------------------------------------------
+
+    def open_user_guide(self) -> bool:
+        """Open docs/user-guide.md with the desktop's viewer; False (message) if it cannot."""
+        from mm_pc.monitor.help import open_user_guide
+
+        ok, message = open_user_guide()
+        self.statusBar().showMessage(message, 8000)
+        return ok
+
+    def shortcuts_text(self) -> str:
+        """The window's keyboard shortcuts, one "keys: what" per line (from the menus)."""
+        lines = []
+        for menu_action in self.menuBar().actions():
+            for act in menu_action.menu().actions():
+                keys = act.shortcut().toString(QKeySequence.NativeText)
+                if keys:
+                    lines.append(f"{keys}: {act.text().replace('&', '').rstrip('…')}")
+        lines += ["Ctrl+C (Data tab): copy the selected rows", "Enter (a field): apply it"]
+        return "\n".join(lines)
+
+    def show_shortcuts(self):
+        from PySide6.QtWidgets import QMessageBox
+
+        box = QMessageBox(QMessageBox.Information, "Keyboard shortcuts", self.shortcuts_text(),
+                          QMessageBox.Close, self)
+        self._open_dialog(box)
+        return box
+
+    def show_about(self):
+        from PySide6.QtWidgets import QMessageBox
+
+        from mm_pc.monitor.help import about_text
+
+        box = QMessageBox(QMessageBox.Information, "About Mouse Monitor",
+                          about_text(self.ctx.config.beagle), QMessageBox.Close, self)
+        self._open_dialog(box)
+        return box
+
+    # -- remembered layout and values ------------------------------------------------------------
+
+    def default_size(self) -> tuple[int, int]:
+        """DEFAULT_SIZE, or the screen's available size if that is smaller."""
+        w, h = DEFAULT_SIZE
+        screen = QGuiApplication.primaryScreen()
+        if screen is not None:
+            avail = screen.availableGeometry()
+            w, h = min(w, avail.width()), min(h, avail.height())
+        return w, h
+
+    def restore_layout(self) -> None:
+        """Geometry, dock layout and tab from the settings (nothing without settings)."""
+        s = self.settings
+        if s is None:
+            return
+        geometry = s.value("window/geometry")
+        if geometry is not None:
+            self.restoreGeometry(geometry)
+        state = s.value("window/state")
+        if state is not None:
+            self.restoreState(state)
+        tab = s.value("window/tab", "")
+        for i in range(self.tabs.count()):
+            if self.tabs.tabText(i) == tab:
+                self.tabs.setCurrentIndex(i)
+
+    def save_settings(self) -> None:
+        """Remember geometry, dock layout, tab, sample rate and pose method."""
+        s = self.settings
+        if s is None:
+            return
+        s.setValue("window/geometry", self.saveGeometry())
+        s.setValue("window/state", self.saveState())
+        s.setValue("window/tab", self.tabs.tabText(self.tabs.currentIndex()))
+        s.setValue("sampling/rate_hz", float(self.ctx.config.rate_hz))
+        s.setValue("pose/method", self.ctx.session.method)
+        s.sync()
+
+    def reset_layout(self) -> None:
+        """Default size, both docks shown where they start, the Map tab; forgotten in the
+        settings too (rate, method and folders stay)."""
+        self.showNormal()
+        self.restoreState(self._default_state)
+        for dock in (self.control_dock, self.direction_dock):
+            dock.setFloating(False)
+            dock.show()
+        self.resize(*self.default_size())
+        self.tabs.setCurrentIndex(0)
+        if self.settings is not None:
+            self.settings.remove("window")
+            self.settings.sync()
+        self.statusBar().showMessage("layout reset", 3000)
+
     def closeEvent(self, event) -> None:  # noqa: N802 - Qt API
         self.frame_timer.stop()
+        self.save_settings()
         if self.ctx.recorder is not None:
             self.ctx.recorder.close()
             self.ctx.recorder = None

@@ -166,7 +166,7 @@ def test_method_selector_switches_the_pose_method(qtbot, tmp_path):
     ctx = MonitorContext(MonitorSession(), None, config)
     window = MainWindow(ctx)
     qtbot.addWidget(window)
-    window.method_box.setCurrentText("two-sensor")
+    window.method_box.setCurrentIndex(window.method_box.findData("two-sensor"))
     assert ctx.session.method == "two-sensor"
     assert window.method_error.isHidden()
     assert "offline" in window.state_label.text()

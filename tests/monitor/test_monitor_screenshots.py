@@ -94,3 +94,28 @@ def test_every_tab_screenshot_has_content(live_window, qapp, screenshot_dir):
         assert share > 0.05, f"{title}: {share:.1%} of the picture is not background"
     window.tabs.setCurrentIndex(0)
     assert session.stats.used > 400
+
+
+#: the small laptop screen the window must fit, and a large one (docs/user-guide.md)
+WINDOW_SIZES = ((1024, 700), (1600, 1000))
+
+
+@pytest.mark.screenshot
+@pytest.mark.parametrize(("width", "height"), WINDOW_SIZES)
+def test_whole_window_at_small_and_large_sizes(live_window, qapp, screenshot_dir, width, height):
+    window = live_window
+    session = window.ctx.session
+    wait(qapp, lambda: session.history is not None and len(session.history) > 200, 40)
+    window.tabs.setCurrentIndex(0)
+    window.resize(width, height)
+    for _ in range(5):
+        window.frame()
+        qapp.processEvents()
+    assert (window.width(), window.height()) == (width, height)  # nothing widened it
+    assert window.control_dock.isVisible() and window.direction_dock.isVisible()
+    path = grab_png(window, screenshot_dir / f"monitor-{width}x{height}.png")
+    img = QImage(str(path))
+    assert (img.width(), img.height()) == (width, height)
+    colours, share = content_stats(path)
+    assert colours > 20 and share > 0.05
+    window.resize(1280, 800)

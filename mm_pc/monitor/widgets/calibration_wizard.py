@@ -48,11 +48,14 @@ from PySide6.QtWidgets import (
 from mm_pc.core.calibration import Calibration
 from mm_pc.core.calibration_fit import MIN_STRAIGHT_M, MountFit
 from mm_pc.monitor.context import MonitorContext
+from mm_pc.monitor.settings import last_folder, remember_folder
 from mm_pc.monitor.widgets.style import ERROR_STYLE
 
 __all__ = ["CalibrationWizard", "parse_spin_angle", "parse_true_distance"]
 
 OK_STYLE = "color: #1b7a1b"
+#: the kind of file dialog (``settings.last_folder``) the Save page's Browse remembers
+FOLDER_KIND = "calibration"
 PAGE_INTRO, PAGE_DRIVE, PAGE_DISTANCE, PAGE_RESULTS, PAGE_SAVE = range(5)
 USE_FIT, USE_STRAIGHT_RUN = "whole-mount fit", "straight-run formula (seed)"
 
@@ -166,6 +169,13 @@ class DrivePage(QWizardPage):
         self.stop_button.clicked.connect(self.stop)
         self.discard_button = QPushButton("Discard last step")
         self.discard_button.clicked.connect(self.discard)
+        self.straight_button.setToolTip("record a straight: push the robot straight forward "
+                                        "(or back) along a marked edge, then press Stop")
+        self.spin_button.setToolTip("record a spin: turn the robot on the spot one full turn, "
+                                    "then press Stop")
+        self.stop_button.setToolTip("end the step: nothing after Stop is recorded; the step "
+                                    "passes or fails")
+        self.discard_button.setToolTip("forget the last recorded step (e.g. a failed one)")
         # kept for the old name: Restart = discard everything and open the run again
         self.start_button = self.straight_button
         self.table = _table(list(self.COLUMNS))
@@ -322,8 +332,11 @@ class DistancePage(QWizardPage):
                          "Each spin turned this far (empty: 360 deg, one full turn).")
         self.edit = QLineEdit()
         self.edit.setPlaceholderText("empty = scale from the sensors")
+        self.edit.setToolTip("the measured length of each straight in cm (e.g. 100); empty "
+                             "keeps the sensors' mean Y scale at 1")
         self.spin_edit = QLineEdit()
         self.spin_edit.setPlaceholderText("empty = 360")
+        self.spin_edit.setToolTip("how far each spin turned, in degrees (360 = one full turn)")
         self.error = _error_label()
         self.true_distance: float | None = None
         self.spin_angle = 2 * math.pi
@@ -365,6 +378,9 @@ class ResultsPage(QWizardPage):
         self.drift.setWordWrap(True)
         self.use_box = QComboBox()
         self.use_box.addItems([USE_FIT, USE_STRAIGHT_RUN])
+        self.use_box.setToolTip("<p>whole-mount fit: angle, scales and position of every sensor "
+                                "(recommended); straight-run formula: the original's angle "
+                                "only, to compare</p>")
         self.use_box.currentTextChanged.connect(lambda _t: self._wizard.choose())
         self.error = _error_label()
         row = QHBoxLayout()
@@ -429,9 +445,12 @@ class SavePage(QWizardPage):
                          "calibration in force. Finish without saving uses it for this "
                          "session only.")
         self.path_edit = QLineEdit(str(wizard.ctx.config.calibration_file))
+        self.path_edit.setToolTip("the monitor loads this file at start (default "
+                                  "~/.config/mouse-monitor/calibration.yaml)")
         browse = QPushButton("Browse…")
         browse.clicked.connect(self._browse)
         self.save_button = QPushButton("Save")
+        self.save_button.setToolTip("write the file and put the calibration in force")
         self.save_button.clicked.connect(lambda: self._wizard.save(self.path_edit.text()))
         row = QHBoxLayout()
         row.addWidget(self.path_edit, 1)
@@ -449,11 +468,14 @@ class SavePage(QWizardPage):
         lay.addStretch(1)
 
     def _browse(self) -> None:
+        """A save dialog in the folder the last calibration went to (never the repository)."""
+        start = Path(last_folder(FOLDER_KIND)) / Path(self.path_edit.text()).name
         path, _ = QFileDialog.getSaveFileName(
-            self, "Save calibration", self.path_edit.text(), "YAML (*.yaml *.yml)"
+            self, "Save calibration", str(start), "YAML (*.yaml *.yml)"
         )
         if path:
             self.path_edit.setText(path)
+            remember_folder(FOLDER_KIND, path)
 
 
 class CalibrationWizard(QWizard):
@@ -536,6 +558,7 @@ class CalibrationWizard(QWizard):
             page.status.setText("")
             return False
         page.error.hide()
+        remember_folder(FOLDER_KIND, path)
         self._apply(cal, str(path))
         page.status.setText(f"saved to {path} and applied")
         return True

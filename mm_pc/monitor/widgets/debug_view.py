@@ -84,6 +84,10 @@ class DebugView(QWidget):
         for b in (self.pause_button, self.request_button):
             b.setEnabled(bridge is not None)
         self.state = QLabel("offline: no ROS connection" if bridge is None else "")
+        self.state.setWordWrap(True)
+        self.pause_button.setToolTip("stop the periodic requests, so every reply answers a "
+                                     "Request sample")
+        self.clear_button.setToolTip("empty the table and the upper plot")
         self.error = QLabel("")
         self.error.setStyleSheet(ERROR_STYLE)
         self.error.setWordWrap(True)
@@ -91,6 +95,7 @@ class DebugView(QWidget):
         self.fetch_row = QHBoxLayout()
         self.fetch_buttons: dict[str, QPushButton] = {}
         self.polls_label = QLabel("")
+        self.polls_label.setWordWrap(True)  # a long summary must not widen the window
 
         self.table = QTableWidget(0, 1)
         self.table.setEditTriggers(QTableWidget.NoEditTriggers)
@@ -150,9 +155,9 @@ class DebugView(QWidget):
                 w.deleteLater()
         self.fetch_buttons.clear()
         for dev in devices:
-            b = QPushButton(f"Fetch 1 kHz polls: {dev}")
-            b.setToolTip(f"get_samples for {dev}: up to {MAX_POLLS_PER_FETCH} polls after the "
-                         "last fetched")
+            b = QPushButton(f"Fetch 1 kHz polls: {dev.rsplit('/', 1)[-1]}")
+            b.setToolTip(f"get_samples for {dev}: its single 1 kHz polls, up to "
+                         f"{MAX_POLLS_PER_FETCH} after the last fetched")
             b.setEnabled(self.ctx.bridge is not None)
             b.clicked.connect(lambda _c=False, d=dev: self.fetch_polls(d))
             self.fetch_row.addWidget(b)

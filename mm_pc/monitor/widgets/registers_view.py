@@ -26,6 +26,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from mm_pc.monitor.widgets.style import ERROR_STYLE
 from pln2033.regmap import REGISTER_NAMES, RegisterMap
 
 __all__ = ["FIELDS", "RegistersView", "decode_status", "status_bits"]
@@ -73,8 +74,9 @@ class RegistersView(QWidget):
         self.refresh_button.setToolTip(NO_LOSS_TIP)
         self.refresh_button.clicked.connect(lambda: self.request_registers())
         self.note = QLabel("")
+        self.note.setWordWrap(True)
         self.error = QLabel("")
-        self.error.setStyleSheet("color: #b00020")
+        self.error.setStyleSheet(ERROR_STYLE)
         self.error.setWordWrap(True)
         bar = QHBoxLayout()
         bar.addWidget(self.refresh_button)
@@ -121,6 +123,7 @@ class RegistersView(QWidget):
             self.table.setHorizontalHeaderItem(col, QTableWidgetItem(device))
             label = QLabel("not read yet")
             label.setFont(self._mono)
+            label.setWordWrap(True)
             box = QGroupBox(device)
             QVBoxLayout(box).addWidget(label)
             self.status_layout.addWidget(box)

@@ -52,11 +52,15 @@ class _SensorRow:
         self.device = device
         self.edit = QLineEdit()
         self.edit.setPlaceholderText(f"{CPI_MIN}..{CPI_MAX}")
-        self.edit.setMinimumWidth(90)
+        self.edit.setMinimumWidth(60)
         self.edit.setToolTip(f"counts per inch of both axes, {ALLOWED} (Enter sets)")
         self.set_button = QPushButton("Set")
+        self.set_button.setMaximumWidth(48)  # the dock is narrow (1024 px screens)
+        self.set_button.setToolTip("ask the node to set this CPI; it reads the register back")
         self.current = QLabel("now: –")
+        self.current.setToolTip("the CPI in force, from the newest reply")
         self.read_back = QLabel("")
+        self.read_back.setWordWrap(True)
         self.error = QLabel("")
         self.error.setStyleSheet(RED)
         self.error.setWordWrap(True)
@@ -124,9 +128,11 @@ class ResolutionPanel(QGroupBox):
             cpi = validate_cpi(row.edit.text())
         except ValueError as e:
             row.error.setText(str(e))
+            self._restore_field(device)
             return False
         if self.ctx.bridge is None:
             row.error.setText("offline: no node to set the resolution on")
+            self._restore_field(device)
             return False
         row.error.setText("")
         row.read_back.setStyleSheet("")
@@ -147,6 +153,21 @@ class ResolutionPanel(QGroupBox):
         else:
             row.error.setText(message or "the node refused the resolution")
             row.read_back.setText(f"read back: {cpi} CPI" if cpi else "")
+            self._restore_field(device, cpi)
+
+    def cpi_in_force(self, device: str) -> int | None:
+        """The CPI of ``device`` in the newest reply (None before the first)."""
+        hist = self.ctx.session.history
+        devices = self.ctx.session.devices
+        if hist is None or not len(hist) or device not in devices:
+            return None
+        value = hist.last(f"s{devices.index(device)}_cpi")
+        return int(value) if value == value else None
+
+    def _restore_field(self, device: str, cpi: int = 0) -> None:
+        """After a refusal the field shows the value in force again (empty if unknown)."""
+        known = cpi or self.cpi_in_force(device)
+        self.rows[device].edit.setText(str(known) if known else "")
 
     def _on_reply(self, _reply) -> None:
         self.refresh()
