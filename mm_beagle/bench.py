@@ -312,6 +312,10 @@ def main(argv: list[str] | None = None) -> int:
     gui.add_argument("--hours", type=float, default=1.0, help="simulated history (h)")
     gui.add_argument("--rate", type=float, default=100.0, help="sample rate (Hz)")
     gui.add_argument("--frames", type=int, default=300, help="frames measured per tab")
+    gui.add_argument(
+        "--live-seconds", type=float, default=10.0,
+        help="seconds of each live CPU measurement at 100 and 500 Hz (0: none)",
+    )
     gui.add_argument("--json", action="store_true", help="print JSON only (the default)")
     agent = sub.add_parser("agent", help="the board agent: CPU per poll, RSS, link, drops")
     agent.add_argument("--seconds", type=float, default=3.0, help="per measurement")
@@ -329,7 +333,10 @@ def main(argv: list[str] | None = None) -> int:
         from mm_pc.bench.gui import bench_gui
 
         try:
-            result = bench_gui(hours=args.hours, rate_hz=args.rate, frames=args.frames)
+            result = bench_gui(
+                hours=args.hours, rate_hz=args.rate, frames=args.frames,
+                live_seconds=args.live_seconds,
+            )
         except ValueError as e:
             parser.error(str(e))
     elif args.what == "maps":

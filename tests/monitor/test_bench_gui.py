@@ -30,7 +30,7 @@ POSITIVE = (
 
 @pytest.mark.ros
 def test_bench_gui_reports_every_figure(qapp):
-    r = bench_gui(hours=0.01, frames=20)
+    r = bench_gui(hours=0.01, frames=20, live_seconds=2.0)
     for key in (*POSITIVE, "dropped_requests", "memory_growth_mb_during_frames", "tab_p95_ms"):
         assert key in r, key
     for key in POSITIVE:
@@ -44,12 +44,25 @@ def test_bench_gui_reports_every_figure(qapp):
     assert all(math.isfinite(v) and v > 0 for v in r["tab_p95_ms"].values())
     assert set(r["tab_catch_up_frames"]) == set(r["tab_p95_ms"])
     assert all(3 <= n <= 300 for n in r["tab_catch_up_frames"].values())
+    # the live CPU measurement at 100 and 500 Hz against the node in another process
+    assert set(r["live"]) == {"100", "500"} and r["goal_live_cpu_percent"] == 50.0
+    for hz, live in r["live"].items():
+        assert 0 < live["achieved_hz"] <= float(hz) * 1.2, (hz, live)
+        assert live["replies"] > 0 and 0 < live["cpu_percent_one_core"] < 200.0 + 1, live
+        per_reply_ms = 10.0 * live["cpu_percent_one_core"] / live["achieved_hz"]
+        assert math.isclose(live["cpu_ms_per_reply"], per_reply_ms, rel_tol=0.05), live
 
 
 def test_bench_gui_refuses_bad_arguments(capsys):
-    for bad in ({"hours": 0}, {"hours": -1.0}, {"rate_hz": 0}, {"frames": 0}, {"max_catch_up": -1}):
+    for bad in (
+        {"hours": 0}, {"hours": -1.0}, {"rate_hz": 0}, {"frames": 0}, {"max_catch_up": -1},
+        {"live_seconds": -1.0}, {"live_seconds": "x"},
+    ):
         with pytest.raises(ValueError, match="must be"):
             bench_gui(**bad)
     with pytest.raises(SystemExit):
         bench_main(["gui", "--frames", "0"])
     assert "frames must be an integer >= 1" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        bench_main(["gui", "--live-seconds", "-2"])
+    assert "live_seconds must be in [0, 600]" in capsys.readouterr().err

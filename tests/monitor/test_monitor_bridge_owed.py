@@ -1,0 +1,73 @@
+"""A tick skipped while a request is out is owed: the bridge asks again as soon as the
+reply is done, not a whole period later (the real rclpy client is replaced by a recorder;
+the live behaviour is measured by ``mm-bench gui``)."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import pytest
+
+pytest.importorskip("PySide6")
+
+from mm_pc.monitor.ros_bridge import RosBridge
+
+
+class _Future:
+    def __init__(self, result) -> None:
+        self._result, self.callbacks = result, []
+
+    def add_done_callback(self, cb) -> None:
+        self.callbacks.append(cb)
+
+    def result(self):
+        return self._result
+
+    def finish(self) -> None:
+        for cb in self.callbacks:
+            cb(self)
+
+
+class _Client:
+    def __init__(self) -> None:
+        self.sent: list[_Future] = []
+
+    def service_is_ready(self) -> bool:
+        return True
+
+    def call_async(self, request) -> _Future:
+        f = _Future(SimpleNamespace(success=True, message="", data=[]))
+        self.sent.append(f)
+        return f
+
+
+def _bridge() -> tuple[RosBridge, _Client]:
+    bridge = RosBridge(rate_hz=500.0, fetch_polls=False)
+    client = _Client()
+    bridge._clients = {"get_sensor_data": client}
+    bridge._types = {"get_sensor_data": SimpleNamespace(Request=lambda id: id)}
+    return bridge, client
+
+
+def test_a_skipped_tick_is_asked_for_when_the_reply_is_done(qapp):
+    bridge, client = _bridge()
+    got = []
+    bridge.data_received.connect(got.append)
+    bridge._tick()
+    bridge._tick()  # the first request is still out: skipped and owed
+    assert len(client.sent) == 1 and bridge.skipped_ticks == 1
+    client.sent[0].finish()
+    assert len(got) == 1
+    assert len(client.sent) == 2  # the owed request went out with the reply, not a tick later
+    client.sent[1].finish()
+    assert len(client.sent) == 2  # nothing owed any more: the next request waits for a tick
+    assert bridge.requests == bridge.replies == 2
+
+
+def test_nothing_is_owed_while_paused(qapp):
+    bridge, client = _bridge()
+    bridge._tick()
+    bridge._tick()
+    bridge.set_polling(False)
+    client.sent[0].finish()
+    assert len(client.sent) == 1
