@@ -387,6 +387,16 @@ def test_filter_dialog_refuses_bad_windows(qtbot, ctx):
         assert not row.fx.isChecked()
         assert filter_state(ctx.session) == before
     assert "not applied" in dlg.status.text()
+    # the wrapped message shows whole in a narrow dialog (it was cut off)
+    dlg.resize(360, 200)
+    dlg.show()
+    qtbot.waitExposed(dlg)
+    row.window.setText("abc")
+    assert not dlg.apply_all()
+    qtbot.wait(10)
+    assert row.error.height() >= row.error.heightForWidth(row.error.width())
+    assert row.error.geometry().bottom() <= dlg._grid_host.height()
+    assert "apply at once" not in dlg.note.text() and "Apply applies every row" in dlg.note.text()
     with pytest.raises(ValueError, match=WINDOW_MSG):
         from mm_pc.monitor.widgets.filter_dialog import parse_window
 
@@ -439,7 +449,7 @@ def test_geometry_dialog_refuses_bad_input_and_changes_nothing(qtbot, ctx):
         (dlg.rows[0].x, "abc", rf"{D0} x \(cm\) must be a number, got 'abc'"),
         (dlg.rows[1].y, "nan", rf"{D1} y \(cm\) must be a finite number, got 'nan'"),
         (dlg.rows[0].yaw, "", rf"{D0} yaw \(deg\) must be a number, got ''"),
-        (dlg.axis_edit, "0", r"axis length must be > 0 cm, got '0'"),
+        (dlg.axis_edit, "0", r"axle length must be > 0 cm, got '0'"),
         (dlg.rows[0].x, "0", r"sensor 0 at base_link \(0.0 m, -0.0395 m\) lies on the axle line"),
     ]
     for edit, text, msg in cases:
