@@ -17,7 +17,7 @@ from PySide6.QtCore import QPointF, QRectF, Qt
 from PySide6.QtWidgets import QApplication
 
 from mm_pc.core.fixes.gps import gps_accuracy_m
-from mm_pc.core.maps.coverage_map import COLORS_RGB8, MOWED, MOWER, UNMOWED, CoverageMap
+from mm_pc.core.maps.coverage_map import COLORS_RGB, MOWED, MOWER, UNMOWED, CoverageMap
 from mm_pc.core.maps.trilateration import plane_distances
 from mm_pc.monitor.context import MonitorContext
 from mm_pc.monitor.model import maps as mm
@@ -25,6 +25,8 @@ from mm_pc.monitor.model.session import MonitorSession
 from mm_pc.monitor.model.sim_feed import sim_replies
 from mm_pc.monitor.widgets.maps_view import grid_item
 from mm_pc.monitor.widgets.maps_view import view as mv
+from mm_pc.monitor.widgets.maps_view.palette import DISPLAY_RGB8 as COLORS_RGB8
+from mm_pc.monitor.widgets.maps_view.palette import PATH_STYLES, luminance
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -406,3 +408,18 @@ def test_one_changed_cell_costs_the_same_on_a_large_map(qtbot, shape):
         times.append(time.perf_counter() - t0)
     assert view.grid.pixels_written == 30
     assert float(np.median(times)) < 0.05  # generous; measured ~0.1 ms on both sizes
+
+
+def test_the_maps_palette_is_colour_blind_safe_and_keeps_the_seeds_meanings():
+    assert len({tuple(c) for c in COLORS_RGB8}) == len(COLORS_RGB8)  # one colour per code
+    # unmowed and mowed differ in lightness (seen without hue), not only in hue as the
+    # seed's two greens
+    assert luminance(COLORS_RGB8[MOWED]) - luminance(COLORS_RGB8[UNMOWED]) > 0.4
+    seed = np.asarray(COLORS_RGB)
+    assert abs(luminance(seed[MOWED] * 255) - luminance(seed[UNMOWED] * 255)) > 0.1  # seed: close
+    # the seed's meanings by hue: unmowed green-dominant, mower blue-dominant
+    assert np.argmax(COLORS_RGB8[UNMOWED]) == 1 and np.argmax(COLORS_RGB8[MOWER]) == 2
+    # truth, fused and raw differ in width or dash as well as colour
+    styles = {key: (width, dash) for key, (_c, width, dash, _z) in PATH_STYLES.items()}
+    assert len(set(styles.values())) == 3
+    assert len({c for c, *_ in PATH_STYLES.values()}) == 3

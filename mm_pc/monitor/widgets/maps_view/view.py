@@ -47,7 +47,6 @@ from PySide6.QtWidgets import (
 
 from mm_pc.core.maps.coverage_map import (
     CODE_NAMES,
-    COLORS_RGB8,
     CoverageMap,
     UpdateResult,
 )
@@ -63,6 +62,7 @@ from mm_pc.monitor.model.maps import (
 )
 from mm_pc.monitor.widgets.maps_view.dialog import NewMapDialog
 from mm_pc.monitor.widgets.maps_view.grid_item import GridImageItem
+from mm_pc.monitor.widgets.maps_view.palette import DISPLAY_RGB8, PATH_STYLES
 from mm_pc.monitor.widgets.style import ERROR_STYLE
 
 __all__ = ["SPEEDS", "MapsView"]
@@ -84,7 +84,7 @@ GPS_CIRCLES = 5  # accuracy circles for the newest this many GPS fixes
 GPS_TRAIL = 120  # GPS fixes shown (60 s at 2 Hz); all 1374 of a run hide the map
 LEGEND_WIDTH = 190  # px
 
-PATH_COLOURS = {"truth": "#000000", "raw": "#ff7f0e", "fused": "#0050c8"}
+PATH_COLOURS = {key: style[0] for key, style in PATH_STYLES.items()}
 BEACON_COLOUR = "#7b2fbe"
 GPS_COLOUR = "#e6a800"
 
@@ -109,7 +109,7 @@ def _code_samples() -> list[tuple[pg.ScatterPlotItem, str]]:
             ),
             f"{code} {CODE_NAMES[code]}",
         )
-        for code, rgb in enumerate(COLORS_RGB8)
+        for code, rgb in enumerate(DISPLAY_RGB8)
     ]
 
 
@@ -236,7 +236,8 @@ class MapsView(QWidget):
             size=7, symbol="x", brush=pg.mkBrush("#666666"), pen=pg.mkPen("#666666")
         )
         self.paths = {
-            key: pg.PlotDataItem([], [], pen=pg.mkPen(colour, width=1 if key == "truth" else 2))
+            key: pg.PlotDataItem([], [], pen=pg.mkPen(colour, width=PATH_STYLES[key][1],
+                                                      style=PATH_STYLES[key][2]))
             for key, colour in PATH_COLOURS.items()
         }
         for curve in self.paths.values():
@@ -250,14 +251,16 @@ class MapsView(QWidget):
             self.gps_circles,
             self.gps_good,
             self.gps_bad,
-            self.paths["raw"],
-            self.paths["fused"],
+            self.paths["fused"],  # wide, under the others
+            self.paths["raw"],  # dashed
             self.paths["truth"],  # on top: thin black over the fused path
             self.beacons,
         ]
         for item in self.sim_items:
             plot.addItem(item)
-        for key, text in (("truth", "truth"), ("raw", "raw mouse odometry"), ("fused", "fused")):
+        for key, text in (("truth", "truth (thin black)"),
+                          ("fused", "fused, EKF (wide blue)"),
+                          ("raw", "raw mouse odometry (dashed)")):
             self.sim_legend.addItem(self.paths[key], text)
         self.sim_legend.addItem(self.beacons, "beacon")
         self.sim_legend.addItem(self.range_circles, "range (newest set)")
