@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 import re
 import time
 from pathlib import Path
@@ -301,8 +302,15 @@ def test_simulate_button_draws_beacons_circles_gps_and_paths(qtbot, run):
     view = make_view(qtbot)
     view.speed_box.setCurrentText("all at once")
     qtbot.mouseClick(view.sim_button, Qt.MouseButton.LeftButton)
+    # built in a process of its own, with a busy bar and a Cancel while it runs
+    assert view._job is not None and view._job.process.pid != os.getpid()
+    assert not view.progress.isHidden() and not view.cancel_button.isHidden()
+    assert not view.sim_button.isEnabled() and "own process" in view.status.text()
     last = len(run.sim.t) - 1
-    qtbot.waitUntil(lambda: view.run is not None and view.sim_k == last, timeout=20_000)
+    qtbot.waitUntil(lambda: view.run is not None and view.sim_k == last, timeout=60_000)
+    assert view.progress.isHidden() and view.cancel_button.isHidden()
+    assert view.sim_button.isEnabled() and not view._job
+    np.testing.assert_array_equal(view.run.fused, run.fused)  # the same run as in-process
     sim = view.run.sim
     assert view.source == "sim" and view.source_box.currentData() == "sim"
     # beacons with names
@@ -423,3 +431,31 @@ def test_the_maps_palette_is_colour_blind_safe_and_keeps_the_seeds_meanings():
     styles = {key: (width, dash) for key, (_c, width, dash, _z) in PATH_STYLES.items()}
     assert len(set(styles.values())) == 3
     assert len({c for c, *_ in PATH_STYLES.values()}) == 3
+
+
+@pytest.mark.parametrize("child", ["fail", "report_error"])
+def test_a_failing_simulation_is_shown_in_the_view(qtbot, monkeypatch, child):
+    import sim_children
+
+    monkeypatch.setattr(mv.MapsView, "sim_target", staticmethod(getattr(sim_children, child)))
+    view = make_view(qtbot)
+    view.start_simulation(7)
+    qtbot.waitUntil(lambda: view._job is None, timeout=30_000)
+    assert not view.error.isHidden() and view.error.text().startswith("simulated run failed: ")
+    text = view.error.text()
+    assert ("seed 7 refused" in text) if child == "report_error" else ("exit code 1" in text)
+    assert view.run is None and view.sim_button.isEnabled() and view.progress.isHidden()
+
+
+def test_cancel_stops_the_simulation_process(qtbot, monkeypatch):
+    import sim_children
+
+    monkeypatch.setattr(mv.MapsView, "sim_target", staticmethod(sim_children.hang))
+    view = make_view(qtbot)
+    view.start_simulation(3)
+    process = view._job.process
+    qtbot.waitUntil(process.is_alive, timeout=10_000)
+    qtbot.mouseClick(view.cancel_button, Qt.MouseButton.LeftButton)
+    assert view._job is None and not process.is_alive()
+    assert "cancelled" in view.status.text() and view.sim_button.isEnabled()
+    assert view.cancel_button.isHidden() and view.run is None
