@@ -570,6 +570,7 @@ def test_health_view_shows_diagnostics_residual_and_counters(qtbot, ctx, screens
     assert np.array_equal(drawn, h.column("residual") * 1e3)
     axis = view.residual_plot.getAxis("left")
     assert axis.labelText == "residual (mm)" and axis.labelString().count("(") == 1
+    assert view.lift_plot.legend is None and D1 in view.lift_plot.titleLabel.text
     lift_axis = view.lift_plot.getAxis("left")
     assert lift_axis.autoSIPrefixScale == 1.0 and "x0.001" not in lift_axis.labelString()
     assert view.lift_plot.viewRange()[1][0] == pytest.approx(-0.05 * 3, abs=0.2)

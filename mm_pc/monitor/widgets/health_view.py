@@ -156,7 +156,7 @@ class HealthView(QWidget):
         self.lift_plot.enableAutoRange(y=False)
         self.lift_plot.setYRange(0.0, 1.0, padding=0.05)
         self.lift_plot.setXLink(self.residual_plot)
-        self.lift_plot.addLegend(offset=(10, 5))
+        # no legend item over the curves: the title names each sensor's colour
         self.lift_curves: list[pg.PlotDataItem] = []
 
         top = QWidget()
@@ -291,6 +291,10 @@ class HealthView(QWidget):
             name = self.ctx.session.devices[k]
             pen = SENSOR_PENS[k % len(SENSOR_PENS)]
             self.lift_curves.append(self._curve(self.lift_plot, pen, name))
+            keys = ", ".join(
+                f'<span style="color:{SENSOR_PENS[j % len(SENSOR_PENS)]}">&#9644; '
+                f'{self.ctx.session.devices[j]}</span>' for j in range(len(self.lift_curves)))
+            self.lift_plot.setTitle(f"Lifted polls per reply ({keys})")
         top = 1.0
         for k, curve in enumerate(self.lift_curves[:n]):
             lt, ly = self._thinned(hist, f"s{k}_lifts", t_all)
