@@ -387,6 +387,16 @@ def test_filter_dialog_refuses_bad_windows(qtbot, ctx):
         assert not row.fx.isChecked()
         assert filter_state(ctx.session) == before
     assert "not applied" in dlg.status.text()
+    # the wrapped message shows whole in a narrow dialog (it was cut off)
+    dlg.resize(360, 200)
+    dlg.show()
+    qtbot.waitExposed(dlg)
+    row.window.setText("abc")
+    assert not dlg.apply_all()
+    qtbot.wait(10)
+    assert row.error.height() >= row.error.heightForWidth(row.error.width())
+    assert row.error.geometry().bottom() <= dlg._grid_host.height()
+    assert "apply at once" not in dlg.note.text() and "Apply applies every row" in dlg.note.text()
     with pytest.raises(ValueError, match=WINDOW_MSG):
         from mm_pc.monitor.widgets.filter_dialog import parse_window
 
@@ -439,7 +449,7 @@ def test_geometry_dialog_refuses_bad_input_and_changes_nothing(qtbot, ctx):
         (dlg.rows[0].x, "abc", rf"{D0} x \(cm\) must be a number, got 'abc'"),
         (dlg.rows[1].y, "nan", rf"{D1} y \(cm\) must be a finite number, got 'nan'"),
         (dlg.rows[0].yaw, "", rf"{D0} yaw \(deg\) must be a number, got ''"),
-        (dlg.axis_edit, "0", r"axis length must be > 0 cm, got '0'"),
+        (dlg.axis_edit, "0", r"axle length must be > 0 cm, got '0'"),
         (dlg.rows[0].x, "0", r"sensor 0 at base_link \(0.0 m, -0.0395 m\) lies on the axle line"),
     ]
     for edit, text, msg in cases:
@@ -508,16 +518,26 @@ def test_health_view_shows_diagnostics_residual_and_counters(qtbot, ctx, screens
     view.resize(1000, 700)
     bridge.diagnostics_received.emit({D0: diag(0, 4), D1: diag(1, 9)})
     t = view.table
-    assert t.rowCount() == 2
-    assert [t.verticalHeaderItem(r).text() for r in range(2)] == [D0, D1]
-    headers = [t.horizontalHeaderItem(c).text() for c in range(t.columnCount())]
-    row1 = dict(zip(headers, (t.item(1, c).text() for c in range(t.columnCount())), strict=True))
-    assert row1["Level"] == "WARN" and row1["Late polls"] == "9" and row1["SPI errors"] == "3"
-    assert row1["Period p99 (µs)"] == "1210" and row1["Last error"] == "CRC"
+    assert t.columnCount() == 2
+    assert [t.horizontalHeaderItem(c).text() for c in range(2)] == [D0, D1]
+    names = [t.verticalHeaderItem(r).text() for r in range(t.rowCount())]
+    col1 = dict(zip(names, (t.item(r, 1).text() for r in range(t.rowCount())), strict=True))
+    assert col1["Status"] == "WARN" and col1["Late polls"] == "9" and col1["Bus errors"] == "3"
+    assert col1["Worst gap (µs)"] == "1210" and col1["Last error"] == "CRC"
+    for r in range(t.rowCount()):  # every quantity explains itself in plain words
+        assert len(t.verticalHeaderItem(r).toolTip()) > 20
+        assert t.verticalHeaderItem(r).toolTip() in t.item(r, 1).toolTip()
+    assert "CRC" in t.item(names.index("Last error"), 1).toolTip()
     assert t.item(0, 0).background().color().name() == LEVEL_COLOURS[0][1]
-    assert t.item(1, 5).background().color().name() == LEVEL_COLOURS[1][1]
+    assert t.item(5, 1).background().color().name() == LEVEL_COLOURS[1][1]
     bridge.diagnostics_received.emit({D0: diag(2, 5, state="down")})  # one sensor updates
-    assert t.item(0, 1).text() == "down" and t.item(0, 0).text() == "ERROR"
+    assert t.item(1, 0).text() == "down" and t.item(0, 0).text() == "ERROR"
+    # the table fits a narrow view: the sensors' columns share the width, none runs off
+    view.resize(420, 700)
+    view.show()
+    qtbot.waitExposed(view)
+    assert t.horizontalHeader().length() <= t.viewport().width() + 1
+    assert t.horizontalScrollBar().maximum() == 0
 
     replies = list(sim_replies("figure_eight", 50, seconds=8))
     # the simulated node reports no lifts: mark a few polls of sensor 1 as lifted
@@ -532,16 +552,28 @@ def test_health_view_shows_diagnostics_residual_and_counters(qtbot, ctx, screens
     h = ctx.session.history
     x, y = view.residual_data()
     assert np.array_equal(x, h.column("t"))
-    assert np.array_equal(y, h.column("residual"))
+    np.testing.assert_allclose(y, h.column("residual"), rtol=1e-12)
     assert np.all(np.isfinite(y)) and 1e-5 < y.max() < 1e-2  # 0.01..10 mm
     assert "two sensors disagree" in view.residual_note.text()
     _, ly = view.lift_curves[1].getOriginalDataset()
     assert np.array_equal(ly, h.column("s1_lifts")) and ly.sum() == 3 * 10
     s = ctx.session.stats
-    assert f"{s.replies} replies, {s.used} used" in view.session_label.text()
-    assert "1 incomplete" in view.session_label.text()
+    assert f"{s.replies} replies received, {s.used} used for the pose" in view.session_label.text()
+    assert "1 missing a sensor" in view.session_label.text()
+    assert "baselines" not in view.session_label.text()
     bridge.stats_updated.emit(bridge.stats())
-    assert "0 dropped requests, 0 skipped ticks" in view.bridge_label.text()
+    assert "0 requests unanswered in time, 0 requests not sent" in view.bridge_label.text()
+    assert "skipped" not in view.bridge_label.text()
+    assert "still unanswered" in view.bridge_label.toolTip()
+    # one unit per quantity: the residual is drawn in mm and the axis says mm, no SI prefix
+    _, drawn = view.residual_curve.getOriginalDataset()
+    assert np.array_equal(drawn, h.column("residual") * 1e3)
+    axis = view.residual_plot.getAxis("left")
+    assert axis.labelText == "residual (mm)" and axis.labelString().count("(") == 1
+    assert view.lift_plot.legend is None and D1 in view.lift_plot.titleLabel.text
+    lift_axis = view.lift_plot.getAxis("left")
+    assert lift_axis.autoSIPrefixScale == 1.0 and "x0.001" not in lift_axis.labelString()
+    assert view.lift_plot.viewRange()[1][0] == pytest.approx(-0.05 * 3, abs=0.2)
     assert_shows_content(screenshot(view, "health.png"), "health.png")
 
     ctx.session.configure_odometry(method="exact")
@@ -716,7 +748,7 @@ def test_manual_request_against_the_node_loses_no_counts(qtbot, beagle_node, tmp
             lambda: ctx.session.history is not None and len(ctx.session.history) >= 10,
             timeout=20000,
         )
-        qtbot.waitUntil(lambda: health.table.rowCount() == 2, timeout=5000)
+        qtbot.waitUntil(lambda: health.table.columnCount() == 2, timeout=5000)
         qtbot.mouseClick(view.pause_button, Qt.LeftButton)
         assert not bridge.polling
         qtbot.wait(300)  # a request in flight lands

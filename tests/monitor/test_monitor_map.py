@@ -27,6 +27,7 @@ from mm_pc.monitor.widgets.direction_widget import (
     GAINS_PX_PER_MM,
     DirectionPanel,
     auto_gain,
+    gain_peak,
 )
 from mm_pc.monitor.widgets.map_view.raster import PathRaster
 from mm_pc.monitor.widgets.map_view.view import (
@@ -761,8 +762,11 @@ def test_direction_vector_is_the_newest_displacement_times_the_gain(panel, ctx, 
         dx, dy = hist.last(f"s{k}_dx"), hist.last(f"s{k}_dy")
         assert (dx, dy) != (0.0, 0.0)
         assert w.vector_px() == pytest.approx((dx * w.gain, dy * w.gain))
-        tail = hist.tail(100)
-        peak = np.hypot(tail[:, hist.index[f"s{k}_dx"]], tail[:, hist.index[f"s{k}_dy"]]).max()
+        t = hist.column("t")
+        last_s = t >= t[-1] - 1.0  # the gain looks back one second, not a number of rows
+        speed = np.hypot(hist.column(f"s{k}_vx"), hist.column(f"s{k}_vy"))[last_s]
+        peak = np.percentile(speed, 95) * np.median(np.diff(t[last_s]))
+        assert peak == pytest.approx(0.2 / 50, rel=0.3)  # ~0.2 m/s at 50 Hz: ~4 mm per reply
         assert w.gain == auto_gain(peak, w.radius_px())
         assert peak * w.gain <= 0.9 * w.radius_px()
         speed = math.hypot(hist.last(f"s{k}_vx"), hist.last(f"s{k}_vy"))
@@ -773,6 +777,40 @@ def test_direction_vector_is_the_newest_displacement_times_the_gain(panel, ctx, 
         assert w.gain == 1e4
         assert w.vector_px() == pytest.approx(
             (hist.last(f"s{k}_dx") * 1e4, hist.last(f"s{k}_dy") * 1e4))
+
+
+def test_one_long_reply_does_not_shrink_the_auto_gain(panel, ctx, feed):
+    feed(ctx, rate_hz=50, seconds=5)
+    panel.refresh()
+    gains = [w.gain for w in panel.widgets]
+    hist = ctx.session.history
+    row = hist.tail(1)[0].copy()
+    # a reply 0.6 s late (after a pause or a registers refresh): 30x the displacement, the
+    # same speed
+    row[hist.index["t"]] += 0.6
+    for k in range(2):
+        for f in ("dx", "dy"):
+            row[hist.index[f"s{k}_{f}"]] *= 30
+    hist.append(row)
+    panel.refresh()
+    for k, w in enumerate(panel.widgets):
+        big = math.hypot(hist.last(f"s{k}_dx"), hist.last(f"s{k}_dy"))
+        assert auto_gain(big, w.radius_px()) < gains[k] / 10  # the old largest-of-100-rows rule
+        assert w.gain == gains[k]
+        assert w.vector_px() == pytest.approx((hist.last(f"s{k}_dx") * w.gain,
+                                               hist.last(f"s{k}_dy") * w.gain))
+    panel.widgets[0].grab()  # the long arrow is painted clipped at the circle, no error
+
+
+def test_gain_peak_is_a_speed_percentile_over_one_second():
+    t = np.arange(0, 3, 0.01)
+    v = np.full_like(t, 0.1)
+    v[-1] = 5.0  # one fast row does not move the 95th percentile
+    assert gain_peak(t, v, np.zeros_like(t)) == pytest.approx(0.1 * 0.01)
+    assert gain_peak(t[:1], v[:1], v[:1]) == 0.0
+    assert gain_peak(t, np.full_like(t, np.nan), v * np.nan) == 0.0
+    v[: len(t) - 150] = 3.0  # older than one second: not looked at
+    assert gain_peak(t, v, np.zeros_like(t)) == pytest.approx(0.1 * 0.01)
 
 
 def test_direction_refresh_skips_unchanged_history(panel, ctx, monkeypatch, feed):

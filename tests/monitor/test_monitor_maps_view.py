@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 import re
 import time
 from pathlib import Path
@@ -17,7 +18,7 @@ from PySide6.QtCore import QPointF, QRectF, Qt
 from PySide6.QtWidgets import QApplication
 
 from mm_pc.core.fixes.gps import gps_accuracy_m
-from mm_pc.core.maps.coverage_map import COLORS_RGB8, MOWED, MOWER, UNMOWED, CoverageMap
+from mm_pc.core.maps.coverage_map import COLORS_RGB, MOWED, MOWER, UNMOWED, CoverageMap
 from mm_pc.core.maps.trilateration import plane_distances
 from mm_pc.monitor.context import MonitorContext
 from mm_pc.monitor.model import maps as mm
@@ -25,6 +26,8 @@ from mm_pc.monitor.model.session import MonitorSession
 from mm_pc.monitor.model.sim_feed import sim_replies
 from mm_pc.monitor.widgets.maps_view import grid_item
 from mm_pc.monitor.widgets.maps_view import view as mv
+from mm_pc.monitor.widgets.maps_view.palette import DISPLAY_RGB8 as COLORS_RGB8
+from mm_pc.monitor.widgets.maps_view.palette import PATH_STYLES, luminance
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -299,8 +302,15 @@ def test_simulate_button_draws_beacons_circles_gps_and_paths(qtbot, run):
     view = make_view(qtbot)
     view.speed_box.setCurrentText("all at once")
     qtbot.mouseClick(view.sim_button, Qt.MouseButton.LeftButton)
+    # built in a process of its own, with a busy bar and a Cancel while it runs
+    assert view._job is not None and view._job.process.pid != os.getpid()
+    assert not view.progress.isHidden() and not view.cancel_button.isHidden()
+    assert not view.sim_button.isEnabled() and "own process" in view.status.text()
     last = len(run.sim.t) - 1
-    qtbot.waitUntil(lambda: view.run is not None and view.sim_k == last, timeout=20_000)
+    qtbot.waitUntil(lambda: view.run is not None and view.sim_k == last, timeout=60_000)
+    assert view.progress.isHidden() and view.cancel_button.isHidden()
+    assert view.sim_button.isEnabled() and not view._job
+    np.testing.assert_array_equal(view.run.fused, run.fused)  # the same run as in-process
     sim = view.run.sim
     assert view.source == "sim" and view.source_box.currentData() == "sim"
     # beacons with names
@@ -406,3 +416,46 @@ def test_one_changed_cell_costs_the_same_on_a_large_map(qtbot, shape):
         times.append(time.perf_counter() - t0)
     assert view.grid.pixels_written == 30
     assert float(np.median(times)) < 0.05  # generous; measured ~0.1 ms on both sizes
+
+
+def test_the_maps_palette_is_colour_blind_safe_and_keeps_the_seeds_meanings():
+    assert len({tuple(c) for c in COLORS_RGB8}) == len(COLORS_RGB8)  # one colour per code
+    # unmowed and mowed differ in lightness (seen without hue), not only in hue as the
+    # seed's two greens
+    assert luminance(COLORS_RGB8[MOWED]) - luminance(COLORS_RGB8[UNMOWED]) > 0.4
+    seed = np.asarray(COLORS_RGB)
+    assert abs(luminance(seed[MOWED] * 255) - luminance(seed[UNMOWED] * 255)) > 0.1  # seed: close
+    # the seed's meanings by hue: unmowed green-dominant, mower blue-dominant
+    assert np.argmax(COLORS_RGB8[UNMOWED]) == 1 and np.argmax(COLORS_RGB8[MOWER]) == 2
+    # truth, fused and raw differ in width or dash as well as colour
+    styles = {key: (width, dash) for key, (_c, width, dash, _z) in PATH_STYLES.items()}
+    assert len(set(styles.values())) == 3
+    assert len({c for c, *_ in PATH_STYLES.values()}) == 3
+
+
+@pytest.mark.parametrize("child", ["fail", "report_error"])
+def test_a_failing_simulation_is_shown_in_the_view(qtbot, monkeypatch, child):
+    import sim_children
+
+    monkeypatch.setattr(mv.MapsView, "sim_target", staticmethod(getattr(sim_children, child)))
+    view = make_view(qtbot)
+    view.start_simulation(7)
+    qtbot.waitUntil(lambda: view._job is None, timeout=30_000)
+    assert not view.error.isHidden() and view.error.text().startswith("simulated run failed: ")
+    text = view.error.text()
+    assert ("seed 7 refused" in text) if child == "report_error" else ("exit code 1" in text)
+    assert view.run is None and view.sim_button.isEnabled() and view.progress.isHidden()
+
+
+def test_cancel_stops_the_simulation_process(qtbot, monkeypatch):
+    import sim_children
+
+    monkeypatch.setattr(mv.MapsView, "sim_target", staticmethod(sim_children.hang))
+    view = make_view(qtbot)
+    view.start_simulation(3)
+    process = view._job.process
+    qtbot.waitUntil(process.is_alive, timeout=10_000)
+    qtbot.mouseClick(view.cancel_button, Qt.MouseButton.LeftButton)
+    assert view._job is None and not process.is_alive()
+    assert "cancelled" in view.status.text() and view.sim_button.isEnabled()
+    assert view.cancel_button.isHidden() and view.run is None

@@ -116,6 +116,24 @@ def test_graph_curves_equal_the_history_window_in_mm(qtbot, make_ctx):
     assert (lo, hi) == pytest.approx((t[-1] - 10.0, t[-1] + 1.0))  # X_LEAD of the window ahead
 
 
+def test_graphs_show_speed_first_with_units_and_the_legend_outside(qtbot, make_ctx):
+    ctx = make_ctx(3.0)
+    view = GraphsView(ctx)
+    qtbot.addWidget(view)
+    view.refresh()
+    for k in range(2):
+        speed, disp = view.plots[(k, "speed")], view.plots[(k, "disp")]
+        # speed is the top row of each sensor's column; the per-reply displacement is
+        # second and says that it depends on the request interval
+        assert view.canvas.ci.getItem(0, k) is speed and view.canvas.ci.getItem(1, k) is disp
+        assert "request interval" in disp.titleLabel.text
+        assert speed.getAxis("left").labelText == "speed (mm/s)"
+        assert disp.getAxis("left").labelText == "displacement per reply (mm)"
+        assert speed.legend is None and disp.legend is None  # nothing drawn over the curves
+    assert "X (sensor right)" in view.legend.text() and "Y (sensor forward)" in view.legend.text()
+    assert not view.legend.isHidden()
+
+
 def test_graph_axes_move_only_when_the_data_reach_their_ends(qtbot, make_ctx):
     ctx = make_ctx(30.0)
     view = GraphsView(ctx)

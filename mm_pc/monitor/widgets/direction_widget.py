@@ -4,8 +4,14 @@ One :class:`DirectionWidget` per sensor, in the sensor frame (X right =
 robot right, Y up = robot forward), as the original monitor's "Direction
 Widget". The arrow is the processed (filtered, calibrated) displacement of
 the newest history row, ``s{k}_dx, s{k}_dy`` (m), times a gain in screen
-pixels per metre: chosen automatically (a 1-2-5 step that keeps the largest
-displacement of the last second inside the circle) or fixed by the user.
+pixels per metre: chosen automatically or fixed by the user.
+The automatic gain is a 1-2-5 step that keeps the typical displacement of
+the last ``GAIN_WINDOW_S`` (1 s) of history inside the circle: the
+``GAIN_PERCENTILE`` (95th) percentile of the speed times the median time
+between rows (:func:`gain_peak`). It is based on speed and time, not on the
+largest displacement of the last rows, so one long reply (after a pause, a
+registers refresh or a 1 kHz fetch) does not shrink the arrows to dots for
+seconds; that reply's own arrow is drawn clipped at the circle's edge.
 """
 
 from __future__ import annotations
@@ -20,12 +26,16 @@ from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidg
 from mm_pc.monitor.context import MonitorContext
 from mm_pc.monitor.widgets.style import sensor_colour
 
-__all__ = ["GAINS_PX_PER_MM", "DirectionPanel", "DirectionWidget", "auto_gain"]
+__all__ = ["GAINS_PX_PER_MM", "DirectionPanel", "DirectionWidget", "auto_gain", "gain_peak"]
 
 #: Gains offered (screen pixels per millimetre of displacement), 1-2-5 steps.
 GAINS_PX_PER_MM = (0.1, 0.2, 0.5, 1, 2, 5, 10, 20, 50, 100, 200, 500, 1000)
-#: Rows the auto gain looks back over for the largest displacement.
-PEAK_ROWS = 100
+#: Seconds of history the auto gain looks back over.
+GAIN_WINDOW_S = 1.0
+#: Percentile of the speed over that window the auto gain fits in the circle.
+GAIN_PERCENTILE = 95.0
+#: Rows read from the history's end to find the last GAIN_WINDOW_S (>= 1 s at 1 kHz).
+TAIL_ROWS = 1024
 #: Part of the circle's radius the largest recent displacement may fill.
 FILL = 0.9
 
@@ -37,6 +47,26 @@ def auto_gain(peak_m: float, radius_px: float) -> float:
         if peak_m * g * 1e3 <= FILL * radius_px:
             best = g * 1e3
     return best
+
+
+def gain_peak(t: np.ndarray, vx: np.ndarray, vy: np.ndarray,
+              window_s: float = GAIN_WINDOW_S, percentile: float = GAIN_PERCENTILE) -> float:
+    """The displacement (m) the auto gain fits: the ``percentile`` of the speed (m/s)
+    over the rows with ``t`` (s) in the last ``window_s`` seconds, times their median
+    time step (s). 0 when there is no finite speed or fewer than two rows."""
+    if len(t) < 2:
+        return 0.0
+    keep = t >= t[-1] - window_s
+    if keep.sum() < 2:
+        keep[-2:] = True
+    tt = t[keep]
+    speed = np.hypot(vx[keep], vy[keep])
+    speed = speed[np.isfinite(speed)]
+    steps = np.diff(tt)
+    steps = steps[np.isfinite(steps) & (steps > 0)]
+    if not len(speed) or not len(steps):
+        return 0.0
+    return float(np.percentile(speed, percentile) * np.median(steps))
 
 
 class DirectionWidget(QWidget):
@@ -96,6 +126,9 @@ class DirectionWidget(QWidget):
         p.drawText(QPointF(cx - 4, cy - r - 3), "Y")
 
         vx, vy = self.vector_px()
+        length = math.hypot(vx, vy)
+        if length > r > 0:  # a long reply's arrow stops at the circle (the gain fits speed)
+            vx, vy = vx * r / length, vy * r / length
         self._draw_arrow(p, cx, cy, vx, vy)
 
         p.setPen(QColor("#202020"))
@@ -195,13 +228,12 @@ class DirectionPanel(QWidget):
         self._ensure_widgets()
         if hist is None:
             return
-        tail = hist.tail(PEAK_ROWS)
+        tail = hist.tail(TAIL_ROWS)
         for k, w in enumerate(self.widgets):
             if not len(tail):
                 w.set_sample(0.0, 0.0, 0.0, 0.0)
                 continue
             col = {f: tail[:, hist.index[f"s{k}_{f}"]] for f in ("dx", "dy", "vx", "vy")}
-            mags = np.hypot(col["dx"], col["dy"])
-            peak = float(np.nanmax(mags)) if np.isfinite(mags).any() else 0.0
+            peak = gain_peak(tail[:, hist.index["t"]], col["vx"], col["vy"])
             w.set_sample(col["dx"][-1], col["dy"][-1],
                          math.hypot(col["vx"][-1], col["vy"][-1]), peak)

@@ -71,8 +71,9 @@ class FilterDialog(QDialog):
         self.grid = QGridLayout(self._grid_host)
         self.note = QLabel(
             f"Window in samples ({MIN_WINDOW}..{MAX_WINDOW}), a true median over the newest "
-            "replies. X filters the sensor's X axis (right), Y its Y axis (forward). Changes "
-            "apply at once. At low sample rates a median throws correct large steps away "
+            "replies. X filters the sensor's X axis (right), Y its Y axis (forward). A check "
+            "box applies its sensor at once, Enter in a window field too; Apply applies "
+            "every row. At low sample rates a median throws correct large steps away "
             "(a late reply holds more counts), so filters are off by default."
         )
         self.note.setWordWrap(True)
@@ -151,7 +152,17 @@ class FilterDialog(QDialog):
             row.error.hide()
             return
         row.error.setText(f"{row.device}: {error}; nothing changed")
+        row.error.setToolTip(row.error.text())
         row.error.show()
+        self._fit_height()
+
+    def _fit_height(self) -> None:
+        """Grow the dialog so a wrapped error message shows whole (it was cut off when the
+        dialog kept the height it had without it)."""
+        self.layout().activate()
+        need = self.layout().totalHeightForWidth(self.width())
+        if need > self.height():
+            self.resize(self.width(), need)
 
     def apply_sensor(self, device: str) -> bool:
         """Apply one sensor's row; False (its filter unchanged, message shown) if refused."""

@@ -1,16 +1,16 @@
-"""Robot geometry editor: where the sensors sit, the axis length, the one-sensor choice.
+"""Robot geometry editor: where the sensors sit, the axle length, the one-sensor choice.
 
 Shown in the units of the original (cm, degrees); kept in SI. Mount
 positions are base_link (REP 103: x forward of the axle centre, y left);
 yaw is the mounting error (CCW+, see :class:`mm_pc.core.geometry.SensorMount`).
-"Apply" validates every field (numbers, finite, axis length > 0) and then
+"Apply" validates every field (numbers, finite, axle length > 0) and then
 hands the mounts and sensor index to ``MonitorSession.configure_odometry``,
 which refuses what the pose method cannot use (e.g. a one-sensor method
 with its sensor on the axle line, x = 0). On any refusal the message is
 shown in red and nothing changes; on success ``ctx.odometry_changed`` is
 emitted and the pose carries on from where it is.
 
-The pose math does not use the axis length (it is the wheel odometry's); it
+The pose math does not use the axle length (it is the wheel odometry's); it
 is kept with the geometry in ``ctx.robot_geometry`` and in the YAML file::
 
     version: 1
@@ -57,7 +57,7 @@ class _MountRow:
 
 
 class GeometryDialog(QDialog):
-    """Edit the sensor mounts (cm, deg), the axis length (cm) and the one-sensor index."""
+    """Edit the sensor mounts (cm, deg), the axle length (cm; key axis_length), the one sensor."""
 
     def __init__(self, ctx: MonitorContext, parent: QWidget | None = None) -> None:
         super().__init__(parent)
@@ -72,7 +72,7 @@ class GeometryDialog(QDialog):
         self.sensor_box.setToolTip("the sensor that exact, seed-approach1 and seed-approach2 use")
         self.method_label = QLabel()
         form = QFormLayout()
-        form.addRow("Axis length (cm)", self.axis_edit)
+        form.addRow("Axle length (cm)", self.axis_edit)
         form.addRow("Sensor for one-sensor methods", self.sensor_box)
         form.addRow("Pose method", self.method_label)
         self.error = QLabel("")
@@ -169,9 +169,9 @@ class GeometryDialog(QDialog):
             y = parse_number(row.y.text(), f"{name} y (cm)") / 100
             yaw = math.radians(parse_number(row.yaw.text(), f"{name} yaw (deg)"))
             mounts.append(SensorMount(x, y, yaw))
-        axis = parse_number(self.axis_edit.text(), "axis length (cm)") / 100
+        axis = parse_number(self.axis_edit.text(), "axle length (cm)") / 100
         if axis <= 0:
-            raise ValueError(f"axis length must be > 0 cm, got {self.axis_edit.text().strip()!r}")
+            raise ValueError(f"axle length must be > 0 cm, got {self.axis_edit.text().strip()!r}")
         return RobotGeometry(tuple(mounts), axis), max(self.sensor_box.currentIndex(), 0)
 
     # -- actions -------------------------------------------------------------------------------

@@ -1,8 +1,12 @@
 """Graphs of each sensor's displacement and speed over time, in a scrolling window.
 
-Per sensor two plots against t (s since the first reply): the displacement
-per reply (processed: filtered and calibrated; mm, sensor frame X/Y) and the
-speed (mm/s). Only the rows inside the window are handed to the curves (found
+Per sensor two plots against t (s since the first reply): first the speed
+(mm/s, sensor frame X/Y), then the displacement per reply (processed:
+filtered and calibrated; mm). The displacement per reply depends on the
+request interval -- a late reply covers more time and shows a spike while
+the speed stays flat -- so it is second and its title says so. The legend
+(X, Y colours) is a line above the plots, never over the curves; each value
+axis names its one unit. Only the rows inside the window are handed to the curves (found
 with a binary search on t), so a redraw costs the same with a minute or an
 hour of history; a window of more than 4000 rows is drawn as the minimum
 and maximum of 1000-2000 buckets (spikes stay visible), kept from frame to
@@ -34,15 +38,17 @@ from PySide6.QtWidgets import (
 
 from mm_pc.monitor.model.session import sensor_columns
 
-__all__ = ["DEFAULT_WINDOW_S", "GraphsView", "PeakCache", "bucket_size"]
+__all__ = ["AXIS_NAMES", "DEFAULT_WINDOW_S", "PLOTS", "GraphsView", "PeakCache", "bucket_size"]
 
 DEFAULT_WINDOW_S = 10
 MAX_WINDOW_S = 3600
 #: (key, title, history fields, unit)
 PLOTS = (
-    ("disp", "displacement per sample", ("dx", "dy"), "mm"),
     ("speed", "speed", ("vx", "vy"), "mm/s"),
+    ("disp", "displacement per reply (grows with the request interval)", ("dx", "dy"), "mm"),
 )
+#: the axes' names in the legend line (sensor frame)
+AXIS_NAMES = {"x": "X (sensor right)", "y": "Y (sensor forward)"}
 AXIS_COLOURS = {"x": "#d62728", "y": "#1f77b4"}
 #: windows longer than 2 * MAX_BUCKETS rows are drawn min/max-decimated (a few px per bucket)
 MAX_BUCKETS = 2000
@@ -110,6 +116,13 @@ class PeakCache:
         return out_t, np.concatenate((col[head], peaks, col[tail]))
 
 
+def legend_html() -> str:
+    """The legend line: each axis's colour and name (drawn outside the plots)."""
+    parts = [f'<span style="color:{AXIS_COLOURS[a]}">&#9644;&#9644; {AXIS_NAMES[a]}</span>'
+             for a in ("x", "y")]
+    return "&nbsp;&nbsp;&nbsp;".join(parts) + "&nbsp;&nbsp;&nbsp;(t: seconds since the first reply)"
+
+
 class GraphsView(QWidget):
     """Displacement and speed of every sensor over the last ``window`` seconds."""
 
@@ -145,10 +158,17 @@ class GraphsView(QWidget):
         bar.addStretch(1)
         bar.addWidget(self.note)
 
+        self.legend = QLabel(legend_html())
+        self.legend.setWordWrap(True)
+        self.legend.setToolTip(
+            "Speed is the displacement divided by the time the reply covers; the "
+            "displacement per reply grows when a reply comes late (the request interval), "
+            "so a spike there with a flat speed is no sensor glitch.")
         self.canvas = pg.GraphicsLayoutWidget()
         self.canvas.setBackground("w")
         lay = QVBoxLayout(self)
         lay.addLayout(bar)
+        lay.addWidget(self.legend)
         lay.addWidget(self.canvas, 1)
 
         ctx.devices_known.connect(self._build)
@@ -168,16 +188,12 @@ class GraphsView(QWidget):
             for row, (key, title, _fields, unit) in enumerate(PLOTS):
                 plot = self.canvas.addPlot(row=row, col=k)
                 plot.setTitle(f"{dev}: {title}", color="#222222")
-                self._style(plot, unit)
-                legend = plot.addLegend(offset=(5, 5))
-                legend.setLabelTextColor("#222222")
-                legend.setBrush(pg.mkBrush(255, 255, 255, 210))
+                self._style(plot, title, unit)
                 for axis in ("x", "y"):
                     pen = pg.mkPen(AXIS_COLOURS[axis], width=1)
                     # no clipping or downsampling by pyqtgraph: the points are the window's
                     # already (min/max buckets when long), and both cost with every frame
-                    curve = plot.plot([], [], pen=pen, name=f"{axis.upper()} ({unit})",
-                                      skipFiniteCheck=True)
+                    curve = plot.plot([], [], pen=pen, skipFiniteCheck=True)
                     self.curves[(k, key, axis)] = curve
                 plot.disableAutoRange()  # the ranges are set in refresh (rarely)
                 if row < len(PLOTS) - 1:  # one time axis per column, under its last plot:
@@ -188,7 +204,7 @@ class GraphsView(QWidget):
         self._invalidate()
 
     @staticmethod
-    def _style(plot: pg.PlotItem, unit: str) -> None:
+    def _style(plot: pg.PlotItem, title: str, unit: str) -> None:
         # no grid: its translucent lines cost 3-4x the curves' paint time (software raster)
         plot.addLine(y=0.0, pen=pg.mkPen("#bbbbbb", width=1))
         for name in ("left", "bottom"):
@@ -196,7 +212,7 @@ class GraphsView(QWidget):
             axis.setPen(pg.mkPen("#444444"))
             axis.setTextPen(pg.mkPen("#222222"))
         plot.setLabel("bottom", "t", units="s")
-        plot.setLabel("left", unit)
+        plot.setLabel("left", f"{title.split(' (')[0]} ({unit})")
         plot.getAxis("left").enableAutoSIPrefix(False)
         plot.getAxis("bottom").enableAutoSIPrefix(False)
 

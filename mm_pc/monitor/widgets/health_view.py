@@ -1,10 +1,11 @@
 """Health of the link and the sensors (issue item 8).
 
-* A table per sensor from the Beagle node's ``/diagnostics`` (state, achieved
-  poll rate, poll period p50/p99, late polls, SPI errors, lift events,
-  overflows, poller CPU, last error), each row coloured by the status level.
+* A table from the Beagle node's ``/diagnostics``, one column per sensor and
+  one row per quantity in plain words with a tooltip each (state, polls per
+  second, typical and worst poll gap, late polls, bus errors, lifts,
+  overflows, poller CPU, last error), each column coloured by the status level.
 * A plot of the two-sensor residual over time (history column ``residual``,
-  metres; NaN -- and said so -- unless the pose method is
+  metres, drawn in mm; NaN -- and said so -- unless the pose method is
   ``two-sensor``) and of the lift events per sample (``s{k}_lifts``).
 * The session's counters (replies, used, restarts, incomplete) and the
   bridge's (dropped requests, skipped ticks).
@@ -42,21 +43,32 @@ from mm_pc.monitor.context import MonitorContext
 
 __all__ = ["DIAG_COLUMNS", "LEVEL_COLOURS", "BucketMax", "HealthView", "bucket_max"]
 
-#: (column title, /diagnostics key)
+#: (column title, /diagnostics key, tooltip): plain words, each title with its one unit
 DIAG_COLUMNS = (
-    ("Level", "level"),
-    ("State", "state"),
-    ("Rate (Hz)", "achieved_rate_hz"),
-    ("Period p50 (µs)", "period_p50_us"),
-    ("Period p99 (µs)", "period_p99_us"),
-    ("Late polls", "late_polls"),
-    ("SPI errors", "spi_errors"),
-    ("Lift events", "lift_events"),
-    ("Overflows", "overflows"),
-    ("Poller CPU (%)", "poller_cpu_percent"),
-    ("Last error", "last_error"),
-    ("Message", "message"),
+    ("Status", "level", "OK, WARN (look at it), ERROR (the sensor does not work) or STALE "
+     "(no report for a while), as the Beagle node judges it"),
+    ("State", "state", "the sensor's state in the node: up, down (not answering), ..."),
+    ("Polls/s (Hz)", "achieved_rate_hz", "how often the node read the sensor in the last "
+     "second (the goal is 1000 per second)"),
+    ("Typical gap (µs)", "period_p50_us", "time between two reads of the sensor, median "
+     "(the goal is 1000 µs)"),
+    ("Worst gap (µs)", "period_p99_us", "time between two reads that only 1 in 100 "
+     "exceeded (99th percentile)"),
+    ("Late polls", "late_polls", "reads that came later than planned (counts are kept, "
+     "the step just covers more time)"),
+    ("Bus errors", "spi_errors", "failed SPI transfers to the sensor chip (the read is "
+     "repeated)"),
+    ("Lifts", "lift_events", "reads in which the sensor saw no surface (lifted off the "
+     "ground): its motion is estimated there"),
+    ("Overflows", "overflows", "reads in which the chip's counter ran over (counts lost: "
+     "should stay 0)"),
+    ("Poller CPU (%)", "poller_cpu_percent", "CPU time of the node's read loop, percent of "
+     "one core"),
+    ("Last error", "last_error", "the newest error the node reported for this sensor"),
+    ("Message", "message", "the node's summary of this sensor"),
 )
+#: columns of free text: drawn elided in the width left, the whole text in the cell's tooltip
+TEXT_COLUMNS = ("last_error", "message")
 #: diagnostic_msgs/DiagnosticStatus level -> (name, row background)
 LEVEL_COLOURS = {
     0: ("OK", "#d9f2d9"),
@@ -64,6 +76,21 @@ LEVEL_COLOURS = {
     2: ("ERROR", "#f7c6c6"),
     3: ("STALE", "#dddddd"),
 }
+SESSION_TIP = (
+    "replies received: answers of the node; used for the pose: those that moved the map.\n"
+    "fresh starts: replies taken as a new starting point (the first one, after a node "
+    "restart or a replay) -- their counts are not a motion.\n"
+    "missing a sensor: replies without every sensor's data (the next full reply covers "
+    "the gap, no count lost); refused: replies with numbers that are not finite.\n"
+    "single polls: the node's 1 kHz reads the pose was built from; gaps bridged: stretches "
+    "without those reads, crossed in one straight step; replies without polls: "
+    "integrated as one step each.")
+BRIDGE_TIP = (
+    "requests: questions the monitor sent at the sample rate; replies: answers.\n"
+    "unanswered in time: given up after the timeout (the next reply's totals cover them).\n"
+    "not sent: at a tick the previous request was still unanswered, so none was sent "
+    "(a slow link; no count is lost).\n"
+    "replies with an error: the node answered but the call failed.")
 PLOT_HZ = 4.0
 MAX_POINTS = 2000
 #: zoomed in to at most this many rows: thin them afresh (finer than the cache)
@@ -89,27 +116,47 @@ class HealthView(QWidget):
         self._caches: dict[str, BucketMax] = {}
         self._hist_key: tuple = ()
 
-        self.table = QTableWidget(0, len(DIAG_COLUMNS))
-        self.table.setHorizontalHeaderLabels([c for c, _ in DIAG_COLUMNS])
+        # one row per quantity, one column per sensor: twelve quantities side by side did
+        # not fit (the last column was cut off); two or four sensors do
+        self.table = QTableWidget(len(DIAG_COLUMNS), 0)
         self.table.setEditTriggers(QTableWidget.NoEditTriggers)
-        self.table.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeToContents)
-        self.table.horizontalHeader().setStretchLastSection(True)
+        for r, (title, _key, tip) in enumerate(DIAG_COLUMNS):
+            item = QTableWidgetItem(title)
+            item.setToolTip(tip)
+            self.table.setVerticalHeaderItem(r, item)
+        self.table.horizontalHeader().setSectionResizeMode(QHeaderView.Stretch)
+        self.table.verticalHeader().setSectionResizeMode(QHeaderView.ResizeToContents)
+        self.table.setTextElideMode(Qt.ElideRight)
+        self.table.setWordWrap(False)
         self.diag_state = QLabel("no /diagnostics received yet")
         self.session_label = QLabel()
+        self.session_label.setWordWrap(True)
+        self.session_label.setToolTip(SESSION_TIP)
         self.bridge_label = QLabel()
+        self.bridge_label.setWordWrap(True)
+        self.bridge_label.setToolTip(BRIDGE_TIP)
         self.residual_note = QLabel()
         self.residual_note.setWordWrap(True)
 
         self.plots = pg.GraphicsLayoutWidget()
         self.plots.setBackground("w")
         self.residual_plot = self.plots.addPlot(row=0, col=0, title="Two-sensor residual")
-        self.residual_plot.setLabel("left", "residual", units="m")
+        # one unit, named once: mm (pyqtgraph's SI prefix showed µm beside a text in m)
+        self.residual_plot.setLabel("left", "residual (mm)")
+        self.residual_plot.getAxis("left").enableAutoSIPrefix(False)
         self.residual_curve = self._curve(self.residual_plot, "#ff7f0e")
-        self.lift_plot = self.plots.addPlot(row=1, col=0, title="Lift events per sample")
-        self.lift_plot.setLabel("left", "polls lifted")
-        self.lift_plot.setLabel("bottom", "time", units="s")
+        self.lift_plot = self.plots.addPlot(row=1, col=0, title="Lifted polls per reply")
+        self.lift_plot.setLabel("left", "lifted polls (count)")
+        self.lift_plot.setLabel("bottom", "time (s)")
+        for plot in (self.lift_plot, self.residual_plot):
+            plot.getAxis("bottom").enableAutoSIPrefix(False)
+        self.lift_plot.getAxis("left").enableAutoSIPrefix(False)
+        # a count: the axis starts at 0 and shows at least 0..1 (an empty plot ran
+        # -0.4..0.4 "(x0.001)")
+        self.lift_plot.enableAutoRange(y=False)
+        self.lift_plot.setYRange(0.0, 1.0, padding=0.05)
         self.lift_plot.setXLink(self.residual_plot)
-        self.lift_plot.addLegend(offset=(10, 5))
+        # no legend item over the curves: the title names each sensor's colour
         self.lift_curves: list[pg.PlotDataItem] = []
 
         top = QWidget()
@@ -147,24 +194,27 @@ class HealthView(QWidget):
         for dev, values in status.items():
             self.diagnostics[dev] = dict(values)
         devices = list(self.diagnostics)
-        if self.table.rowCount() != len(devices):
-            self.table.setRowCount(len(devices))
-            self.table.setVerticalHeaderLabels(devices)
-        for r, dev in enumerate(devices):
-            self._fill_row(r, self.diagnostics[dev])
+        if self.table.columnCount() != len(devices):
+            self.table.setColumnCount(len(devices))
+            self.table.setHorizontalHeaderLabels(devices)
+            for c, dev in enumerate(devices):
+                self.table.horizontalHeaderItem(c).setToolTip(f"sensor {c + 1}: {dev}")
+        for c, dev in enumerate(devices):
+            self._fill_column(c, self.diagnostics[dev])
         self.diag_state.setText(f"/diagnostics: {len(devices)} sensor(s), updated just now")
 
-    def _fill_row(self, r: int, values: dict) -> None:
+    def _fill_column(self, c: int, values: dict) -> None:
         level = _level(values.get("level"))
         name, colour = LEVEL_COLOURS.get(level, (str(level), "#ffffff"))
         brush = QBrush(QColor(colour))
-        for c, (_title, key) in enumerate(DIAG_COLUMNS):
+        for r, (title, key, tip) in enumerate(DIAG_COLUMNS):
             text = name if key == "level" else str(values.get(key, "–"))
             item = self.table.item(r, c)
             if item is None:
                 item = QTableWidgetItem()
                 self.table.setItem(r, c, item)
             item.setText(text)
+            item.setToolTip(f"{text}\n{title}: {tip}" if key in TEXT_COLUMNS else f"{title}: {tip}")
             item.setBackground(brush)
 
     def on_bridge_stats(self, stats) -> None:
@@ -223,10 +273,11 @@ class HealthView(QWidget):
             self._hist_key = key
             self._caches.clear()
         t_all = hist.column("t")
-        self.residual_curve.setData(*self._thinned(hist, "residual", t_all))
+        rt, ry = self._thinned(hist, "residual", t_all)
+        self.residual_curve.setData(rt, ry * 1e3)
         if method == "two-sensor":
             self.residual_note.setText(
-                "Residual: how far the two sensors disagree with one rigid motion (m); "
+                "Residual (mm): how far the two sensors disagree with one rigid motion; "
                 "large values mean slip, a lift or a wrong geometry."
             )
         else:
@@ -240,8 +291,17 @@ class HealthView(QWidget):
             name = self.ctx.session.devices[k]
             pen = SENSOR_PENS[k % len(SENSOR_PENS)]
             self.lift_curves.append(self._curve(self.lift_plot, pen, name))
+            keys = ", ".join(
+                f'<span style="color:{SENSOR_PENS[j % len(SENSOR_PENS)]}">&#9644; '
+                f'{self.ctx.session.devices[j]}</span>' for j in range(len(self.lift_curves)))
+            self.lift_plot.setTitle(f"Lifted polls per reply ({keys})")
+        top = 1.0
         for k, curve in enumerate(self.lift_curves[:n]):
-            curve.setData(*self._thinned(hist, f"s{k}_lifts", t_all))
+            lt, ly = self._thinned(hist, f"s{k}_lifts", t_all)
+            curve.setData(lt, ly)
+            if np.isfinite(ly).any():
+                top = max(top, float(np.nanmax(ly)))
+        self.lift_plot.setYRange(0.0, top, padding=0.05)
 
     def _show_counters(self) -> None:
         s = self.ctx.session.stats
@@ -252,9 +312,11 @@ class HealthView(QWidget):
             return
         self._stats_key = key
         self.session_label.setText(
-            f"Session: {s.replies} replies, {s.used} used, {s.baselines} baselines, "
-            f"{s.restarts} node restarts, {s.incomplete} incomplete, {s.rejected} rejected; "
-            f"pose from {s.polls} single polls, {s.gaps} gaps, {s.per_reply} replies per reply"
+            f"Session: {s.replies} replies received, {s.used} used for the pose; "
+            f"{s.baselines} fresh starts, {s.restarts} node restarts; "
+            f"{s.incomplete} missing a sensor, {s.rejected} refused; "
+            f"pose from {s.polls} single polls, {s.gaps} gaps bridged, "
+            f"{s.per_reply} replies without polls"
         )
         if self.ctx.bridge is None:
             self.bridge_label.setText("Bridge: offline (no ROS connection)")
@@ -262,16 +324,17 @@ class HealthView(QWidget):
             self.bridge_label.setText("Bridge: no figures yet")
         else:
             self.bridge_label.setText(
-                f"Bridge ({b.state}): {b.requests} requests, {b.replies} replies, "
-                f"{b.dropped_requests} dropped requests, {b.skipped_ticks} skipped ticks, "
-                f"{b.failed_replies} failed replies"
+                f"Link to the node ({b.state}): {b.requests} requests, {b.replies} replies; "
+                f"{b.dropped_requests} requests unanswered in time, "
+                f"{b.skipped_ticks} requests not sent (the previous one was still "
+                f"unanswered), {b.failed_replies} replies with an error"
             )
 
     def residual_data(self) -> tuple[np.ndarray, np.ndarray]:
-        """What the residual curve shows now (t in s, residual in m)."""
+        """What the residual curve shows now (t in s, residual in m; drawn in mm)."""
         x, y = self.residual_curve.getOriginalDataset()
         return (np.asarray(x) if x is not None else np.empty(0),
-                np.asarray(y) if y is not None else np.empty(0))
+                np.asarray(y) / 1e3 if y is not None else np.empty(0))
 
 
 def bucket_max(

@@ -17,14 +17,13 @@ from PySide6.QtWidgets import (
     QGraphicsItem,
 )
 
-from mm_pc.core.maps.coverage_map import (
-    COLORS_RGB8,
-    CoverageMap,
-)
+from mm_pc.core.maps.coverage_map import CoverageMap
+from mm_pc.monitor.widgets.maps_view.palette import DISPLAY_RGB8 as COLORS_RGB8
 
 __all__ = ["CODE_PIXELS", "GridImageItem"]
 
-#: uint32 0xFFRRGGBB per code: a pixel of a Format_RGB32 QImage.
+#: uint32 0xFFRRGGBB per code: a pixel of a Format_RGB32 QImage (the colour-blind-safe
+#: display palette, palette.DISPLAY_RGB8, not the seed's greens).
 CODE_PIXELS = (
     np.uint32(0xFF000000)
     | (COLORS_RGB8[:, 0].astype(np.uint32) << 16)

@@ -15,7 +15,9 @@ Two sources, chosen in the "Source" box:
   afresh.
 * **Simulated run** -- "Simulate mowing run" builds
   :func:`mm_pc.sim.field_run.simulate_field_run` and :func:`~mm_pc.sim.field_run.run_fusion`
-  in a worker thread (about 2.5 s; the result of a seed is cached), then plays
+  in a process of its own (:class:`~mm_pc.monitor.model.sim_process.SimJob`, 2.5-7 s:
+  on a thread it held the interpreter lock and the window stuttered), with a busy bar,
+  the seconds so far and a Cancel; the result of a seed is kept; then plays
   it with a timer at 1x..100x or all at once: the coverage grid from the TRUE
   path, the four beacons (names) and the range circles of the newest range
   set (in the robot's plane, ``sqrt(r^2 - h^2)``), the GPS fixes of the last
@@ -28,7 +30,6 @@ The grid image is :class:`~.grid_item.GridImageItem`; the model, :mod:`mm_pc.mon
 
 from __future__ import annotations
 
-import concurrent.futures
 import math
 import time
 
@@ -39,6 +40,7 @@ from PySide6.QtWidgets import (
     QComboBox,
     QHBoxLayout,
     QLabel,
+    QProgressBar,
     QPushButton,
     QSpinBox,
     QVBoxLayout,
@@ -47,22 +49,22 @@ from PySide6.QtWidgets import (
 
 from mm_pc.core.maps.coverage_map import (
     CODE_NAMES,
-    COLORS_RGB8,
     CoverageMap,
     UpdateResult,
 )
 from mm_pc.monitor.model.maps import (
     MapSettings,
     SimRun,
-    build_sim_run,
     circles,
     default_settings,
     feed_positions,
     make_map,
     sim_map,
 )
+from mm_pc.monitor.model.sim_process import SimJob, build_in_child
 from mm_pc.monitor.widgets.maps_view.dialog import NewMapDialog
 from mm_pc.monitor.widgets.maps_view.grid_item import GridImageItem
+from mm_pc.monitor.widgets.maps_view.palette import DISPLAY_RGB8, PATH_STYLES
 from mm_pc.monitor.widgets.style import ERROR_STYLE
 
 __all__ = ["SPEEDS", "MapsView"]
@@ -84,7 +86,7 @@ GPS_CIRCLES = 5  # accuracy circles for the newest this many GPS fixes
 GPS_TRAIL = 120  # GPS fixes shown (60 s at 2 Hz); all 1374 of a run hide the map
 LEGEND_WIDTH = 190  # px
 
-PATH_COLOURS = {"truth": "#000000", "raw": "#ff7f0e", "fused": "#0050c8"}
+PATH_COLOURS = {key: style[0] for key, style in PATH_STYLES.items()}
 BEACON_COLOUR = "#7b2fbe"
 GPS_COLOUR = "#e6a800"
 
@@ -109,7 +111,7 @@ def _code_samples() -> list[tuple[pg.ScatterPlotItem, str]]:
             ),
             f"{code} {CODE_NAMES[code]}",
         )
-        for code, rgb in enumerate(COLORS_RGB8)
+        for code, rgb in enumerate(DISPLAY_RGB8)
     ]
 
 
@@ -132,7 +134,8 @@ class MapsView(QWidget):
         self.sim_errors: tuple[float, float] | None = None
         self._play_t = 0.0
         self._clock = 0.0
-        self._future: concurrent.futures.Future | None = None
+        self._job: SimJob | None = None
+        self._runs: dict[int, SimRun] = {}  # seed -> built run (the child's cache is gone)
         self.dialog: NewMapDialog | None = None
 
         self._build_controls()
@@ -168,6 +171,15 @@ class MapsView(QWidget):
             "wire contacts, fused by the EKF; coverage drawn from the true path"
         )
         self.sim_button.clicked.connect(lambda: self.start_simulation())
+        self.cancel_button = QPushButton("Cancel")
+        self.cancel_button.setToolTip("stop building the simulated run")
+        self.cancel_button.clicked.connect(self.cancel_simulation)
+        self.cancel_button.hide()
+        self.progress = QProgressBar()
+        self.progress.setRange(0, 0)  # busy: the simulation reports no fraction done
+        self.progress.setMaximumWidth(120)
+        self.progress.setTextVisible(False)
+        self.progress.hide()
         self.seed_box = QSpinBox()
         self.seed_box.setRange(1, 1_000_000)
         self.seed_box.setValue(1)
@@ -184,6 +196,8 @@ class MapsView(QWidget):
         bar.addWidget(self.new_map_button)
         bar.addSpacing(16)
         bar.addWidget(self.sim_button)
+        bar.addWidget(self.progress)
+        bar.addWidget(self.cancel_button)
         bar.addWidget(self.seed_box)
         bar.addWidget(QLabel("Speed"))
         bar.addWidget(self.speed_box)
@@ -236,7 +250,8 @@ class MapsView(QWidget):
             size=7, symbol="x", brush=pg.mkBrush("#666666"), pen=pg.mkPen("#666666")
         )
         self.paths = {
-            key: pg.PlotDataItem([], [], pen=pg.mkPen(colour, width=1 if key == "truth" else 2))
+            key: pg.PlotDataItem([], [], pen=pg.mkPen(colour, width=PATH_STYLES[key][1],
+                                                      style=PATH_STYLES[key][2]))
             for key, colour in PATH_COLOURS.items()
         }
         for curve in self.paths.values():
@@ -250,14 +265,16 @@ class MapsView(QWidget):
             self.gps_circles,
             self.gps_good,
             self.gps_bad,
-            self.paths["raw"],
-            self.paths["fused"],
+            self.paths["fused"],  # wide, under the others
+            self.paths["raw"],  # dashed
             self.paths["truth"],  # on top: thin black over the fused path
             self.beacons,
         ]
         for item in self.sim_items:
             plot.addItem(item)
-        for key, text in (("truth", "truth"), ("raw", "raw mouse odometry"), ("fused", "fused")):
+        for key, text in (("truth", "truth (thin black)"),
+                          ("fused", "fused, EKF (wide blue)"),
+                          ("raw", "raw mouse odometry (dashed)")):
             self.sim_legend.addItem(self.paths[key], text)
         self.sim_legend.addItem(self.beacons, "beacon")
         self.sim_legend.addItem(self.range_circles, "range (newest set)")
@@ -304,7 +321,7 @@ class MapsView(QWidget):
                 self._clock = time.monotonic()
                 self.timer.start()  # resume playing
         else:
-            if self._future is None:
+            if self._job is None:
                 self.timer.stop()  # pause playing
             self._version = -1
             self._draw_live_status()
@@ -395,18 +412,37 @@ class MapsView(QWidget):
     # -- simulated run -------------------------------------------------------------------
 
     def start_simulation(self, seed: int | None = None) -> None:
-        """Build the simulated run in a worker thread; it plays when ready."""
-        if self._future is not None:
+        """Build the simulated run in a child process; it plays when ready."""
+        if self._job is not None:
             return
         seed = self.seed_box.value() if seed is None else int(seed)
         self.error.hide()
+        if seed in self._runs:
+            self.load_simulation(self._runs[seed])
+            return
         self.sim_button.setEnabled(False)
-        self.status.setText(f"simulating the mowing run (seed {seed})…")
-        # one thread for this run, no module-wide pool: it ends when the run is built
-        worker = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="maps-sim")
-        self._future = worker.submit(build_sim_run, seed)
-        worker.shutdown(wait=False)
+        self.progress.show()
+        self.cancel_button.show()
+        self.status.setText(f"simulating the mowing run (seed {seed}) in its own process…")
+        self._job = SimJob(seed, target=self.sim_target)
         self.timer.start()
+
+    #: the child's function (tests replace it with one that fails or hangs)
+    sim_target = staticmethod(build_in_child)
+
+    def cancel_simulation(self) -> None:
+        """Stop building the simulated run (its process is terminated)."""
+        if self._job is None:
+            return
+        job, self._job = self._job, None
+        job.cancel()
+        self._end_job()
+        self.status.setText(f"simulation (seed {job.seed}) cancelled after {job.elapsed_s:.1f} s")
+
+    def _end_job(self) -> None:
+        self.sim_button.setEnabled(True)
+        self.progress.hide()
+        self.cancel_button.hide()
 
     @property
     def speed(self) -> float | None:
@@ -443,19 +479,23 @@ class MapsView(QWidget):
             self.timer.start()
 
     def _tick(self) -> None:
-        if self._future is not None:
-            if not self._future.done():
+        if self._job is not None:
+            result = self._job.poll()
+            if result is None:
+                self.status.setText(f"simulating the mowing run (seed {self._job.seed}) in its "
+                                    f"own process… {self._job.elapsed_s:.0f} s")
                 return
-            future, self._future = self._future, None
-            self.sim_button.setEnabled(True)
-            try:
-                run = future.result()
-            except Exception as e:  # anything the simulation raised: show it where it happened
+            job, self._job = self._job, None
+            self._end_job()
+            kind, value = result
+            if kind != "ok":  # anything the simulation raised: show it where it happened
                 self.timer.stop()
-                self.error.setText(f"simulated run failed: {e}")
+                self.status.setText(f"simulation (seed {job.seed}) failed")
+                self.error.setText(f"simulated run failed: {value}")
                 self.error.show()
                 return
-            self.load_simulation(run)
+            self._runs[job.seed] = value
+            self.load_simulation(value)
             return
         if self.run is None or self.source != "sim":
             self.timer.stop()
