@@ -261,7 +261,8 @@ class DebugView(QWidget):
         lifts = int(np.count_nonzero(np.asarray(res.flags, dtype=np.uint8) & 1)) if n else 0
         self.polls_label.setText(
             f"{device}: {n} polls (seq {res.first_seq}..{int(res.next_seq) - 1}), "
-            f"{res.dropped} already dropped by the node, {lifts} lifted, CPI {res.cpi}; "
+            f"{res.dropped} older polls no longer kept by the node (it keeps its newest "
+            f"ring_size polls, 65 s at the default), {lifts} lifted, CPI {res.cpi}; "
             f"sums dX {int(np.sum(res.dx))}, dY {int(np.sum(res.dy))} counts"
         )
         self._draw_polls()
