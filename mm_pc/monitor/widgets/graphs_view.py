@@ -45,7 +45,7 @@ MAX_WINDOW_S = 3600
 #: (key, title, history fields, unit)
 PLOTS = (
     ("speed", "speed", ("vx", "vy"), "mm/s"),
-    ("disp", "displacement per reply (grows with the request interval)", ("dx", "dy"), "mm"),
+    ("disp", "displacement per reply (∝ request interval)", ("dx", "dy"), "mm"),
 )
 #: the axes' names in the legend line (sensor frame)
 AXIS_NAMES = {"x": "X (sensor right)", "y": "Y (sensor forward)"}
