@@ -61,7 +61,7 @@ class RobotGeometry:
         if not self.mounts:
             raise ValueError("a robot needs at least one sensor mount")
         if not self.axis_length > 0:
-            raise ValueError(f"axle length (axis_length) must be > 0 m, got {self.axis_length}")
+            raise ValueError(f"axle length must be > 0 m (axis_length), got {self.axis_length}")
         for m in self.mounts:
             if not all(math.isfinite(v) for v in (m.x, m.y, m.yaw)):
                 raise ValueError(f"sensor mount {m} has a non-finite value")

@@ -145,9 +145,9 @@ def test_positive_yaw_reports_forward_as_rightward_x():
     ("kwargs", "message"),
     [
         ({"mounts": ()}, "at least one sensor mount"),
-        ({"mounts": DEFAULT_MOUNTS, "axis_length": 0.0}, "axle length (axis_length) must"),
-        ({"mounts": DEFAULT_MOUNTS, "axis_length": -0.1}, "axle length (axis_length) must"),
-        ({"mounts": DEFAULT_MOUNTS, "axis_length": float("nan")}, "axle length (axis_length) must"),
+        ({"mounts": DEFAULT_MOUNTS, "axis_length": 0.0}, "axle length must be > 0"),
+        ({"mounts": DEFAULT_MOUNTS, "axis_length": -0.1}, "axle length must be > 0"),
+        ({"mounts": DEFAULT_MOUNTS, "axis_length": float("nan")}, "axle length must be > 0"),
         ({"mounts": (SensorMount(float("nan"), 0.0),)}, "non-finite"),
         ({"mounts": (SensorMount(0.05, float("inf")),)}, "non-finite"),
         ({"mounts": (SensorMount(0.05, 0.0, float("nan")),)}, "non-finite"),
