@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import errno
 import re
+from collections.abc import Sequence
 from typing import Protocol, runtime_checkable
 
 from .errors import DeviceNotFoundError, DevicePermissionError, SpiError
@@ -31,7 +32,7 @@ OVERLAY_HINT = (
 )
 PERMISSION_HINT = (
     "Run as a member of the 'spi' group (sudo usermod -aG spi $USER, then log in "
-    "again) or add a udev rule: SUBSYSTEM==\"spidev\", GROUP=\"spi\", MODE=\"0660\". "
+    'again) or add a udev rule: SUBSYSTEM=="spidev", GROUP="spi", MODE="0660". '
     "See docs/hardware-setup.md"
 )
 
@@ -45,6 +46,20 @@ class SpiBus(Protocol):
         ...
 
     def close(self) -> None: ...
+
+
+@runtime_checkable
+class SegmentedSpiBus(SpiBus, Protocol):
+    """A bus that can pause inside one chip-select frame (PMW3360: tSRAD after an address byte).
+
+    On Linux one ``SPI_IOC_MESSAGE(n)`` ioctl, one ``spi_ioc_transfer`` per segment with its
+    ``delay_usecs``; emulators check the delays.
+    """
+
+    def xfer_segments(self, segments: Sequence[tuple[list[int], int]]) -> list[list[int]]:
+        """Send each (bytes, delay_us after them) under one chip select; the bytes clocked in
+        per segment."""
+        ...
 
 
 def parse_device(path: str) -> tuple[int, int]:

@@ -17,7 +17,6 @@ from __future__ import annotations
 import re
 from collections.abc import Sequence
 from pathlib import Path
-from typing import NamedTuple
 
 from .bus import SpiBus
 from .errors import (
@@ -28,26 +27,25 @@ from .errors import (
     SpiError,
 )
 from .regmap import REGISTER_NAMES, RegisterMap
+from .sensor import INCH_M, ChipInfo, CpiRange, Motion
 
-INCH_M = 0.0254
-"""One inch in metres: counts / cpi * INCH_M = metres."""
+__all__ = ["INCH_M", "INFO", "PLN2033", "Motion", "pln2033_info", "read_patch_file"]
 
 
-class Motion(NamedTuple):
-    """One displacement read: counts since the previous read, sensor frame.
-
-    (A NamedTuple: it is built twice per 1 kHz poll, and that is cheap.)
-
-    ``dx`` is along the sensor's X axis (robot's right), ``dy`` along its Y
-    axis (robot's forward), both signed 16-bit counts.
-    """
-
-    dx: int
-    dy: int
-    status: int
-    lifted: bool
-    moved: bool
-    overflow: bool
+def pln2033_info(regmap: RegisterMap) -> ChipInfo:
+    """The PLN2033's :class:`ChipInfo` under ``regmap`` (its CPI range is part of the map)."""
+    return ChipInfo(
+        chip="pln2033",
+        title="Philips PLN2033",
+        bus="spi",
+        cpi=CpiRange(regmap.cpi_min, regmap.cpi_max, regmap.cpi_step),
+        cpi_default=regmap.cpi_default,
+        spi_mode=1,
+        max_spi_hz=8_000_000,
+        max_speed_mps=0.0,  # not published
+        firmware="patch",
+        source="assumed register map (no public datasheet): docs/pln2033.md",
+    )
 
 
 def _signed16(value: int) -> int:
@@ -55,12 +53,13 @@ def _signed16(value: int) -> int:
 
 
 class PLN2033:
-    """One PLN2033 sensor on one chip select."""
+    """One PLN2033 sensor on one chip select (a :class:`~pln2033.sensor.SensorDriver`)."""
 
     def __init__(self, bus: SpiBus, regmap: RegisterMap | None = None, name: str = "pln2033"):
         self.bus = bus
         self.map = regmap or RegisterMap.default()
         self.name = name
+        self.info = pln2033_info(self.map)
         m = self.map
         a = m.addresses
         # The motion burst is built once: it runs 1000 times a second.
@@ -140,9 +139,7 @@ class PLN2033:
         status read cleared the sensor's counters.
         """
         rx = self._xfer(self._all_tx)
-        values = {
-            reg: (rx[3 * i + 1] << 8) | rx[3 * i + 2] for i, reg in enumerate(REGISTER_NAMES)
-        }
+        values = {reg: (rx[3 * i + 1] << 8) | rx[3 * i + 2] for i, reg in enumerate(REGISTER_NAMES)}
         status = values["status"]
         self._decode_status(status)
         m = self.map
@@ -167,6 +164,12 @@ class PLN2033:
         problem = self.map.cpi_problem(cpi)
         if problem:
             raise InvalidCpiError(problem)
+
+    def cpi_problem(self, cpi: object) -> str | None:
+        return self.map.cpi_problem(cpi)
+
+    def get_cpi(self) -> tuple[int, int]:
+        return self.get_x_cpi(), self.get_y_cpi()
 
     def get_x_cpi(self) -> int:
         return self.map.decode_cpi(self._command("get_x_cpi"))
@@ -236,6 +239,13 @@ class PLN2033:
         value = self.read_register("system_control")
         self.write_register("system_control", value | self.map.patch_enable_bit)
 
+    def check_firmware(self, words: Sequence[int]) -> None:
+        """The PLN2033's firmware is its vendor patch code: :meth:`check_patch`."""
+        self.check_patch(words)
+
+    def load_firmware(self, words: Sequence[int]) -> None:
+        self.load_patch(words)
+
     def verify_patch(self, words: Sequence[int]) -> None:
         """Read the DSP RAM back and compare it with ``words``."""
         self.check_patch(words)
@@ -266,13 +276,14 @@ class PLN2033:
 
     # --- bring-up ---------------------------------------------------------------------------
 
-    def initialise(self, cpi: int, patch: Sequence[int] | None = None) -> None:
-        """The initial configuration: reset, presence check, patch, power up, CPI."""
+    def initialise(self, cpi: int, firmware: Sequence[int] | None = None) -> None:
+        """The initial configuration: reset, presence check, patch code (``firmware``), power up,
+        CPI."""
         self._check_cpi(cpi)
         self.soft_reset()
         self.check_presence()
-        if patch is not None:
-            self.load_patch(patch)
+        if firmware is not None:
+            self.load_patch(firmware)
         self.power_up()
         self.set_cpi(cpi)
         self.read_motion()  # start from clean counters
@@ -320,3 +331,7 @@ def read_patch_file(path: str | Path) -> list[int]:
     if not data:
         raise PatchError(f"patch file {p} is empty")
     return [(data[i] << 8) | data[i + 1] for i in range(0, len(data), 2)]
+
+
+INFO = pln2033_info(RegisterMap.default())
+"""The PLN2033 under the default register map (a user's map may change its CPI range)."""

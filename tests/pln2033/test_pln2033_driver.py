@@ -527,7 +527,7 @@ def test_initialise_brings_the_sensor_up():
     drv.power_down()
     clock.t = 0.2
     emu.advance()
-    drv.initialise(2400, patch=[0xCAFE, 0xF00D, 0x0001])
+    drv.initialise(2400, firmware=[0xCAFE, 0xF00D, 0x0001])
     assert emu.stats.resets == 1
     assert emu.powered and emu.patch_enabled
     assert emu.ram[:3] == [0xCAFE, 0xF00D, 0x0001]
