@@ -630,19 +630,21 @@ def read_replies(path: str | Path) -> list[Reply]:
 
 
 def _deserialize_appended(data: bytes, msg_type):
-    """``data`` as ``msg_type``; also a recording made before ``instance_id`` was appended.
+    """``data`` as ``msg_type``; also a recording made before fields were appended.
 
-    SensorData and GetSamples' response end with a uint64 ``instance_id`` since
-    issue 13; older CDR bytes lack it, so they get the padding to the next 8-byte
-    boundary of the CDR body (after its 4-byte header) and a zero: that field
-    reads 0 ("unknown").
+    SensorData, SensorPolls and GetSamples' response grew fields at their end
+    (``instance_id`` in issue 13; chip and quality in issue 15). Older CDR bytes
+    end early, so they get zero bytes appended: every missing field then reads 0,
+    '' or empty ("unknown"), whatever alignment padding it needs.
     """
     ros = _ros()
     try:
         return ros.deserialize(data, msg_type)
     except Exception:  # rclpy raises RMWError for bytes that end early
-        data = bytes(data)
-        return ros.deserialize(data + bytes((-(len(data) - 4)) % 8 + 8), msg_type)
+        return ros.deserialize(bytes(data) + bytes(_APPENDED_ROOM), msg_type)
+
+
+_APPENDED_ROOM = 64  # bytes: more than the appended fields and their padding need
 
 
 def _decode_polls(schema: str, data: bytes):
@@ -650,7 +652,7 @@ def _decode_polls(schema: str, data: bytes):
     (both have the fields the pose needs); ValueError for another type."""
     ros = _ros()
     if schema == POLLS_TYPE:
-        return ros.deserialize(data, ros.SensorPolls)
+        return _deserialize_appended(data, ros.SensorPolls)
     if schema == LEGACY_POLLS_TYPE:
         return _deserialize_appended(data, ros.GetSamplesResponse)
     raise ValueError(f"single polls of type {schema!r}, expected {POLLS_TYPE}")

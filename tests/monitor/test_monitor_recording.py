@@ -148,7 +148,7 @@ def test_file_is_ros2_mcap_that_rclpy_decodes(recording):
         sensor_schema = summary.schemas[topics[SENSOR_TOPIC].schema_id]
         assert sensor_schema.name == "mm_interfaces/msg/SensorData"
         text = sensor_schema.data.decode()
-        assert text.startswith("# Displacement of one PLN2033")
+        assert text.startswith("# Displacement of one sensor")
         assert "\n" + "=" * 80 + "\nMSG: builtin_interfaces/Time\n" in text
         assert "uint32 nanosec" in text
         meta = dict(next(iter(reader.iter_metadata())).metadata)
@@ -684,7 +684,8 @@ def test_recordings_made_before_the_node_identity_still_decode():
     new = serialize_message(SensorData(id="/dev/spidev1.0", seq=42, y_total_disp=0.5,
                                        instance_id=99))  # fmt: skip
     assert recording._deserialize_appended(new, SensorData).instance_id == 99
-    old = recording._deserialize_appended(new[:-8], SensorData)
+    before_id = new[: new.rfind((99).to_bytes(8, "little"))]  # the layout before issue 13
+    old = recording._deserialize_appended(before_id, SensorData)
     assert (old.id, old.seq, old.y_total_disp, old.instance_id) == ("/dev/spidev1.0", 42, 0.5, 0)
     res = serialize_message(GetSamples.Response(success=True, first_seq=3, next_seq=4, dx=[5],
                                                 flags=[1, 2, 9], instance_id=7))  # fmt: skip
@@ -694,3 +695,28 @@ def test_recordings_made_before_the_node_identity_still_decode():
     assert len(res) - len(old_bytes) > 8
     old = recording._deserialize_appended(old_bytes, GetSamples.Response)
     assert (old.first_seq, list(old.dx), list(old.flags), old.instance_id) == (3, [5], [1, 2, 9], 0)
+
+
+def test_recordings_made_before_the_chip_fields_still_decode():
+    """SensorData / SensorPolls bytes from before chip and quality were appended (issue 15)."""
+    from rclpy.serialization import serialize_message
+
+    from mm_interfaces.msg import SensorData, SensorPolls
+    from mm_pc.monitor import recording
+
+    new = serialize_message(SensorData(id="/dev/spidev1.0", seq=7, instance_id=99, chip="pmw3360",
+                                       quality=40, low_quality_events=2))  # fmt: skip
+    got = recording._deserialize_appended(new, SensorData)
+    assert (got.chip, got.quality, got.low_quality_events) == ("pmw3360", 40, 2)
+    # the old layout ended with instance_id: cut the appended fields off
+    before = serialize_message(SensorData(id="/dev/spidev1.0", seq=7, instance_id=99))
+    old_bytes = before[: before.rfind((99).to_bytes(8, "little")) + 8]
+    old = recording._deserialize_appended(old_bytes, SensorData)
+    assert (old.seq, old.instance_id, old.chip, old.quality) == (7, 99, "", 0)
+    polls = serialize_message(SensorPolls(first_seq=1, next_seq=3, dx=[4, 5], flags=[2, 34],
+                                          quality=[50, 3]))  # fmt: skip
+    got = recording._decode_polls(recording.POLLS_TYPE, polls)
+    assert list(got.quality) == [50, 3] and list(got.flags) == [2, 34]
+    old_polls = polls[: polls.rfind(bytes([2, 34])) + 2]
+    got = recording._decode_polls(recording.POLLS_TYPE, old_polls)
+    assert (list(got.dx), list(got.flags), list(got.quality)) == ([4, 5], [2, 34], [])
