@@ -7,9 +7,11 @@ select asserted for the whole list, as spidev does.
 
 from __future__ import annotations
 
+import ctypes
 import errno
 import re
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Protocol, runtime_checkable
 
 from .errors import DeviceNotFoundError, DevicePermissionError, SpiError
@@ -74,11 +76,15 @@ class SpidevBus:
     """The real bus: Linux spidev through the ``spidev`` package.
 
     Mode 1, 8 bits per word, MSB first; ``speed_hz`` 100 kHz..8 MHz
-    (3 MHz default, as the original).
+    (3 MHz default, as the original). ``mode`` is the chip's SPI mode
+    (:attr:`~pln2033.sensor.ChipInfo.spi_mode`: 3 for the PMW3360/PMW3389, which
+    also want ``speed_hz`` <= 2 MHz).
     """
 
-    def __init__(self, path: str, speed_hz: int = DEFAULT_SPEED_HZ) -> None:
+    def __init__(self, path: str, speed_hz: int = DEFAULT_SPEED_HZ, mode: int = SPI_MODE) -> None:
         bus, cs = parse_device(path)
+        if mode not in (0, 1, 2, 3):
+            raise ValueError(f"SPI mode {mode} does not exist (0..3)")
         if not MIN_SPEED_HZ <= speed_hz <= MAX_SPEED_HZ:
             raise ValueError(
                 f"SPI speed {speed_hz} Hz is out of range ({MIN_SPEED_HZ}..{MAX_SPEED_HZ} Hz)"
@@ -101,14 +107,14 @@ class SpidevBus:
         except OSError as exc:
             raise SpiError(f"cannot open {path}: {exc.strerror or exc}") from exc
         try:
-            self._dev.mode = SPI_MODE
+            self._dev.mode = mode
             self._dev.bits_per_word = SPI_BITS_PER_WORD
             self._dev.lsbfirst = False
             self._dev.max_speed_hz = speed_hz
         except OSError as exc:
             self._dev.close()
             raise SpiError(
-                f"cannot configure {path} (mode 1, 8 bit): {exc.strerror or exc}"
+                f"cannot configure {path} (mode {mode}, 8 bit): {exc.strerror or exc}"
             ) from exc
 
     def xfer2(self, data: list[int]) -> list[int]:
@@ -119,5 +125,123 @@ class SpidevBus:
                 raise DeviceNotFoundError(f"{self.path} disappeared. {OVERLAY_HINT}") from exc
             raise SpiError(f"SPI transfer on {self.path} failed: {exc.strerror or exc}") from exc
 
+    def xfer_segments(self, segments: Sequence[tuple[list[int], int]]) -> list[list[int]]:
+        """Each (bytes, delay_us after them) under one chip select: ``SPI_IOC_MESSAGE(n)``.
+
+        One ``spi_ioc_transfer`` per segment with its ``delay_usecs`` (the kernel waits that
+        long after the segment's last bit, chip select still asserted). A frame longer than
+        one ioctl can carry (:data:`MAX_SEGMENTS_PER_IOCTL` transfers, the spidev buffer size
+        in bytes) goes out as several ioctls, each but the last ending with ``cs_change=1``,
+        which asks the controller to keep chip select asserted until the next message (the
+        kernel's "hint"; the syscall between them only lengthens that gap).
+        """
+        return spi_message(self._dev.fileno(), segments, self.path, _spidev_bufsiz())
+
     def close(self) -> None:
         self._dev.close()
+
+
+# --- SPI_IOC_MESSAGE (linux/spi/spidev.h) ------------------------------------------------
+
+
+class SpiIocTransfer(ctypes.Structure):
+    """``struct spi_ioc_transfer`` of linux/spi/spidev.h: 32 bytes, no padding."""
+
+    _fields_ = [
+        ("tx_buf", ctypes.c_uint64),
+        ("rx_buf", ctypes.c_uint64),
+        ("len", ctypes.c_uint32),
+        ("speed_hz", ctypes.c_uint32),
+        ("delay_usecs", ctypes.c_uint16),
+        ("bits_per_word", ctypes.c_uint8),
+        ("cs_change", ctypes.c_uint8),
+        ("tx_nbits", ctypes.c_uint8),
+        ("rx_nbits", ctypes.c_uint8),
+        ("word_delay_usecs", ctypes.c_uint8),
+        ("pad", ctypes.c_uint8),
+    ]
+
+
+SPI_IOC_MAGIC = ord("k")
+_IOC_WRITE = 1
+_IOC_SIZEBITS = 14
+MAX_SEGMENTS_PER_IOCTL = ((1 << _IOC_SIZEBITS) - 1) // ctypes.sizeof(SpiIocTransfer)  # 511
+MAX_DELAY_US = 0xFFFF  # delay_usecs is a __u16
+SPIDEV_BUFSIZ = 4096  # the spidev module's default 'bufsiz' (bytes per message)
+
+
+def spi_ioc_message(n: int) -> int:
+    """The ioctl request number ``SPI_IOC_MESSAGE(n)`` (asm-generic encoding: x86, ARM).
+
+    ``_IOW(SPI_IOC_MAGIC, 0, char[n * 32])``: direction write (1) in bits 30-31, the
+    size in bits 16-29, the magic 'k' in bits 8-15, number 0.
+    """
+    size = n * ctypes.sizeof(SpiIocTransfer)
+    if n < 1 or size >= 1 << _IOC_SIZEBITS:
+        raise ValueError(f"SPI_IOC_MESSAGE takes 1..{MAX_SEGMENTS_PER_IOCTL} transfers, got {n}")
+    return (_IOC_WRITE << 30) | (size << 16) | (SPI_IOC_MAGIC << 8)
+
+
+def _spidev_bufsiz() -> int:
+    try:
+        return int(Path("/sys/module/spidev/parameters/bufsiz").read_text())
+    except (OSError, ValueError):
+        return SPIDEV_BUFSIZ
+
+
+def _chunks(segments: Sequence[tuple[list[int], int]], bufsiz: int) -> list[list[int]]:
+    """Indices of the segments of each ioctl: <= 511 transfers and <= bufsiz bytes each."""
+    out: list[list[int]] = [[]]
+    size = 0
+    for i, (data, _delay) in enumerate(segments):
+        n = len(data)
+        if n > bufsiz:
+            raise ValueError(f"one SPI segment of {n} bytes exceeds spidev's bufsiz ({bufsiz})")
+        if len(out[-1]) == MAX_SEGMENTS_PER_IOCTL or size + n > bufsiz:
+            out.append([])
+            size = 0
+        out[-1].append(i)
+        size += n
+    return out
+
+
+def spi_message(
+    fd: int,
+    segments: Sequence[tuple[list[int], int]],
+    path: str = "spidev",
+    bufsiz: int = SPIDEV_BUFSIZ,
+) -> list[list[int]]:
+    """Run ``segments`` on the spidev file descriptor ``fd`` (see SpidevBus.xfer_segments)."""
+    import fcntl
+
+    for data, delay in segments:
+        if not 0 <= delay <= MAX_DELAY_US:
+            raise ValueError(f"SPI segment delay {delay} us is out of range (0..{MAX_DELAY_US})")
+        if any(not 0 <= b <= 0xFF for b in data):
+            raise ValueError("SPI bytes must be 0..255")
+    rx_out: list[list[int]] = [[] for _ in segments]
+    chunks = _chunks(segments, bufsiz) if segments else []
+    for c, idx in enumerate(chunks):
+        xfers = (SpiIocTransfer * len(idx))()
+        bufs = []
+        for k, i in enumerate(idx):
+            data, delay = segments[i]
+            tx = (ctypes.c_uint8 * max(len(data), 1))(*data)
+            rx = (ctypes.c_uint8 * max(len(data), 1))()
+            bufs.append((tx, rx))
+            t = xfers[k]
+            t.tx_buf = ctypes.addressof(tx)
+            t.rx_buf = ctypes.addressof(rx)
+            t.len = len(data)
+            t.delay_usecs = delay
+        if c < len(chunks) - 1:
+            xfers[len(idx) - 1].cs_change = 1  # keep chip select asserted into the next ioctl
+        try:
+            fcntl.ioctl(fd, spi_ioc_message(len(idx)), xfers)
+        except OSError as exc:
+            if exc.errno == errno.ENODEV:
+                raise DeviceNotFoundError(f"{path} disappeared. {OVERLAY_HINT}") from exc
+            raise SpiError(f"SPI transfer on {path} failed: {exc.strerror or exc}") from exc
+        for k, i in enumerate(idx):
+            rx_out[i] = list(bufs[k][1])[: len(segments[i][0])]
+    return rx_out

@@ -29,7 +29,15 @@ from .errors import (
 from .regmap import REGISTER_NAMES, RegisterMap
 from .sensor import INCH_M, ChipInfo, CpiRange, Motion
 
-__all__ = ["INCH_M", "INFO", "PLN2033", "Motion", "pln2033_info", "read_patch_file"]
+__all__ = [
+    "INCH_M",
+    "INFO",
+    "PLN2033",
+    "Motion",
+    "pln2033_info",
+    "read_firmware_bytes",
+    "read_patch_file",
+]
 
 
 def pln2033_info(regmap: RegisterMap) -> ChipInfo:
@@ -295,18 +303,19 @@ _HEX_TOKEN = re.compile(r"(?:0x)?([0-9a-fA-F]{1,2})\b")
 _BINARY_CHARS = re.compile(r"[\x00-\x08\x0e-\x1f\x7f]")
 
 
-def read_patch_file(path: str | Path) -> list[int]:
-    """Read the vendor patch code the user supplies.
+def read_firmware_bytes(
+    path: str | Path, what: str = "patch file", error: type[Exception] = PatchError
+) -> bytes:
+    """The bytes of a firmware file the user supplies (PLN2033 patch code, PixArt SROM).
 
-    Two formats: a text file of bytes in hex (``0x12, 0x34 ...``, the output
-    of the original's arrayConverter; ``//`` and ``#`` comments allowed), or
-    a raw binary file. Bytes pair up big-endian into 16-bit RAM words.
+    Two formats: a text file of bytes in hex (``0x12, 0x34 ...``; ``//`` and ``#``
+    comments allowed), or a raw binary file. Problems raise ``error`` naming ``what``.
     """
     p = Path(path)
     try:
         raw = p.read_bytes()
     except OSError as exc:
-        raise PatchError(f"cannot read patch file {p}: {exc.strerror or exc}") from exc
+        raise error(f"cannot read {what} {p}: {exc.strerror or exc}") from exc
     try:
         text = raw.decode("ascii")
     except UnicodeDecodeError:
@@ -318,18 +327,28 @@ def read_patch_file(path: str | Path) -> list[int]:
         body = " ".join(lines)
         tokens = [t for t in re.split(r"[\s,;{}]+", body) if t]
         if not tokens:
-            raise PatchError(f"patch file {p} has no bytes")
+            raise error(f"{what} {p} has no bytes")
         data_list = []
         for tok in tokens:
             m = _HEX_TOKEN.fullmatch(tok)
             if not m:
-                raise PatchError(f"patch file {p}: '{tok}' is not a hex byte (like 0x1f)")
+                raise error(f"{what} {p}: '{tok}' is not a hex byte (like 0x1f)")
             data_list.append(int(m.group(1), 16))
         data = bytes(data_list)
-    if len(data) % 2:
-        raise PatchError(f"patch file {p} has {len(data)} bytes; 16-bit words need an even count")
     if not data:
-        raise PatchError(f"patch file {p} is empty")
+        raise error(f"{what} {p} is empty")
+    return data
+
+
+def read_patch_file(path: str | Path) -> list[int]:
+    """Read the vendor patch code the user supplies (:func:`read_firmware_bytes`; the output
+    of the original's arrayConverter). Bytes pair up big-endian into 16-bit RAM words.
+    """
+    data = read_firmware_bytes(path, "patch file", PatchError)
+    if len(data) % 2:
+        raise PatchError(
+            f"patch file {Path(path)} has {len(data)} bytes; 16-bit words need an even count"
+        )
     return [(data[i] << 8) | data[i + 1] for i in range(0, len(data), 2)]
 
 
