@@ -28,7 +28,7 @@ from collections.abc import Callable, Sequence
 from ..bus import SpiBus
 from ..errors import FirmwareError, InvalidCpiError, Pln2033Error, ProductIdError, SpiError
 from ..sensor import ChipInfo, CpiRange, Motion
-from . import regs as R
+from . import regs
 from .flow_scale import BITCRAZE_PMW3901, OPTICAL_FLOW_ROS_PAA5100, FlowOptics
 
 __all__ = [
@@ -110,14 +110,14 @@ class PMW3901:
         init: str | Sequence[tuple[int, int]] = "pimoroni",
         c1_rule: str = "px4",
         rotation_deg: int | None = 0,
-        product_id: int = R.PRODUCT_ID_VALUE,
+        product_id: int = regs.PRODUCT_ID_VALUE,
         sleep: Callable[[float], None] = time.sleep,
     ) -> None:
         self.bus = bus
         self.name = name
         self.optics = optics or self.OPTICS
         self.height_m = self._check_height(self.HEIGHT_DEFAULT_M if height_m is None else height_m)
-        variants = R.INITS[self.CHIP]
+        variants = regs.INITS[self.CHIP]
         if isinstance(init, str):
             if init not in variants:
                 raise ValueError(
@@ -127,9 +127,9 @@ class PMW3901:
             self._preamble, self._init = variants[init]
         else:
             self._preamble, self._init = True, tuple((int(r), int(v)) for r, v in init)
-        R.adjust_c1(0, c1_rule)  # ValueError naming the rules
+        regs.adjust_c1(0, c1_rule)  # ValueError naming the rules
         self.c1_rule = c1_rule
-        if rotation_deg is not None and rotation_deg not in R.ROTATIONS:
+        if rotation_deg is not None and rotation_deg not in regs.ROTATIONS:
             raise ValueError(
                 f"{name}: rotation_deg must be one of 0, 90, 180, 270 or None, got {rotation_deg!r}"
             )
@@ -143,8 +143,8 @@ class PMW3901:
         self.cpi = max(1, round(self.effective_cpi))
         self.info = self.chip_info(self.height_m, self.optics)
         # The burst is built once: it runs up to 1000 times a second.
-        self._burst_tx = [R.MOTION_BURST] + [0] * R.BURST_LEN
-        self.last_burst: list[int] = [0] * (R.BURST_LEN + 1)
+        self._burst_tx = [regs.MOTION_BURST] + [0] * regs.BURST_LEN
+        self.last_burst: list[int] = [0] * (regs.BURST_LEN + 1)
         self.revision = -1
 
     # --- the chip's description -------------------------------------------------------------
@@ -155,7 +155,7 @@ class PMW3901:
 
     @classmethod
     def chip_info(cls, height_m: float | None = None, optics: FlowOptics | None = None) -> ChipInfo:
-        """The :class:`ChipInfo` at ``height_m`` (default height): CPI fixed at the effective value."""
+        """The :class:`ChipInfo` at ``height_m`` (default: the default height), CPI fixed there."""
         h = cls.HEIGHT_DEFAULT_M if height_m is None else height_m
         cpi = max(1, round((optics or cls.OPTICS).cpi(h)))
         return ChipInfo(
@@ -168,7 +168,7 @@ class PMW3901:
             max_spi_hz=2_000_000,
             counter_bits=16,
             quality_name="SQUAL",
-            quality_threshold=R.SQUAL_MIN,
+            quality_threshold=regs.SQUAL_MIN,
             max_speed_mps=round(cls.max_speed_mps(h), 3),
             firmware="",
             source="pimoroni/pmw3901-python (init, burst, rejection rule), crazyflie-firmware "
@@ -197,16 +197,16 @@ class PMW3901:
 
     def read_register(self, reg: int) -> int:
         """One byte from ``reg`` of the current bank."""
-        return self._xfer([reg & R.ADDRESS_MASK, 0])[1]
+        return self._xfer([reg & regs.ADDRESS_MASK, 0])[1]
 
     def write_register(self, reg: int, value: int) -> None:
         if not 0 <= value <= 0xFF:
             raise ValueError(f"register value {value} does not fit 8 bits")
-        self._xfer([(reg & R.ADDRESS_MASK) | R.WRITE_FLAG, value])
+        self._xfer([(reg & regs.ADDRESS_MASK) | regs.WRITE_FLAG, value])
 
     def _write_all(self, pairs: Sequence[tuple[int, int]]) -> None:
         for reg, value in pairs:
-            if reg == R.WAIT:
+            if reg == regs.WAIT:
                 self._sleep(value / 1000.0)
             else:
                 self.write_register(reg, value)
@@ -214,14 +214,14 @@ class PMW3901:
     # --- bring-up -------------------------------------------------------------------------------
 
     def power_up_reset(self) -> None:
-        self.write_register(R.POWER_UP_RESET, R.POWER_UP_RESET_VALUE)
-        self._sleep(R.POWER_UP_WAIT_S)
+        self.write_register(regs.POWER_UP_RESET, regs.POWER_UP_RESET_VALUE)
+        self._sleep(regs.POWER_UP_WAIT_S)
 
     def check_product_id(self) -> None:
         """ProductIdError unless the ids read (product, inverse) = (expected, its complement)."""
-        got = self.read_register(R.PRODUCT_ID)
-        self.revision = self.read_register(R.REVISION_ID)
-        inv = self.read_register(R.INVERSE_PRODUCT_ID)
+        got = self.read_register(regs.PRODUCT_ID)
+        self.revision = self.read_register(regs.REVISION_ID)
+        inv = self.read_register(regs.INVERSE_PRODUCT_ID)
         want, want_inv = self.product_id, self.product_id ^ 0xFF
         if got == want and inv == want_inv:
             return
@@ -238,22 +238,22 @@ class PMW3901:
 
     def _run_init(self) -> None:
         if self._preamble:
-            self._write_all(R.PREAMBLE)
-            probe = self.read_register(R.TRIM_PROBE)
+            self._write_all(regs.PREAMBLE)
+            probe = self.read_register(regs.TRIM_PROBE)
             self.write_register(
-                R.TRIM_REG, R.TRIM_SET if probe & R.TRIM_PROBE_BIT else R.TRIM_CLEAR
+                regs.TRIM_REG, regs.TRIM_SET if probe & regs.TRIM_PROBE_BIT else regs.TRIM_CLEAR
             )
-            self._write_all(R.MIDDLE)
-            if self.read_register(R.C_FLAG) == 0:
-                c1 = R.adjust_c1(self.read_register(R.C1_REG), self.c1_rule)
-                c2 = R.adjust_c2(self.read_register(R.C2_REG))
-                self._write_all(R.C_PREFIX)
-                self.write_register(R.C1_REG, c1)
-                self.write_register(R.C2_REG, c2)
+            self._write_all(regs.MIDDLE)
+            if self.read_register(regs.C_FLAG) == 0:
+                c1 = regs.adjust_c1(self.read_register(regs.C1_REG), self.c1_rule)
+                c2 = regs.adjust_c2(self.read_register(regs.C2_REG))
+                self._write_all(regs.C_PREFIX)
+                self.write_register(regs.C1_REG, c1)
+                self.write_register(regs.C2_REG, c2)
         self._write_all(self._init)
-        self.write_register(R.BANK_SELECT, 0x00)
+        self.write_register(regs.BANK_SELECT, 0x00)
         if self.rotation_deg is not None:
-            self.write_register(R.ORIENTATION, R.ROTATIONS[self.rotation_deg])
+            self.write_register(regs.ORIENTATION, regs.ROTATIONS[self.rotation_deg])
 
     def initialise(self, cpi: int | None = None, firmware: Sequence[int] | None = None) -> None:
         """Reset, identify, init sequence, orientation, one burst (clean counters).
@@ -265,7 +265,7 @@ class PMW3901:
             self.check_firmware(firmware)
         self.power_up_reset()
         self.check_product_id()
-        for reg in (R.MOTION, R.DELTA_X_L, R.DELTA_X_H, R.DELTA_Y_L, R.DELTA_Y_H):
+        for reg in (regs.MOTION, regs.DELTA_X_L, regs.DELTA_X_H, regs.DELTA_Y_L, regs.DELTA_Y_H):
             self.read_register(reg)
         self._run_init()
         self.read_motion()
@@ -283,43 +283,43 @@ class PMW3901:
 
     def decode_motion(self, rx: list[int]) -> Motion:
         """The :class:`Motion` in the 13 bytes a burst clocked in (rx[0]: during the address)."""
-        if len(rx) != R.BURST_LEN + 1:
-            raise SpiError(f"{self.name}: sent {R.BURST_LEN + 1} bytes, received {len(rx)}")
+        if len(rx) != regs.BURST_LEN + 1:
+            raise SpiError(f"{self.name}: sent {regs.BURST_LEN + 1} bytes, received {len(rx)}")
         self.last_burst = rx
         b = rx[1:]
-        squal = b[R.B_SQUAL]
-        if squal < R.SQUAL_MIN and b[R.B_SHUTTER_UPPER] != R.SHUTTER_UPPER_MAX:
-            squal = R.SQUAL_MIN  # [pimoroni] accepts it: keep it at/above the threshold
-        status = b[R.B_MOTION]
+        squal = b[regs.B_SQUAL]
+        if squal < regs.SQUAL_MIN and b[regs.B_SHUTTER_UPPER] != regs.SHUTTER_UPPER_MAX:
+            squal = regs.SQUAL_MIN  # [pimoroni] accepts it: keep it at/above the threshold
+        status = b[regs.B_MOTION]
         return Motion(
-            dx=_signed16(b[R.B_DX_L], b[R.B_DX_H]),
-            dy=_signed16(b[R.B_DY_L], b[R.B_DY_H]),
+            dx=_signed16(b[regs.B_DX_L], b[regs.B_DX_H]),
+            dy=_signed16(b[regs.B_DY_L], b[regs.B_DY_H]),
             status=status,
             lifted=False,  # no lift bit: a lifted chip shows as low quality
-            moved=bool(status & R.MOTION_BIT),
+            moved=bool(status & regs.MOTION_BIT),
             overflow=False,  # no overflow bit; 16 bits hold > 300 m at the default height
             quality=squal,
         )
 
     def read_all_registers(self) -> tuple[Motion, dict[str, int]]:
         """The register dump (:data:`REGISTER_NAMES`) and the Motion its burst cleared."""
-        ids = [self.read_register(R.PRODUCT_ID), self.read_register(R.REVISION_ID)]
+        ids = [self.read_register(regs.PRODUCT_ID), self.read_register(regs.REVISION_ID)]
         motion = self.read_motion()
         b = self.last_burst[1:]
         values = dict(zip(REGISTER_NAMES[:2], ids, strict=True))
         values.update(
-            motion=b[R.B_MOTION],
-            observation=b[R.B_OBSERVATION],
-            delta_x=(b[R.B_DX_H] << 8) | b[R.B_DX_L],
-            delta_y=(b[R.B_DY_H] << 8) | b[R.B_DY_L],
-            squal=b[R.B_SQUAL],
-            raw_data_sum=b[R.B_RAW_SUM],
-            maximum_raw_data=b[R.B_RAW_MAX],
-            minimum_raw_data=b[R.B_RAW_MIN],
-            shutter_upper=b[R.B_SHUTTER_UPPER],
-            shutter_lower=b[R.B_SHUTTER_LOWER],
-            orientation=self.read_register(R.ORIENTATION),
-            inverse_product_id=self.read_register(R.INVERSE_PRODUCT_ID),
+            motion=b[regs.B_MOTION],
+            observation=b[regs.B_OBSERVATION],
+            delta_x=(b[regs.B_DX_H] << 8) | b[regs.B_DX_L],
+            delta_y=(b[regs.B_DY_H] << 8) | b[regs.B_DY_L],
+            squal=b[regs.B_SQUAL],
+            raw_data_sum=b[regs.B_RAW_SUM],
+            maximum_raw_data=b[regs.B_RAW_MAX],
+            minimum_raw_data=b[regs.B_RAW_MIN],
+            shutter_upper=b[regs.B_SHUTTER_UPPER],
+            shutter_lower=b[regs.B_SHUTTER_LOWER],
+            orientation=self.read_register(regs.ORIENTATION),
+            inverse_product_id=self.read_register(regs.INVERSE_PRODUCT_ID),
         )
         return motion, values
 

@@ -35,14 +35,14 @@ from collections.abc import Callable, Sequence
 from ..emulated import CountingCore
 from ..errors import SpiError
 from ..motion import MotionSource
-from . import regs as R
+from . import regs
 from .flow_scale import BITCRAZE_PMW3901, OPTICAL_FLOW_ROS_PAA5100, FlowOptics
 
 __all__ = ["EmulatedPAA5100", "EmulatedPMW3901", "expected_init_writes"]
 
 #: Factory values of the trim registers (bank 0x0E) -- assumptions: 0x67 bit 7 set, 0x73 = 0,
 #: c1 = 26 (the two c1 rules differ there: 40 vs 51), c2 = 64.
-FACTORY_TRIM = {R.TRIM_PROBE: 0x80, R.C_FLAG: 0x00, R.C1_REG: 26, R.C2_REG: 64}
+FACTORY_TRIM = {regs.TRIM_PROBE: 0x80, regs.C_FLAG: 0x00, regs.C1_REG: 26, regs.C2_REG: 64}
 TRIM_BANK = 0x0E
 
 
@@ -52,19 +52,22 @@ def expected_init_writes(
     """The (register, value) writes the init ``variant`` of ``chip`` makes on a chip whose trim
     registers (bank 0x0E) hold ``trim`` (default :data:`FACTORY_TRIM`); WAITs left out."""
     trim = FACTORY_TRIM if trim is None else trim
-    preamble, block = R.INITS[chip][variant]
+    preamble, block = regs.INITS[chip][variant]
     out: list[tuple[int, int]] = []
     if preamble:
-        out += R.PREAMBLE
+        out += regs.PREAMBLE
         out.append(
-            (R.TRIM_REG, R.TRIM_SET if trim[R.TRIM_PROBE] & R.TRIM_PROBE_BIT else R.TRIM_CLEAR)
+            (
+                regs.TRIM_REG,
+                regs.TRIM_SET if trim[regs.TRIM_PROBE] & regs.TRIM_PROBE_BIT else regs.TRIM_CLEAR,
+            )
         )
-        out += R.MIDDLE
-        if trim[R.C_FLAG] == 0:
-            out += R.C_PREFIX
-            out.append((R.C1_REG, R.adjust_c1(trim[R.C1_REG], c1_rule)))
-            out.append((R.C2_REG, R.adjust_c2(trim[R.C2_REG])))
-    out += [(r, v) for r, v in block if r != R.WAIT]
+        out += regs.MIDDLE
+        if trim[regs.C_FLAG] == 0:
+            out += regs.C_PREFIX
+            out.append((regs.C1_REG, regs.adjust_c1(trim[regs.C1_REG], c1_rule)))
+            out.append((regs.C2_REG, regs.adjust_c2(trim[regs.C2_REG])))
+    out += [(r, v) for r, v in block if r != regs.WAIT]
     return out
 
 
@@ -97,7 +100,7 @@ class EmulatedPMW3901(CountingCore):
         low_quality_windows: Sequence[tuple[float, float]] = (),
         height_m: float | None = None,
         optics: FlowOptics | None = None,
-        product_id: int = R.PRODUCT_ID_VALUE,
+        product_id: int = regs.PRODUCT_ID_VALUE,
         revision: int = 0x00,
         squal: int = 0x60,
         trim: dict[int, int] | None = None,
@@ -112,7 +115,7 @@ class EmulatedPMW3901(CountingCore):
         self.trim = dict(FACTORY_TRIM if trim is None else trim)
         self._expected = {
             (variant, rule): expected_init_writes(self.CHIP, variant, self.trim, rule)
-            for variant in R.INITS[self.CHIP]
+            for variant in regs.INITS[self.CHIP]
             for rule in ("px4", "pimoroni")
         }
         self._expected_lengths = {len(v) for v in self._expected.values()}
@@ -141,9 +144,9 @@ class EmulatedPMW3901(CountingCore):
         self.regs: dict[tuple[int, int], int] = {
             (TRIM_BANK, reg): value for reg, value in self.trim.items()
         }
-        self.regs[(0, R.PRODUCT_ID)] = self.product_id
-        self.regs[(0, R.REVISION_ID)] = self.revision
-        self.regs[(0, R.INVERSE_PRODUCT_ID)] = self.product_id ^ 0xFF
+        self.regs[(0, regs.PRODUCT_ID)] = self.product_id
+        self.regs[(0, regs.REVISION_ID)] = self.revision
+        self.regs[(0, regs.INVERSE_PRODUCT_ID)] = self.product_id ^ 0xFF
         self.bank = 0
         self.writes: list[tuple[int, int, int]] = []
         self.init_variant: tuple[str, str] | None = None
@@ -169,11 +172,11 @@ class EmulatedPMW3901(CountingCore):
 
     @property
     def orientation(self) -> int:
-        return self.regs.get((0, R.ORIENTATION), 0)
+        return self.regs.get((0, regs.ORIENTATION), 0)
 
     def output_counts(self, x: int, y: int) -> tuple[int, int]:
         """True-frame counts (x right, y forward) as the chip reports them (see module doc)."""
-        return R.orient(-y, -x, self.orientation)
+        return regs.orient(-y, -x, self.orientation)
 
     # --- time -------------------------------------------------------------------------------
 
@@ -200,19 +203,19 @@ class EmulatedPMW3901(CountingCore):
             return [0xFF] * len(data)
         self.advance(now)
         out = [0] * len(data)
-        if data and data[0] == R.MOTION_BURST and self.bank == 0:
+        if data and data[0] == regs.MOTION_BURST and self.bank == 0:
             burst = self._burst()
-            n = min(len(data) - 1, R.BURST_LEN)
+            n = min(len(data) - 1, regs.BURST_LEN)
             out[1 : 1 + n] = burst[:n]
         else:
             if len(data) % 2:
                 self.stats.protocol_errors += 1
             for i in range(0, len(data) - 1, 2):
                 cmd = data[i]
-                if cmd & R.WRITE_FLAG:
-                    self._write(cmd & R.ADDRESS_MASK, data[i + 1])
+                if cmd & regs.WRITE_FLAG:
+                    self._write(cmd & regs.ADDRESS_MASK, data[i + 1])
                 else:
-                    out[i + 1] = self._read(cmd & R.ADDRESS_MASK)
+                    out[i + 1] = self._read(cmd & regs.ADDRESS_MASK)
         if mode == "corrupt":
             self.corrupt(out)
         if self.record:
@@ -225,16 +228,20 @@ class EmulatedPMW3901(CountingCore):
     # --- register semantics -----------------------------------------------------------------
 
     def _write(self, reg: int, value: int) -> None:
-        if reg == R.BANK_SELECT:
+        if reg == regs.BANK_SELECT:
             self.writes.append((self.bank, reg, value))
             self.bank = value
-        elif self.bank == 0 and reg == R.POWER_UP_RESET:
-            if value == R.POWER_UP_RESET_VALUE:
+        elif self.bank == 0 and reg == regs.POWER_UP_RESET:
+            if value == regs.POWER_UP_RESET_VALUE:
                 self._power_on()
             return
         else:
             self.writes.append((self.bank, reg, value))
-            if self.bank == 0 and reg in (R.PRODUCT_ID, R.REVISION_ID, R.INVERSE_PRODUCT_ID):
+            if self.bank == 0 and reg in (
+                regs.PRODUCT_ID,
+                regs.REVISION_ID,
+                regs.INVERSE_PRODUCT_ID,
+            ):
                 return  # read-only
             self.regs[(self.bank, reg)] = value
         if self.init_variant is None and len(self.writes) in self._expected_lengths:
@@ -247,10 +254,10 @@ class EmulatedPMW3901(CountingCore):
 
     def _read(self, reg: int) -> int:
         if self.bank == 0:
-            if reg == R.MOTION:
+            if reg == regs.MOTION:
                 return self._latch()
-            if R.DELTA_X_L <= reg <= R.DELTA_Y_H:
-                k = reg - R.DELTA_X_L
+            if regs.DELTA_X_L <= reg <= regs.DELTA_Y_H:
+                k = reg - regs.DELTA_X_L
                 value = self._latch_out[k]
                 if k == 1:
                     self.latch_x = self._latch_out[0] = self._latch_out[1] = 0
@@ -277,7 +284,7 @@ class EmulatedPMW3901(CountingCore):
         ox &= 0xFFFF
         oy &= 0xFFFF
         self._latch_out = [ox & 0xFF, ox >> 8, oy & 0xFF, oy >> 8]
-        return R.MOTION_BIT if moved else 0
+        return regs.MOTION_BIT if moved else 0
 
     def _burst(self) -> list[int]:
         moved, poor, x, y = self._take()
@@ -288,15 +295,15 @@ class EmulatedPMW3901(CountingCore):
         oy &= 0xFFFF
         rng = self._rng
         if poor:
-            squal = rng.randrange(0, R.SQUAL_MIN)
-            shutter_upper, shutter_lower = R.SHUTTER_UPPER_MAX, 0xFF
+            squal = rng.randrange(0, regs.SQUAL_MIN)
+            shutter_upper, shutter_lower = regs.SHUTTER_UPPER_MAX, 0xFF
             raw = (0x08, 0x10, 0x00)
         else:
             squal = max(0x20, min(0xFF, self.squal_level + rng.randint(-8, 8)))
             shutter_upper, shutter_lower = 0x02, rng.randrange(0x40, 0xC0)
             raw = (0x30, 0x70, 0x10)
         return [
-            R.MOTION_BIT if moved else 0,
+            regs.MOTION_BIT if moved else 0,
             0x00,  # observation: its meaning is not published
             ox & 0xFF,
             ox >> 8,

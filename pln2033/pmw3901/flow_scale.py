@@ -62,8 +62,8 @@ class FlowOptics:
     @property
     def rad_per_count(self) -> float:
         """Image angle per count at the centre of the view (rad)."""
-        return 2.0 * math.tan(math.radians(self.fov_deg) / 2.0) / (
-            self.pixels * self.counts_per_pixel
+        return (
+            2.0 * math.tan(math.radians(self.fov_deg) / 2.0) / (self.pixels * self.counts_per_pixel)
         )
 
     def metres_per_count(self, height_m: float) -> float:

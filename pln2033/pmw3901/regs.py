@@ -127,10 +127,12 @@ PMW3901_INIT = (
 #: [bitcraze] InitRegisters (no preamble, no c1/c2 trim): 0x74 = 0x1F where [pimoroni] and
 #: [px4] write 0x21, and it ends with 0x5A = 0x10, 0x54 = 0x00 instead of the LED writes.
 BITCRAZE_PMW3901_INIT = (
-    PMW3901_INIT[:33]
-    + ((0x74, 0x1F),)
-    + PMW3901_INIT[34:74]
-    + ((0x7F, 0x00), (0x5A, 0x10), (0x54, 0x00))
+    *PMW3901_INIT[:33],
+    (0x74, 0x1F),
+    *PMW3901_INIT[34:74],
+    (0x7F, 0x00),
+    (0x5A, 0x10),
+    (0x54, 0x00),
 )
 
 #: [pimoroni] PAA5100._secret_sauce, last block (no other public source).
