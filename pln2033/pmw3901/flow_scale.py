@@ -83,3 +83,22 @@ class FlowOptics:
 BITCRAZE_PMW3901 = FlowOptics(4.2, 30, 1.0, "bitcraze/crazyflie-firmware mm_flow.c")
 #: [optical_flow_ros] optical_flow_publisher.py, its author's PAA5100 tests (motion_scale 5).
 OPTICAL_FLOW_ROS_PAA5100 = FlowOptics(42.0, 35, 5.0, "adityakamath/optical_flow_ros")
+
+
+def scale_table() -> str:
+    """The figures docs/sensors.md quotes: ``python -m pln2033.pmw3901``."""
+    from .driver import PAA5100, PMW3901
+
+    lines = ["chip     source                                  mrad/count  height_m  mm/count  CPI"]
+    for cls in (PMW3901, PAA5100):
+        lo, hi = cls.HEIGHT_RANGE_M
+        for h in (lo, cls.HEIGHT_DEFAULT_M, hi):
+            o = cls.OPTICS
+            lines.append(
+                f"{cls.CHIP:8} {o.source:39} {o.rad_per_count * 1e3:10.3f}  {h:8.3f}  "
+                f"{o.metres_per_count(h) * 1e3:8.4f}  {o.cpi(h):6.1f}"
+            )
+    for name, o in (("bitcraze", BITCRAZE_PMW3901), ("optical_flow_ros", OPTICAL_FLOW_ROS_PAA5100)):
+        lines.append(f"{name} at 0.10 m: {o.cpi(0.10):.1f} CPI; at 0.025 m: {o.cpi(0.025):.1f} CPI")
+    return "\n".join(lines)
+
