@@ -297,7 +297,7 @@ class PMW3901:
             status=status,
             lifted=False,  # no lift bit: a lifted chip shows as low quality
             moved=bool(status & regs.MOTION_BIT),
-            overflow=False,  # no overflow bit; 16 bits hold > 300 m at the default height
+            overflow=False,  # no overflow bit; 16 bits hold 8 m per read at 0.10 m
             quality=squal,
         )
 

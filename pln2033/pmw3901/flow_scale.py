@@ -101,4 +101,3 @@ def scale_table() -> str:
     for name, o in (("bitcraze", BITCRAZE_PMW3901), ("optical_flow_ros", OPTICAL_FLOW_ROS_PAA5100)):
         lines.append(f"{name} at 0.10 m: {o.cpi(0.10):.1f} CPI; at 0.025 m: {o.cpi(0.025):.1f} CPI")
     return "\n".join(lines)
-

@@ -28,8 +28,8 @@ from pln2033.pmw3901 import (
     EmulatedPAA5100,
     EmulatedPMW3901,
     InvalidHeightError,
+    regs,
 )
-from pln2033.pmw3901 import regs
 from pln2033.pmw3901.emulator import FACTORY_TRIM, expected_init_writes
 from pln2033.sensor import INCH_M
 
@@ -153,7 +153,7 @@ def test_nothing_on_the_bus_and_a_short_reply_are_clear_errors():
 
 
 def test_registers_are_banked_an_id_read_in_another_bank_fails():
-    _, emu, drv = rig()
+    _, _emu, drv = rig()
     drv.initialise(0)
     drv.write_register(0x7F, 0x0E)
     assert drv.read_register(0x67) == FACTORY_TRIM[0x67]
@@ -223,7 +223,7 @@ def test_counts_follow_the_true_motion_through_the_fov_scale(chip, where, vx, vy
     drv_cls, emu_cls = chip
     lo, hi = drv_cls.HEIGHT_RANGE_M
     h = lo + where * (hi - lo)
-    clock, emu, drv = rig(
+    clock, _emu, drv = rig(
         drv_cls, emu_cls, ConstantVelocity(vx, vy), emu_kw={"height_m": h}, height_m=h
     )
     drv.initialise(0)
@@ -273,7 +273,7 @@ def test_rotation_register_turns_the_reported_axes():
 
 
 def test_register_dump_names_values_and_the_motion_it_cleared():
-    clock, emu, drv = rig(motion=ConstantVelocity(0.0, 0.0254))
+    clock, _emu, drv = rig(motion=ConstantVelocity(0.0, 0.0254))
     drv.initialise(0)
     clock.t += 1.0
     motion, values = drv.read_all_registers()
@@ -332,7 +332,7 @@ def test_the_chip_takes_no_firmware():
 
 def test_wrong_height_shows_the_scale_error_the_calibration_fit_corrects():
     # the sensor sits at 0.12 m, the driver is told 0.10 m: it sees 0.10 / 0.12 of the truth
-    clock, emu, drv = rig(motion=ConstantVelocity(0.0, 0.2), emu_kw={"height_m": 0.12})
+    clock, _emu, drv = rig(motion=ConstantVelocity(0.0, 0.2), emu_kw={"height_m": 0.12})
     drv.initialise(0)
     t0, sy, sx = clock.t, 0, 0
     for k in range(1, 5001):
