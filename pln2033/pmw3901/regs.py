@@ -1,0 +1,178 @@
+"""PMW3901 / PAA5100JE-Q registers, bytes and init sequences, as data with their sources.
+
+Sources (details and disagreements: docs/sensors.md, section "PMW3901 and PAA5100"):
+
+- [pimoroni] github.com/pimoroni/pmw3901-python, ``pmw3901/__init__.py`` (v1.0.0): register
+  addresses, the power-up reset, the motion burst and its 12-byte layout, the rejection
+  rule, the orientation register, both chips' init ("secret sauce") sequences.
+- [px4] github.com/PX4/PX4-Autopilot, ``src/drivers/optical_flow/pmw3901/PMW3901.cpp`` and
+  ``PixArt_PMW3901MB_Registers.hpp``: the same PMW3901 sequence, attributed there to
+  "PixArt PMW3901MB Optical Motion Tracking chip demo kit V3.20 (21 Aug 2018)"; the
+  inverse product id 0xB6 at 0x5F; the 2 MHz SPI clock; 80 mm and 7.4 rad/s from the
+  datasheet.
+- [bitcraze] github.com/bitcraze/crazyflie-firmware, ``src/drivers/src/pmw3901.c``: the
+  product id / inverse id check; an older PMW3901 sequence (``BITCRAZE_PMW3901_INIT``).
+
+Frame format (all sources): a transfer starts with an address byte, bit 7 set for a write
+(``WRITE_FLAG``); a register read is ``[addr, 0]`` -> the value in the second byte; a
+write is ``[addr | 0x80, value]``. Register 0x7F selects a bank; the ids, the motion
+registers, the burst and the power-up reset live in bank 0.
+"""
+
+from __future__ import annotations
+
+WRITE_FLAG = 0x80
+ADDRESS_MASK = 0x7F
+
+PRODUCT_ID = 0x00  # [pimoroni] REG_ID
+REVISION_ID = 0x01  # [pimoroni] read as the second byte of get_id()
+MOTION = 0x02  # [pimoroni] REG_DATA_READY; bit 7 = motion since the last read
+DELTA_X_L = 0x03  # [pimoroni] get_motion_slow: <Bhh from 0x02 (little-endian)
+DELTA_X_H = 0x04
+DELTA_Y_L = 0x05
+DELTA_Y_H = 0x06
+MOTION_BURST = 0x16  # [pimoroni] REG_MOTION_BURST
+POWER_UP_RESET = 0x3A  # [pimoroni] REG_POWER_UP_RESET
+ORIENTATION = 0x5B  # [pimoroni] REG_ORIENTATION (bank 0)
+INVERSE_PRODUCT_ID = 0x5F  # [bitcraze], [px4]
+BANK_SELECT = 0x7F  # [pimoroni] every sequence switches banks by writing 0x7F
+
+PRODUCT_ID_VALUE = 0x49  # [pimoroni], [bitcraze], [px4]
+INVERSE_PRODUCT_ID_VALUE = 0xB6  # [bitcraze], [px4]: ~0x49
+REVISIONS = (0x00, 0x01)  # [pimoroni] accepts these; [px4] names 0x01
+POWER_UP_RESET_VALUE = 0x5A  # [pimoroni], [bitcraze], [px4]
+POWER_UP_WAIT_S = 0.020  # [pimoroni] 20 ms ([bitcraze], [px4]: 5 ms)
+
+MOTION_BIT = 0x80  # [pimoroni] ``dr & 0b10000000``; [bitcraze] motionOccured (bit 7)
+
+# --- the motion burst: [addr] then 12 bytes ([pimoroni] struct "<BBBhhBBBBBB") ----------------
+BURST_LEN = 12
+B_MOTION, B_OBSERVATION = 0, 1
+B_DX_L, B_DX_H, B_DY_L, B_DY_H = 2, 3, 4, 5
+B_SQUAL, B_RAW_SUM, B_RAW_MAX, B_RAW_MIN = 6, 7, 8, 9
+B_SHUTTER_UPPER, B_SHUTTER_LOWER = 10, 11
+
+#: [pimoroni] get_motion: a burst with ``squal < 0x19 and shutter_upper == 0x1F`` carries no
+#: valid motion (too few features with the shutter at its longest: lifted, or a blank floor).
+SQUAL_MIN = 0x19
+SHUTTER_UPPER_MAX = 0x1F
+
+# --- orientation ([pimoroni] set_orientation / set_rotation; swap before inversion) ------------
+ORIENT_SWAP_XY = 0x80
+ORIENT_INVERT_Y = 0x40
+ORIENT_INVERT_X = 0x20
+#: [pimoroni] set_rotation(degrees) -> register value.
+ROTATIONS = {0: 0xE0, 90: 0x40, 180: 0x80, 270: 0x20}
+
+# --- init ("performance optimisation") ------------------------------------------------------
+WAIT = -1
+"""In a sequence, ``(WAIT, ms)`` pauses ``ms`` milliseconds instead of writing."""
+
+#: [pimoroni], [px4], both chips: bank 0 -> 0x0E, then 0x48 is set from bit 7 of 0x67.
+PREAMBLE = ((0x7F, 0x00), (0x55, 0x01), (0x50, 0x07), (0x7F, 0x0E), (0x43, 0x10))
+TRIM_PROBE = 0x67  # bank 0x0E: bit 7 set -> write 0x48 = 0x04, else 0x02
+TRIM_PROBE_BIT = 0x80
+TRIM_REG = 0x48
+TRIM_SET, TRIM_CLEAR = 0x04, 0x02
+MIDDLE = ((0x7F, 0x00), (0x51, 0x7B), (0x50, 0x00), (0x55, 0x00), (0x7F, 0x0E))
+#: bank 0x0E: when 0x73 reads 0, 0x70/0x71 (c1, c2) are read, adjusted (see
+#: :func:`adjust_c1`, ``c2 * 45 // 100``) and written back after ``C_PREFIX``.
+C_FLAG, C1_REG, C2_REG = 0x73, 0x70, 0x71
+C_PREFIX = ((0x7F, 0x00), (0x61, 0xAD), (0x51, 0x70), (0x7F, 0x0E))
+
+
+def adjust_c1(c1: int, rule: str = "px4") -> int:
+    """The c1 adjustment, clamped to 0..0x3F.
+
+    [px4] (the vendor demo kit): ``c1 + 14`` when ``c1 <= 28``, else ``c1 + 11``.
+    [pimoroni] uses two ``if``s, so a c1 of 15..28 gets both (+25): ``rule="pimoroni"``.
+    """
+    if rule == "px4":
+        c1 = c1 + 14 if c1 <= 28 else c1 + 11
+    elif rule == "pimoroni":
+        if c1 <= 28:
+            c1 += 14
+        if c1 > 28:
+            c1 += 11
+    else:
+        raise ValueError(f"c1 rule {rule!r} unknown; allowed: 'px4', 'pimoroni'")
+    return max(0, min(0x3F, c1))
+
+
+def adjust_c2(c2: int) -> int:
+    return (c2 * 45) // 100
+
+
+#: [pimoroni] PMW3901._secret_sauce, last block (identical to [px4] sensorInit, plus the final
+#: "Enable LED_N pulsing" writes 0x7F 0x14, 0x6F 0x1C, 0x7F 0x00 that [px4] lacks).
+PMW3901_INIT = (
+    (0x7F, 0x00), (0x61, 0xAD), (0x7F, 0x03), (0x40, 0x00), (0x7F, 0x05),
+    (0x41, 0xB3), (0x43, 0xF1), (0x45, 0x14), (0x5B, 0x32), (0x5F, 0x34),
+    (0x7B, 0x08), (0x7F, 0x06), (0x44, 0x1B), (0x40, 0xBF), (0x4E, 0x3F),
+    (0x7F, 0x08), (0x65, 0x20), (0x6A, 0x18), (0x7F, 0x09), (0x4F, 0xAF),
+    (0x5F, 0x40), (0x48, 0x80), (0x49, 0x80), (0x57, 0x77), (0x60, 0x78),
+    (0x61, 0x78), (0x62, 0x08), (0x63, 0x50), (0x7F, 0x0A), (0x45, 0x60),
+    (0x7F, 0x00), (0x4D, 0x11), (0x55, 0x80), (0x74, 0x21), (0x75, 0x1F),
+    (0x4A, 0x78), (0x4B, 0x78), (0x44, 0x08), (0x45, 0x50), (0x64, 0xFF),
+    (0x65, 0x1F), (0x7F, 0x14), (0x65, 0x67), (0x66, 0x08), (0x63, 0x70),
+    (0x7F, 0x15), (0x48, 0x48), (0x7F, 0x07), (0x41, 0x0D), (0x43, 0x14),
+    (0x4B, 0x0E), (0x45, 0x0F), (0x44, 0x42), (0x4C, 0x80), (0x7F, 0x10),
+    (0x5B, 0x02), (0x7F, 0x07), (0x40, 0x41), (0x70, 0x00), (WAIT, 10),
+    (0x32, 0x44), (0x7F, 0x07), (0x40, 0x40), (0x7F, 0x06), (0x62, 0xF0),
+    (0x63, 0x00), (0x7F, 0x0D), (0x48, 0xC0), (0x6F, 0xD5), (0x7F, 0x00),
+    (0x5B, 0xA0), (0x4E, 0xA8), (0x5A, 0x50), (0x40, 0x80), (WAIT, 240),
+    (0x7F, 0x14), (0x6F, 0x1C), (0x7F, 0x00),
+)  # fmt: skip
+
+#: [bitcraze] InitRegisters (no preamble, no c1/c2 trim): 0x74 = 0x1F where [pimoroni] and
+#: [px4] write 0x21, and it ends with 0x5A = 0x10, 0x54 = 0x00 instead of the LED writes.
+BITCRAZE_PMW3901_INIT = (
+    *PMW3901_INIT[:33],
+    (0x74, 0x1F),
+    *PMW3901_INIT[34:74],
+    (0x7F, 0x00),
+    (0x5A, 0x10),
+    (0x54, 0x00),
+)
+
+#: [pimoroni] PAA5100._secret_sauce, last block (no other public source).
+PAA5100_INIT = (
+    (0x7F, 0x00), (0x61, 0xAD), (0x7F, 0x03), (0x40, 0x00), (0x7F, 0x05),
+    (0x41, 0xB3), (0x43, 0xF1), (0x45, 0x14), (0x5F, 0x34), (0x7B, 0x08),
+    (0x5E, 0x34), (0x5B, 0x11), (0x6D, 0x11), (0x45, 0x17), (0x70, 0xE5),
+    (0x71, 0xE5), (0x7F, 0x06), (0x44, 0x1B), (0x40, 0xBF), (0x4E, 0x3F),
+    (0x7F, 0x08), (0x66, 0x44), (0x65, 0x20), (0x6A, 0x3A), (0x61, 0x05),
+    (0x62, 0x05), (0x7F, 0x09), (0x4F, 0xAF), (0x5F, 0x40), (0x48, 0x80),
+    (0x49, 0x80), (0x57, 0x77), (0x60, 0x78), (0x61, 0x78), (0x62, 0x08),
+    (0x63, 0x50), (0x7F, 0x0A), (0x45, 0x60), (0x7F, 0x00), (0x4D, 0x11),
+    (0x55, 0x80), (0x74, 0x21), (0x75, 0x1F), (0x4A, 0x78), (0x4B, 0x78),
+    (0x44, 0x08), (0x45, 0x50), (0x64, 0xFF), (0x65, 0x1F), (0x7F, 0x14),
+    (0x65, 0x67), (0x66, 0x08), (0x63, 0x70), (0x6F, 0x1C), (0x7F, 0x15),
+    (0x48, 0x48), (0x7F, 0x07), (0x41, 0x0D), (0x43, 0x14), (0x4B, 0x0E),
+    (0x45, 0x0F), (0x44, 0x42), (0x4C, 0x80), (0x7F, 0x10), (0x5B, 0x02),
+    (0x7F, 0x07), (0x40, 0x41), (WAIT, 10), (0x7F, 0x00), (0x32, 0x00),
+    (0x7F, 0x07), (0x40, 0x40), (0x7F, 0x06), (0x68, 0xF0), (0x69, 0x00),
+    (0x7F, 0x0D), (0x48, 0xC0), (0x6F, 0xD5), (0x7F, 0x00), (0x5B, 0xA0),
+    (0x4E, 0xA8), (0x5A, 0x90), (0x40, 0x80), (0x73, 0x1F), (WAIT, 10),
+    (0x73, 0x00),
+)  # fmt: skip
+
+#: Named init variants per chip: (run the preamble and c1/c2 trim, the last block).
+INITS: dict[str, dict[str, tuple[bool, tuple[tuple[int, int], ...]]]] = {
+    "pmw3901": {"pimoroni": (True, PMW3901_INIT), "bitcraze": (False, BITCRAZE_PMW3901_INIT)},
+    "paa5100": {"pimoroni": (True, PAA5100_INIT)},
+}
+
+
+def orient(x: int, y: int, value: int) -> tuple[int, int]:
+    """The chip's output for native counts (x, y) under orientation register ``value``.
+
+    [pimoroni] set_orientation: "Swapping is performed before flipping".
+    """
+    if value & ORIENT_SWAP_XY:
+        x, y = y, x
+    if value & ORIENT_INVERT_Y:
+        y = -y
+    if value & ORIENT_INVERT_X:
+        x = -x
+    return x, y
