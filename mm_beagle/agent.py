@@ -24,7 +24,7 @@ import time
 import zlib
 from dataclasses import dataclass, field
 
-from . import link
+from . import chip_config, link
 from . import shared_state as ss
 from .poller import Poller, PollerConfig, poller_config, tune_process
 from .sim_backend import SimConfig, check_trajectory, parse_fail_windows
@@ -216,6 +216,10 @@ class AgentLink:
             "cpi": cfg.cpi,
             "cpi_range": [self.poller.regmap.cpi_min, self.poller.regmap.cpi_max],
             "cpi_step": self.poller.regmap.cpi_step,
+            "chips": self.poller.chips,
+            "chip_cpi": [
+                [ch.info.cpi.min, ch.info.cpi.max, ch.info.cpi.step] for ch in self.poller.channels
+            ],
         }
 
     # --- status and events ---
@@ -233,6 +237,7 @@ class AgentLink:
             "boot_id": self.boot_id,
             "uptime_s": round(now - self.t0, 3),
             "devices": self.poller.cfg.devices,
+            "chips": self.poller.chips,
             "states": [ss.STATE_NAMES.get(ch.ints[ss.I_STATE], "?") for ch in chans],
             "last_errors": [ch.last_error for ch in chans],
             "cpu_percent": round(self.cpu_percent, 2),
@@ -326,10 +331,16 @@ def make_state(cfg: PollerConfig) -> ss.SharedState:
 # --- command line -------------------------------------------------------------------------
 
 
+def _names(text: str) -> list[str]:
+    """``"pmw3360,pln2033"`` -> ["pmw3360", "pln2033"]."""
+    return [t.strip() for t in text.split(",") if t.strip()]
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="mm-beagle-agent",
-        description="Poll the PLN2033 sensors at 1 kHz and serve them over zenoh (no ROS). "
+        description="Poll the mouse sensors (PLN2033, PMW3360, ...) at 1 kHz and serve them "
+        "over zenoh (no ROS). "
         "On the ROS machine: mm-beagle --ros-args -p backend:=remote -p agent:=ENDPOINT",
     )
     p.add_argument("--config", help="YAML file with any of these options (dashes as _)")
@@ -347,6 +358,21 @@ def build_parser() -> argparse.ArgumentParser:
         help="the only directory patch files are loaded from, at start or by a peer's "
         "load_patch command (default '': patch loading off)",
     )
+    p.add_argument(
+        "--srom-file",
+        help="SROM for PMW3360/PMW3389 devices, loaded at every bring-up (in --patch-dir)",
+    )
+    p.add_argument(
+        "--chips",
+        type=_names,
+        help=f"chip of each device, comma-separated, or one for all (default pln2033); "
+        f"allowed: {chip_config.chips_help()}",
+    )
+    p.add_argument(
+        "--chip-options",
+        nargs="*",
+        help="driver options key=value or CHIP.key=value (e.g. height_m=0.08)",
+    )
     p.add_argument("--realtime-priority", type=int, help="SCHED_FIFO priority (0 = off)")
     p.add_argument("--retry-interval", type=float)
     p.add_argument("--ring-seconds", type=float, help="single polls kept (s, >= 60)")
@@ -363,6 +389,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sim-speed", type=float)
     p.add_argument("--sim-noise-counts", type=float)
     p.add_argument("--sim-lift-rate", type=float)
+    p.add_argument("--sim-chips", type=_names, help="emulated chip per device (default --chips)")
+    p.add_argument("--sim-low-quality-rate", type=float, help="poor-surface windows per second")
     p.add_argument("--sim-fail-windows", nargs="*", help="DEVICE@START-END (s) failure windows")
     p.add_argument("--sim-start-delay", type=float, help="s standing still before the path")
     p.add_argument("--sim-duration", type=float, help="s of motion, then still (0 = the path)")
@@ -383,6 +411,9 @@ DEFAULTS = {
     "register_map": "",
     "patch_file": "",
     "patch_dir": "",
+    "srom_file": "",
+    "chips": [],
+    "chip_options": [],
     "realtime_priority": 50,
     "retry_interval": 1.0,
     "ring_seconds": 65.536,
@@ -393,6 +424,8 @@ DEFAULTS = {
     "sim_speed": 0.2,
     "sim_noise_counts": 0.0,
     "sim_lift_rate": 0.0,
+    "sim_chips": [],
+    "sim_low_quality_rate": 0.0,
     "sim_fail_windows": [],
     "sim_start_delay": 0.0,
     "sim_duration": 0.0,
@@ -452,12 +485,11 @@ def config_from_args(args: argparse.Namespace) -> AgentConfig:
         raise ValueError("'retry_interval' must be 0.1..60 s")
     if values["ring_seconds"] < MIN_RING_S:
         raise ValueError(f"'ring_seconds' must be >= {MIN_RING_S:g} (the link's replay window)")
-    from pln2033 import RegisterMap
-
-    regmap = RegisterMap.load(values["register_map"]) if values["register_map"] else None
-    problem = (regmap or RegisterMap.default()).cpi_problem(values["cpi"])
-    if problem:
-        raise ValueError(f"'cpi': {problem}")
+    options = chip_config.parse_chip_options(values["chip_options"])
+    chip_config.check_board_config(
+        devices, values["chips"], options, values["cpi"], values["register_map"]
+    )
+    values["chip_options"] = options
     link.keys(values["name"])
     for ep in values["listen"]:
         if not link.is_loopback(ep) and not values["credentials"]:
@@ -477,6 +509,8 @@ def config_from_args(args: argparse.Namespace) -> AgentConfig:
         start_delay=values["sim_start_delay"],
         duration=values["sim_duration"],
         loop=values["sim_loop"],
+        chips=list(values["sim_chips"]),
+        low_quality_rate=values["sim_low_quality_rate"],
     )
     if not (0 <= sim.start_delay <= 3600 and 0 <= sim.duration <= 1e6):
         raise ValueError("'sim_start_delay' must be 0..3600 s and 'sim_duration' 0..1e6 s")
@@ -485,6 +519,10 @@ def config_from_args(args: argparse.Namespace) -> AgentConfig:
         check_trajectory(sim.trajectory)
     ring = round(values["ring_seconds"] * values["poll_rate"])
     cfg = poller_config(values, ring, sim)
+    if values["backend"] == "sim":
+        from .sim_backend import sim_chips
+
+        sim_chips(cfg)
     return AgentConfig(cfg, values["name"], values["listen"], values["credentials"])
 
 

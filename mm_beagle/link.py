@@ -36,14 +36,15 @@ from pathlib import Path
 from . import shared_state as ss
 
 MAGIC = b"MMB1"
-VERSION = 2  # 2: four lift-estimate variances more per sensor (N_FLOAT 10)
+VERSION = 3  # 2: four lift-estimate variances (N_FLOAT 10); 3: quality per poll, N_INT 19
 HEADER = struct.Struct("<4sBBHQQ")
 BLOCK = struct.Struct("<BxxxIQ")
 GLOB_BYTES = 8 * ss.N_GLOBAL
 INTS_BYTES = 8 * ss.N_INT
 FLOATS_BYTES = 8 * ss.N_FLOAT
-POLL_BYTES = 8 + 2 + 2 + 2 + 2 + 1  # one poll across the six ring fields
-ARRAY_ITEM = (8, 2, 2, 2, 2, 1)  # bytes per poll, in SharedState.RING_FIELDS order
+POLL_BYTES = 8 + 2 + 2 + 2 + 2 + 1 + 2  # one poll across the seven ring fields
+ARRAY_ITEM = (8, 2, 2, 2, 2, 1, 2)  # bytes per poll, in SharedState.RING_FIELDS order
+assert len(ARRAY_ITEM) == len(ss.SharedState.RING_FIELDS) and sum(ARRAY_ITEM) == POLL_BYTES
 
 DEFAULT_PORT = 7447
 DEFAULT_ENDPOINT = f"tcp/127.0.0.1:{DEFAULT_PORT}"
@@ -77,7 +78,7 @@ class Block:
     count: int
     ints: bytes  # N_INT int64: the sensor's totals after these polls
     floats: bytes  # N_FLOAT float64
-    arrays: tuple[bytes, ...]  # six ring fields, ``count`` items each
+    arrays: tuple[bytes, ...]  # the ring fields, ``count`` items each
 
 
 @dataclass

@@ -29,11 +29,14 @@ def new_instance_id() -> int:
     return int.from_bytes(os.urandom(8), "little") or 1
 
 
-def sensor_data(device: str, prev: Totals, now: Totals, instance_id: int = 0) -> SensorData:
+def sensor_data(
+    device: str, prev: Totals, now: Totals, instance_id: int = 0, chip: str = "pln2033"
+) -> SensorData:
     """The displacement between two snapshots of one sensor's totals.
 
     ``instance_id``: the node's identity (:func:`new_instance_id`), so a client
-    sees a restart whatever ``seq`` and the totals say.
+    sees a restart whatever ``seq`` and the totals say. ``chip``: the device's chip
+    (registry name); ``quality`` is the newest poll's figure (-1: the chip has none).
     """
     interval = max(0.0, (now.stamp_ns - prev.stamp_ns) / 1e9)
     x_disp = now.x_total_m - prev.x_total_m
@@ -64,14 +67,26 @@ def sensor_data(device: str, prev: Totals, now: Totals, instance_id: int = 0) ->
         x_lift_est_total_disp=now.x_est_m,
         y_lift_est_total_disp=now.y_est_m,
         instance_id=instance_id,
+        chip=chip,
+        quality=max(-32768, min(32767, now.quality)),
+        low_quality_events=now.low_quality_total - prev.low_quality_total,
+        low_quality_events_total=now.low_quality_total,
     )
 
 
 def sensor_settings(device: str, reply: dict) -> SensorSettings:
+    """Any chip's dump as names + values and its CPI range; the 13 named register fields
+    only for a PLN2033 (0 for other chips). Old agents send no chip: a PLN2033."""
     regs = reply["registers"]
-    msg = SensorSettings(spi_device=device)
-    for name, value in regs.items():
-        setattr(msg, f"{name}_register", int(value))
+    chip = reply.get("chip", "pln2033")
+    msg = SensorSettings(spi_device=device, chip=chip)
+    msg.register_names = [str(n) for n in regs]
+    msg.register_values = array("H", (int(v) & 0xFFFF for v in regs.values()))
+    lo, hi, step = reply.get("cpi_range", (0, 0, 0))
+    msg.cpi_min, msg.cpi_max, msg.cpi_step = int(lo), int(hi), int(step)
+    if chip == "pln2033":
+        for name, value in regs.items():
+            setattr(msg, f"{name}_register", int(value))
     msg.x_cpi = int(reply["cpi_x"])
     msg.y_cpi = int(reply["cpi_y"])
     msg.cpi = msg.y_cpi if msg.x_cpi == msg.y_cpi else 0

@@ -34,7 +34,7 @@ from mm_pc.ros import spin as ros_spin
 from mm_pc.ros.clock import ClockWatch, node_stamp
 from mm_pc.ros.tf import frame_ids_problem
 
-from . import health, messages
+from . import chip_config, health, messages
 from . import shared_state as ss
 from .params import NodeSettings, declare
 from .poller_client import PollerClient, PollerError
@@ -61,6 +61,7 @@ class BeagleNode(Node):
         self.settings: NodeSettings = declare(self)
         cfg = self.settings.poller
         self.devices = cfg.devices
+        self.chips = chip_config.resolve_chips(cfg.chips, cfg.devices)
         if cfg.backend == "remote":
             r = self.settings.remote
             self.poller: PollerClient | RemoteAgent = RemoteAgent(
@@ -229,13 +230,21 @@ class BeagleNode(Node):
         if down:
             return "; ".join(down)
         before = [int(self.poller.state.ints[i][ss.I_CPI_Y]) for i in range(len(self.devices))]
+        fixed = [chip_config.chip_info_for(c).cpi.fixed for c in self.chips]
         for i, dev in enumerate(self.devices):
+            if fixed[i]:  # optical flow: its resolution follows its height
+                self.get_logger().info(
+                    f"{dev} ({self.chips[i]}) keeps its fixed {before[i]} CPI (parameter cpi)"
+                )
+                continue
             try:
                 status, payload = self.poller.command("set_cpi", i, cpi)
             except PollerError as exc:
                 status, payload = "error", str(exc)
             if status != "ok":
                 for k in range(i):  # put back the sensors already changed
+                    if fixed[k]:
+                        continue
                     with contextlib.suppress(PollerError):
                         self.poller.command("set_cpi", k, before[k])
                 return f"{dev}: {payload}"
@@ -298,7 +307,11 @@ class BeagleNode(Node):
                 res.success, res.message = False, ss.BUSY_MESSAGE
                 return res
             for i, (prev, now) in zip(wanted, intervals, strict=True):
-                data.append(messages.sensor_data(self.devices[i], prev, now, self.instance_id))
+                data.append(
+                    messages.sensor_data(
+                        self.devices[i], prev, now, self.instance_id, self.chips[i]
+                    )
+                )
         res.data = data
         res.success = True
         return res
@@ -356,9 +369,7 @@ class BeagleNode(Node):
             res.message = f"since_seq {req.since_seq} is ahead of the newest poll ({seq_now})"
             return res
         try:
-            first, nxt, dropped, arr = self.poller.state.samples(
-                i, req.since_seq, req.max_samples
-            )
+            first, nxt, dropped, arr = self.poller.state.samples(i, req.since_seq, req.max_samples)
         except ss.PollerBusyError:
             res.success, res.message = False, ss.BUSY_MESSAGE
             return res
@@ -372,6 +383,7 @@ class BeagleNode(Node):
         res.dy = messages.as_array("h", arr["dy"])
         res.status = messages.as_array("H", arr["status"])
         res.flags = messages.as_array("B", arr["flags"])
+        res.quality = messages.as_array("h", arr["quality"])
         res.success = True
         if dropped:
             res.message = f"{dropped} polls had already left the ring buffer"
@@ -391,7 +403,9 @@ class BeagleNode(Node):
                     now = self.poller.state.snapshot(i)
                 except ss.PollerBusyError:
                     continue  # this round skipped: the cursor keeps the next interval exact
-                msg = messages.sensor_data(dev, self._published[i], now, self.instance_id)
+                msg = messages.sensor_data(
+                    dev, self._published[i], now, self.instance_id, self.chips[i]
+                )
                 self._published[i] = now
                 self.data_pub.publish(msg)
 
@@ -546,6 +560,7 @@ class BeagleNode(Node):
                 else float("nan")
             )
             values = {
+                "chip": self.chips[i],
                 "state": ss.STATE_NAMES.get(t.state, "?"),
                 "polls": t.seq,
                 "achieved_rate_hz": f"{rate:.1f}",
@@ -555,6 +570,8 @@ class BeagleNode(Node):
                 "overruns": int(glob[ss.G_OVERRUNS]),
                 "spi_errors": t.spi_errors,
                 "lift_events": t.lift_total,
+                "quality": t.quality,  # the newest poll's (SQUAL; -1: the chip has none)
+                "low_quality_events": t.low_quality_total,
                 # counts lost to lifts, estimated (pln2033.lift_fill), and its 1 sigma
                 "lift_est_x_counts": f"{t.x_est_counts:.1f}",
                 "lift_est_y_counts": f"{t.y_est_counts:.1f}",
@@ -618,9 +635,7 @@ class BeagleNode(Node):
             gap = health.longest_gap([], [], [], self._diag_stamp[i] or t.stamp_ns, now_ns)
         if self.settings.poller.backend == "remote" or t.state != ss.STATE_UP:
             gap = health.Gap(0.0, 0.0, 0.0)  # the link's own values say what is late there
-        return health.assess(
-            rate, self.settings.poller.poll_rate, overruns_grew, gap, t.cpi_y
-        )
+        return health.assess(rate, self.settings.poller.poll_rate, overruns_grew, gap, t.cpi_y)
 
     def _publish_stuck(self) -> None:
         """ERROR per sensor when no snapshot can be had (the poller stopped mid-write)."""

@@ -21,7 +21,7 @@ from mm_pc.core.odometry import Odometry, Pose2D
 from pln2033 import INCH_M
 
 from .params import OdometrySettings
-from .shared_state import FLAG_LIFT, SharedState
+from .shared_state import FLAG_LIFT, FLAG_LOW_QUALITY, SharedState
 
 
 class OnboardOdometry:
@@ -59,7 +59,8 @@ class OnboardOdometry:
         d = np.empty((n, len(self.devices), 2))
         lifted = np.empty((n, len(self.devices)), dtype=bool)
         for i, (first, _next, _dropped, arr) in enumerate(batches):
-            lifted[:, i] = (arr["flags"][:n] & FLAG_LIFT) != 0
+            # a poll below the chip's quality threshold counts as a lift (issue 15)
+            lifted[:, i] = (arr["flags"][:n] & (FLAG_LIFT | FLAG_LOW_QUALITY)) != 0
             scale = INCH_M / np.maximum(arr["cpi"][:n].astype(float), 1.0)
             dx = arr["dx"][:n] * scale
             dy = arr["dy"][:n] * scale

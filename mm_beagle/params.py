@@ -9,7 +9,7 @@ from rclpy.node import Node
 
 from mm_pc.ros.tf import frame_ids_problem, sensor_frame_names
 
-from . import link
+from . import chip_config, link
 from .poller import PollerConfig, poller_config
 from .sim_backend import SimConfig, check_trajectory, parse_fail_windows
 
@@ -66,7 +66,33 @@ PARAMETERS = {
         True,
         _plain("remote backend: move the agent's stamps to this clock (false if both run NTP)"),
     ),
-    "cpi": (1600, _int("resolution of every sensor, counts per inch (X and Y)", 100, 6400, 100)),
+    "cpi": (
+        1600,
+        _int(
+            "resolution of every sensor, counts per inch (X and Y); each chip also checks its "
+            "own range (pln2033 100..6400/100, pmw3360 100..12000/100, pmw3389 50..16000/50); "
+            "fixed-resolution chips (pmw3901, paa5100) ignore it",
+            *chip_config.cpi_union(),
+        ),
+    ),
+    "chips": (
+        [""],
+        _plain(
+            "the chip of each device, in device order, or one name for all ('' = all "
+            f"pln2033); allowed: {chip_config.chips_help()}"
+        ),
+    ),
+    "chip_options": (
+        [""],
+        _plain(
+            "driver options as key=value, each to every chip whose driver takes it, or "
+            "CHIP.key=value for one chip type (e.g. height_m=0.08, pmw3389.product_id=0x42)"
+        ),
+    ),
+    "srom_file": (
+        "",
+        _plain("SROM (PixArt firmware) for PMW3360/PMW3389, a file in patch_dir ('' = none)"),
+    ),
     "poll_rate": (1000.0, _float("sensor polls per second (Hz)", 10.0, 2000.0)),
     "spi_speed_hz": (3_000_000, _int("SPI clock (Hz)", 100_000, 8_000_000)),
     "register_map": ("", _plain("YAML file overriding the assumed register map ('' = defaults)")),
@@ -141,6 +167,18 @@ PARAMETERS = {
         _plain("sim backend: x, y, yaw (base_link m, rad) of each sensor, flattened"),
     ),
     "sim_lift_rate": (0.0, _float("sim backend: lifts per second per sensor", 0.0, 100.0)),
+    "sim_chips": (
+        [""],
+        _plain("sim backend: the emulated chip of each device ('' = as 'chips')"),
+    ),
+    "sim_low_quality_rate": (
+        0.0,
+        _float(
+            "sim backend: poor-surface windows (20 ms, quality low) per second per sensor",
+            0.0,
+            100.0,
+        ),
+    ),
     "sim_noise_counts": (0.0, _float("sim backend: count noise per sqrt(second)", 0.0, 1e6)),
     "sim_fail_windows": (
         [""],
@@ -213,10 +251,21 @@ def declare(node: Node) -> NodeSettings:
         lift_rate=p["sim_lift_rate"],
         noise_counts=p["sim_noise_counts"],
         fail_windows=fails,
+        chips=[c for c in p["sim_chips"] if c],
+        low_quality_rate=p["sim_low_quality_rate"],
     )
     if p["backend"] == "sim":
         check_trajectory(sim.trajectory)
-    cfg = poller_config({**p, "devices": devices}, p["ring_size"], sim)
+    chips = [c for c in p["chips"] if c]
+    options = chip_config.parse_chip_options(list(p["chip_options"]))
+    chip_config.check_board_config(devices, chips, options, p["cpi"], p["register_map"])
+    cfg = poller_config(
+        {**p, "devices": devices, "chips": chips, "chip_options": options}, p["ring_size"], sim
+    )
+    if p["backend"] == "sim":
+        from .sim_backend import sim_chips
+
+        sim_chips(cfg)  # a bad name now, with a clear message
     flat = list(p["mounts"])
     if p["odometry_rate"] > 0 and len(flat) != 3 * len(devices):
         raise ValueError(

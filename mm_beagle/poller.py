@@ -5,6 +5,12 @@ period of 6 ms under load; a separate process at about 1.1 ms. So the
 poller runs in a process of its own (spawned, so it inherits nothing of
 rclpy), owns the SPI devices, and publishes into :mod:`shared_state`.
 
+Each device has its chip (``chips``, :mod:`mm_beagle.chip_config`): a PLN2033 keeps the
+hand-tuned hot path below; any other driver is polled through ``read_motion()`` and the
+general :meth:`Channel.record`, which also stores the chip's quality figure per poll and
+treats a poll below the chip's threshold like a lift (its counts stay in the measured
+totals, as a lifted poll's do; it is a gap poll for the lift estimate).
+
 Per poll and sensor it reads status + delta X + delta Y in one transfer, adds
 the counts to monotone totals (counts and metres at the CPI in force), stores
 the poll in the ring buffer, and estimates the counts lost to lifts. Between
@@ -23,9 +29,12 @@ import traceback
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 
-from pln2033 import INCH_M, PLN2033, Motion, Pln2033Error, RegisterMap, read_patch_file
-from pln2033.errors import InvalidCpiError, PatchError
+from pln2033 import INCH_M, PLN2033, Motion, Pln2033Error, RegisterMap
+from pln2033 import chips as registry
+from pln2033.errors import FirmwareError, InvalidCpiError
+from pln2033.sensor import QUALITY_NONE, ChipInfo
 
+from . import chip_config
 from . import shared_state as ss
 from .lift_gap import LiftGapEstimator
 from .patches import resolve_patch_file
@@ -45,6 +54,9 @@ class PollerConfig:
     register_map: str = ""
     patch_file: str = ""  # resolved inside patch_dir (see patches.py), '' = none
     patch_dir: str = ""  # where patch files may come from ('' = patch loading off)
+    chips: list[str] = field(default_factory=list)  # one per device, one for all, [] = pln2033
+    chip_options: dict[str, object] = field(default_factory=dict)  # see chip_config
+    srom_file: str = ""  # SROM for chips whose firmware is "srom", inside patch_dir
     realtime_priority: int = 0
     retry_interval: float = 1.0
     ring_size: int = 65536
@@ -62,6 +74,8 @@ COMMON_FIELDS = (
     "patch_dir",
     "realtime_priority",
     "retry_interval",
+    "chips",
+    "chip_options",
 )
 
 
@@ -71,13 +85,20 @@ def poller_config(values: dict, ring_size: int, sim: SimConfig) -> PollerConfig:
     Raises ValueError (PatchPathError) when patch_file is not a file inside patch_dir."""
     common = {k: values[k] for k in COMMON_FIELDS}
     common["patch_file"] = resolve_patch_file(values["patch_dir"], values["patch_file"])
+    common["srom_file"] = resolve_patch_file(values["patch_dir"], values.get("srom_file", ""))
     return PollerConfig(**common, ring_size=ring_size, sim=sim)
 
 
-def _open_spidev(dev: str, cfg: PollerConfig) -> object:
+def _open_bus(dev: str, cfg: PollerConfig, info: ChipInfo) -> object:
+    """The real bus of one device, in its chip's SPI mode, clock capped to its maximum."""
+    if info.bus == "i2c":
+        from pln2033 import i2c  # type: ignore[attr-defined]
+
+        return i2c.open_bus(dev)
     from pln2033.bus import SpidevBus
 
-    return SpidevBus(dev, cfg.spi_speed_hz)
+    speed, _note = chip_config.spi_speed(info, cfg.spi_speed_hz)
+    return SpidevBus(dev, speed, mode=info.spi_mode)
 
 
 # --- one sensor ------------------------------------------------------------------------------
@@ -86,9 +107,20 @@ def _open_spidev(dev: str, cfg: PollerConfig) -> object:
 class Channel:
     """One sensor: its driver, state and its slice of the shared memory."""
 
-    def __init__(self, index: int, device: str, state: ss.SharedState, ring_size: int) -> None:
+    def __init__(
+        self,
+        index: int,
+        device: str,
+        state: ss.SharedState,
+        ring_size: int,
+        chip: str = registry.DEFAULT_CHIP,
+        info: ChipInfo | None = None,
+    ) -> None:
         self.i = index
         self.device = device
+        self.chip = chip
+        self.info = info or registry.chip_info(chip)
+        self.fast = chip == registry.DEFAULT_CHIP  # the PLN2033's hand-tuned hot path
         # memoryviews, not numpy: item access on them is several times cheaper,
         # and this runs twice per 1 kHz poll (and the board's agent has no numpy).
         self.ints, self.floats, self.ring = state.sensor_views(index)
@@ -108,6 +140,7 @@ class Channel:
         self.last_error = ""
         self.gap = LiftGapEstimator()  # in counts
         self.gap_m = LiftGapEstimator()  # in metres: right across a CPI change
+        self.exact_scale = 0.0  # metres per count of a fixed-resolution chip (0: from the CPI)
         self.sim_stats = None  # the emulator's ground truth, sim backend only
         self.sim_base = (0, 0, 0, 0)
         # the hot path's view of the driver (see attach)
@@ -117,16 +150,33 @@ class Channel:
         self._motion_bit = 0
         self.ok = False  # up and its last poll succeeded: the run loop's fast case
         self.ints[ss.I_STATE] = ss.STATE_STARTING
+        self.ints[ss.I_QUALITY] = QUALITY_NONE
+        if self.fast:  # the hot path writes no quality: the PLN2033 has none
+            ring_quality = self.ring[6]
+            for k in range(len(ring_quality)):
+                ring_quality[k] = QUALITY_NONE
+        else:
+            self.poll = self._poll_generic  # type: ignore[method-assign]
+        self._threshold = self.info.quality_threshold
 
     def attach(self, driver: PLN2033 | None) -> None:
         """Use ``driver`` for polls (None: the sensor is down)."""
         self.driver = driver
         self.ok = driver is not None
         if driver is not None:
-            self._xfer = driver.bus.xfer2
-            self._tx = driver.motion_tx
-            self._unusual = driver.unusual_status_bits
-            self._motion_bit = driver.map.status_motion
+            if self.fast:
+                self._xfer = driver.bus.xfer2
+                self._tx = driver.motion_tx
+                self._unusual = driver.unusual_status_bits
+                self._motion_bit = driver.map.status_motion
+            else:
+                self._read = driver.read_motion
+                self.info = driver.info  # the PMW3901's follows its height
+                self._threshold = self.info.quality_threshold
+
+    def _poll_generic(self, stamp_ns: int) -> None:
+        """One motion read of a chip other than the PLN2033, recorded. Raises Pln2033Error."""
+        self.record(stamp_ns, self._read())
 
     def poll(self, stamp_ns: int) -> None:
         """One motion burst, recorded: the 1 kHz hot path. Raises Pln2033Error.
@@ -148,7 +198,7 @@ class Channel:
         ints = self.ints
         seq = self.seq
         slot = seq % self.n
-        stamps, rdx, rdy, rstatus, rcpi, rflags = self.ring
+        stamps, rdx, rdy, rstatus, rcpi, rflags, _rq = self.ring
         ints[0] += 1  # I_VERSION, odd: writing
         rdx[slot] = dx
         rdy[slot] = dy
@@ -178,21 +228,31 @@ class Channel:
         """
         ints, floats = self.ints, self.floats
         slot = self.seq % self.n
-        stamps, rdx, rdy, rstatus, rcpi, rflags = self.ring
+        stamps, rdx, rdy, rstatus, rcpi, rflags, rquality = self.ring
         ints[ss.I_VERSION] += 1  # odd: writing
         if m is None:
             rdx[slot] = rdy[slot] = rstatus[slot] = 0
+            rquality[slot] = QUALITY_NONE
             flags = ss.FLAG_SPI_ERROR
         else:
             dx, dy = m.dx, m.dy
             rdx[slot] = dx
             rdy[slot] = dy
-            rstatus[slot] = m.status
+            rstatus[slot] = m.status & 0xFFFF
+            quality = m.quality
+            rquality[slot] = quality
+            # below the chip's threshold: the counts are not trusted, the poll is a gap
+            # poll for the lift estimate (they stay in the measured totals, as a lift's do)
+            poor = 0 <= quality < self._threshold
             flags = (
                 (ss.FLAG_LIFT if m.lifted else 0)
                 | (ss.FLAG_MOTION if m.moved else 0)
                 | (ss.FLAG_OVERFLOW if m.overflow else 0)
+                | (ss.FLAG_LOW_QUALITY if poor else 0)
             )
+            ints[ss.I_QUALITY] = quality
+            if poor:
+                ints[ss.I_LOW_QUALITY] += 1
             if dx:
                 ints[ss.I_X_TOTAL] += dx
                 floats[ss.F_X_TOTAL_M] += dx * self.scale_x
@@ -203,8 +263,9 @@ class Channel:
                 ints[ss.I_LIFT_TOTAL] += 1
             if m.overflow:
                 ints[ss.I_OVERFLOWS] += 1
-            if not (extra_flags and m.lifted):  # a command's read covers no poll slot
-                self._update_lift_gap(dx, dy, m.lifted)
+            gap = m.lifted or poor
+            if not (extra_flags and gap):  # a command's read covers no poll slot
+                self._update_lift_gap(dx, dy, gap)
         stamps[slot] = stamp_ns
         rcpi[slot] = self.cpi_y
         rflags[slot] = flags | extra_flags
@@ -247,13 +308,13 @@ class Channel:
         oldest slot or the previous lifted poll, whichever comes first; each
         poll in metres at the CPI it was counted with.
         """
-        _, rdx, rdy, _, rcpi, rflags = self.ring
+        _, rdx, rdy, _, rcpi, rflags, _rq = self.ring
         n, seq = self.n, self.seq
         ratio = self.scale_x / self.scale_y if self.scale_y else 1.0  # X's CPI next to Y's
         counts, metres = [], []
         for s in range(seq - 1, max(seq - 1 - self.gap.window, seq - n, -1), -1):
             slot = s % n
-            if rflags[slot] & ss.FLAG_LIFT:
+            if rflags[slot] & (ss.FLAG_LIFT | ss.FLAG_LOW_QUALITY):
                 break
             dx, dy = rdx[slot], rdy[slot]
             cpi = rcpi[slot]
@@ -266,10 +327,16 @@ class Channel:
         self.gap_m.prime(metres)
 
     def set_cpi_cache(self, x: int, y: int) -> None:
-        """The CPI now in force on the chip: later counts are scaled by it."""
+        """The CPI now in force on the chip: later counts are scaled by it.
+
+        An optical-flow chip's CPI is a rounded effective value: its metres use the
+        driver's exact ``metres_per_count`` (the ring's CPI stays the rounded one).
+        """
         self.cpi_x, self.cpi_y = x, y
         self.scale_x = INCH_M / x if x else 0.0
         self.scale_y = INCH_M / y if y else 0.0
+        if self.exact_scale:
+            self.scale_x = self.scale_y = self.exact_scale
         self.gap_m.unit = self.scale_y
         self.ints[ss.I_CPI_X] = x
         self.ints[ss.I_CPI_Y] = y
@@ -290,15 +357,56 @@ class Poller:
         self.state = state
         self.commands = commands
         self.events = events
-        self.channels = [Channel(i, d, state, cfg.ring_size) for i, d in enumerate(cfg.devices)]
         self.regmap = (
             RegisterMap.load(cfg.register_map) if cfg.register_map else RegisterMap.default()
         )
-        self.patch = read_patch_file(cfg.patch_file) if cfg.patch_file else None
+        self.chips, self.notes = chip_config.check_board_config(
+            cfg.devices, cfg.chips, cfg.chip_options, cfg.cpi, cfg.register_map
+        )
+        self.channels = [
+            Channel(i, d, state, cfg.ring_size, chip, self._info(chip))
+            for i, (d, chip) in enumerate(zip(cfg.devices, self.chips, strict=True))
+        ]
+        # firmware per chip type: the PLN2033's patch, the PMW33xx's SROM
+        self.firmware: dict[str, list[int] | None] = {}
+        for chip in sorted(set(self.chips)):
+            info = self._info(chip)
+            path, note = chip_config.firmware_source(info, cfg.patch_file, cfg.srom_file)
+            self.firmware[chip] = chip_config.read_firmware(info, path)
+            if note:
+                self.notes.append(note)
+            if info.bus == "spi":
+                _speed, note = chip_config.spi_speed(info, cfg.spi_speed_hz)
+                if note and cfg.backend == "spidev":
+                    self.notes.append(note)
+        self.driver_extra: dict[str, object] = {}  # tests: e.g. sleep on a fake clock
         self.t0 = time.monotonic()
         self.sim_buses = self._sim_buses() if cfg.backend == "sim" else {}
         self.running = True
         self.commands_seen = 0
+
+    def _info(self, chip: str) -> ChipInfo:
+        if chip == registry.DEFAULT_CHIP:
+            from pln2033.driver import pln2033_info
+
+            return pln2033_info(self.regmap)
+        return registry.chip_info(chip)
+
+    @property
+    def patch(self) -> list[int] | None:
+        """The PLN2033's patch code (loaded at every bring-up)."""
+        return self.firmware.get(registry.DEFAULT_CHIP)
+
+    @patch.setter
+    def patch(self, words: list[int] | None) -> None:
+        self.firmware[registry.DEFAULT_CHIP] = words
+
+    def make_driver(self, ch: Channel) -> object:
+        """The driver of ``ch``'s chip on its bus, with the chip options it takes."""
+        if ch.fast:
+            return PLN2033(ch.bus, self.regmap, name=ch.device)  # type: ignore[arg-type]
+        opts = chip_config.options_for(ch.chip, {**self.cfg.chip_options, **self.driver_extra})
+        return registry.make_driver(ch.chip, ch.bus, ch.device, **opts)
 
     def _sim_buses(self) -> dict[str, object]:
         from .sim_backend import make_sim_buses
@@ -319,12 +427,17 @@ class Poller:
         ch.ints[ss.I_STATE] = ss.STATE_STARTING
         try:
             if ch.bus is None:
-                ch.bus = self.sim_buses.get(ch.device) or _open_spidev(ch.device, self.cfg)
-            driver = PLN2033(ch.bus, self.regmap, name=ch.device)  # type: ignore[arg-type]
-            ch.cpi_wanted = ch.cpi_wanted or self.cfg.cpi
-            driver.initialise(ch.cpi_wanted, self.patch)
-            ch.set_cpi_cache(driver.get_x_cpi(), driver.get_y_cpi())
-            driver.read_motion()  # counts from before this point belong to the start-up
+                ch.bus = self.sim_buses.get(ch.device) or _open_bus(ch.device, self.cfg, ch.info)
+            driver = self.make_driver(ch)
+            if ch.info.cpi.fixed:
+                ch.cpi_wanted = driver.info.cpi.min  # type: ignore[attr-defined]
+            else:
+                ch.cpi_wanted = ch.cpi_wanted or self.cfg.cpi
+            driver.initialise(ch.cpi_wanted, self.firmware.get(ch.chip))  # type: ignore[attr-defined]
+            exact = getattr(driver, "metres_per_count", 0.0)
+            ch.exact_scale = exact if ch.info.cpi.fixed and isinstance(exact, float) else 0.0
+            ch.set_cpi_cache(*driver.get_cpi())  # type: ignore[attr-defined]
+            driver.read_motion()  # type: ignore[attr-defined]  # start-up counts are dropped
         except (Pln2033Error, ValueError, OSError) as exc:
             self.mark_down(ch, now, f"start-up failed: {exc}")
             return
@@ -343,7 +456,7 @@ class Poller:
             )
         ch.ints[ss.I_REINITS] += 1
         ch.ints[ss.I_STATE] = ss.STATE_UP
-        self.emit("up", ch.device, f"initialised at {ch.cpi_x} CPI")
+        self.emit("up", ch.device, f"{ch.info.title} initialised at {ch.cpi_x} CPI")
 
     def mark_down(self, ch: Channel, now: float, why: str) -> None:
         changed = ch.driver is not None or why != ch.last_error
@@ -387,7 +500,7 @@ class Poller:
         if ch.driver is None:
             return
         try:
-            ch.set_cpi_cache(ch.driver.get_x_cpi(), ch.driver.get_y_cpi())
+            ch.set_cpi_cache(*ch.driver.get_cpi())
         except Pln2033Error:
             self.mark_down(ch, time.monotonic(), "CPI unknown after a failed command")
 
@@ -400,7 +513,7 @@ class Poller:
         if ch.driver is None:
             return
         try:
-            x, y = ch.driver.get_x_cpi(), ch.driver.get_y_cpi()
+            x, y = ch.driver.get_cpi()
         except Pln2033Error:
             return  # the polls count SPI errors; they decide about "down"
         if (x, y) != (ch.cpi_x, ch.cpi_y):
@@ -421,32 +534,40 @@ class Poller:
             if kind == "settings":
                 motion, regs = ch.driver.read_all_registers()
                 ch.record(time.time_ns(), motion, ss.FLAG_SETTINGS_READ)
+                cpi = ch.info.cpi
                 return (
                     "ok",
                     {
+                        "chip": ch.chip,
                         "registers": regs,
                         "cpi_x": ch.cpi_x,
                         "cpi_y": ch.cpi_y,
+                        "cpi_range": [cpi.min, cpi.max, cpi.step],
                         "lifted": motion.lifted,
                         "motion": motion.moved,
                     },
                 )
             if kind == "set_cpi":
                 cpi = msg[2]
-                problem = self.regmap.cpi_problem(cpi)
+                problem = ch.driver.cpi_problem(cpi)
                 if problem:
-                    return ("invalid", problem)
+                    return ("invalid", f"{ch.device} ({ch.chip}): {problem}")
                 # Drain the counters at the old CPI first, so every count keeps its scale.
                 ch.record(time.time_ns(), ch.driver.read_motion())
                 ch.driver.set_cpi(cpi)
                 ch.cpi_wanted = cpi
-                ch.set_cpi_cache(ch.driver.get_x_cpi(), ch.driver.get_y_cpi())
+                ch.set_cpi_cache(*ch.driver.get_cpi())
                 return ("ok", ch.cpi_y)
             if kind == "load_patch":
                 words = msg[2]
+                if ch.info.firmware != "patch":
+                    return (
+                        "invalid",
+                        f"{ch.device} is a {ch.info.title}: it takes no PLN2033 patch code",
+                    )
                 try:
                     ch.driver.check_patch(words)
-                except PatchError as exc:
+                except FirmwareError as exc:
                     return ("invalid", str(exc))
                 ch.driver.load_patch(words)  # writes, verifies, enables
                 self.patch = list(words)  # re-initialisations load it too
@@ -596,6 +717,8 @@ def run_poller(cfg: PollerConfig, buffer: object, commands: Connection, events: 
         events.send(("fatal", f"{exc}"))
         return
     events.send(("log", f"poller pid {os.getpid()}: {tune_process(cfg.realtime_priority)}"))
+    for note in poller.notes:
+        events.send(("log", note))
     signal.signal(signal.SIGTERM, lambda *_: setattr(poller, "running", False))
     if os.getppid() != parent_pid:  # the node died before the death signal was armed
         return

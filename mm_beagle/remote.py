@@ -26,7 +26,7 @@ import zlib
 
 import numpy as np
 
-from . import link
+from . import chip_config, link
 from . import shared_state as ss
 from .poller import PollerConfig
 from .poller_client import PollerError
@@ -36,7 +36,7 @@ COMMAND_TIMEOUT_S = 2.0
 HISTORY_TIMEOUT_S = 2.0
 GAP_RETRY_S = 5.0  # how long a gap is asked for before its polls count as lost
 CLOCK_LEAK = 1e-4  # the clock offset estimate may rise this much per second (100 ppm)
-RING_DTYPES = ("<i8", "<i2", "<i2", "<u2", "<u2", "u1")
+RING_DTYPES = ("<i8", "<i2", "<i2", "<u2", "<u2", "u1", "<i2")
 
 
 class RemoteAgent:
@@ -511,6 +511,16 @@ class RemoteAgent:
                 self.mismatch = (
                     f"the agent at {self.endpoint} serves {status.get('devices')}, this node "
                     f"expects {self.cfg.devices}: set the node's 'devices' parameter to match"
+                )
+                self._emit("log", self.mismatch)
+            return
+        chips = status.get("chips")  # an agent from before issue 15 polls PLN2033s only
+        expected = chip_config.resolve_chips(self.cfg.chips, self.cfg.devices)
+        if (chips or ["pln2033"] * len(expected)) != expected:
+            if not self.mismatch:
+                self.mismatch = (
+                    f"the agent at {self.endpoint} polls chips {chips}, this node expects "
+                    f"{expected}: set the node's 'chips' parameter to match the agent's --chips"
                 )
                 self._emit("log", self.mismatch)
             return

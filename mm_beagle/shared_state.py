@@ -37,8 +37,10 @@ I_GEN_Y = 12
 I_REINITS = 13  # successful (re)initialisations
 I_LIFT_LOST_X = 14  # emulator ground truth: counts cleared by lifts
 I_LIFT_LOST_Y = 15
-I_RING_FROM = 16  # oldest seq the ring holds (the remote backend starts mid-run)
-N_INT = 17
+I_LOW_QUALITY = 16  # polls whose quality was below the chip's threshold (treated like a lift)
+I_QUALITY = 17  # the newest poll's quality figure (-1: the chip has none)
+I_RING_FROM = 18  # oldest seq the ring holds (the remote backend starts mid-run)
+N_INT = 19
 
 # int64 fields that only grow: a restarted agent's are added to what came before
 MONOTONE_INTS = (
@@ -53,6 +55,7 @@ MONOTONE_INTS = (
     I_REINITS,
     I_LIFT_LOST_X,
     I_LIFT_LOST_Y,
+    I_LOW_QUALITY,
 )
 
 # float64 fields per sensor
@@ -89,6 +92,7 @@ FLAG_MOTION = 2
 FLAG_OVERFLOW = 4
 FLAG_SPI_ERROR = 8
 FLAG_SETTINGS_READ = 16
+FLAG_LOW_QUALITY = 32  # quality below the chip's threshold: treated like a lift
 
 LATE_FACTOR = 1.5
 
@@ -127,6 +131,8 @@ class Totals:
     reinits: int
     lift_lost_x: int
     lift_lost_y: int
+    low_quality_total: int  # polls below the chip's quality threshold
+    quality: int  # the newest poll's quality figure (-1: none)
     x_total_m: float
     y_total_m: float
     x_est_counts: float
@@ -140,7 +146,7 @@ class Totals:
 
     @classmethod
     def zero(cls, stamp_ns: int = 0) -> Totals:
-        return cls(*([0] * 9), stamp_ns, *([0] * 5), *([0.0] * N_FLOAT))
+        return cls(*([0] * 9), stamp_ns, *([0] * 7), *([0.0] * N_FLOAT))
 
 
 class SharedState:
@@ -164,8 +170,17 @@ class SharedState:
         ("ring_status", "H", 2, True, 0),
         ("ring_cpi", "H", 2, True, 0),
         ("ring_flags", "B", 1, True, 0),
+        ("ring_quality", "h", 2, True, 0),
     )
-    RING_FIELDS = ("ring_stamp", "ring_dx", "ring_dy", "ring_status", "ring_cpi", "ring_flags")
+    RING_FIELDS = (
+        "ring_stamp",
+        "ring_dx",
+        "ring_dy",
+        "ring_status",
+        "ring_cpi",
+        "ring_flags",
+        "ring_quality",
+    )
 
     def __init__(self, buffer: object, n_sensors: int, ring_size: int) -> None:
         self.n_sensors = n_sensors
@@ -225,7 +240,7 @@ class SharedState:
     @staticmethod
     def size(n_sensors: int, ring_size: int) -> int:
         """Bytes needed for the layout (with alignment slack)."""
-        per_ring = 8 + 2 + 2 + 2 + 2 + 1
+        per_ring = 8 + 2 + 2 + 2 + 2 + 1 + 2
         return (
             8 * n_sensors * (N_INT + N_FLOAT)
             + 8 * (N_GLOBAL + HIST_BINS)
@@ -277,6 +292,7 @@ class SharedState:
             "status": self.ring_status[i][idx],
             "cpi": self.ring_cpi[i][idx],
             "flags": self.ring_flags[i][idx],
+            "quality": self.ring_quality[i][idx],
         }
         # Slots the poller overwrote while we copied are not trustworthy.
         oldest_valid = self.snapshot(i).seq - n
@@ -305,4 +321,6 @@ class SharedState:
 
 # The poller's hot path (poller.Channel.poll) writes these by literal index.
 assert (I_VERSION, I_SEQ, I_X_TOTAL, I_Y_TOTAL, I_STAMP_NS) == (0, 1, 2, 3, 10)
+_RINGS = tuple(f[0] for f in SharedState._LAYOUT if f[0].startswith("ring_"))
+assert _RINGS == SharedState.RING_FIELDS
 assert (F_X_TOTAL_M, F_Y_TOTAL_M, FLAG_MOTION) == (0, 1, 2)

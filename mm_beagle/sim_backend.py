@@ -1,7 +1,8 @@
-"""The sim backend: emulated PLN2033s moved along a ground-truth path.
+"""The sim backend: emulated sensors moved along a ground-truth path.
 
-Each device gets a register-level :class:`~pln2033.emulator.EmulatedPLN2033`
-whose motion is the robot simulator's path seen from that sensor's mount, so
+Each device gets the register-level emulator of its chip (``sim_chips``, else
+``chips``: :func:`pln2033.chips.make_emulator`; a PLN2033 by default) whose motion
+is the robot simulator's path seen from that sensor's mount, so
 the real driver and poller code run unchanged. Needs numpy (through the
 simulator); the spidev path never imports this module.
 """
@@ -28,6 +29,9 @@ class SimConfig:
     noise_counts: float = 0.0  # count noise per sqrt(s)
     fail_windows: list[str] = field(default_factory=list)  # "DEVICE@START-END" (s from start)
     seed: int = 1
+    chips: list[str] = field(default_factory=list)  # the emulated chips ([] = as 'chips')
+    low_quality_rate: float = 0.0  # poor-surface windows per second per sensor
+    low_quality_duration: float = 0.02  # s
 
 
 def check_trajectory(spec: str) -> None:
@@ -66,14 +70,47 @@ def parse_fail_windows(
 # --- sensor backends -----------------------------------------------------------------------
 
 
-def make_sim_buses(cfg, t0: float) -> dict[str, object]:
-    """One emulated PLN2033 per device, driven by the ground-truth simulator."""
+def _windows(rate: float, duration: float, seed: int, t0: float) -> list[tuple[float, float]]:
+    """Poisson-spaced (start, end) windows over 24 h from ``t0`` (at most 200 000)."""
     import random
+
+    out: list[tuple[float, float]] = []
+    if rate <= 0:
+        return out
+    rng = random.Random(seed)
+    t = t0
+    horizon = t0 + 24 * 3600
+    while t < horizon and len(out) < 200_000:
+        t += rng.expovariate(rate)
+        out.append((t, t + duration))
+        t += duration
+    return out
+
+
+# emulator keywords taken from the driver options, so that the emulated chip matches
+# the configured one (its height above the floor, its resolution encoding)
+EMULATOR_OPTIONS = ("height_m", "resolution_offset")
+
+
+def sim_chips(cfg) -> list[str]:
+    """The emulated chip of each device: ``sim.chips``, else the poller's ``chips``."""
+    from pln2033.chips import check_chips
+
+    names = [c for c in cfg.sim.chips if c] or [c for c in cfg.chips if c]
+    try:
+        return check_chips(names, len(cfg.devices))
+    except ValueError as exc:
+        raise ValueError(f"'sim_chips': {exc}") from None
+
+
+def make_sim_buses(cfg, t0: float) -> dict[str, object]:
+    """One emulated sensor per device (its chip's emulator), driven by the simulator."""
+    import inspect
 
     import numpy as np
 
     from mm_pc.sim import robot as simulator
-    from pln2033.emulator import EmulatedPLN2033
+    from pln2033 import chips as registry
     from pln2033.motion import SampledPath
 
     sim = cfg.sim
@@ -90,26 +127,28 @@ def make_sim_buses(cfg, t0: float) -> dict[str, object]:
         v, w, vy = (np.concatenate([still, a]) for a in (v, w, vy))
     fails = parse_fail_windows(sim.fail_windows, cfg.devices)
     regmap = RegisterMap.load(cfg.register_map) if cfg.register_map else None
+    chips = sim_chips(cfg)
     buses: dict[str, object] = {}
-    for i, dev in enumerate(cfg.devices):
+    for i, (dev, chip) in enumerate(zip(cfg.devices, chips, strict=True)):
         mount = mounts[i % len(mounts)]
         cx, cy = simulator.cumulative_sensor_path(v, w, simulator.DT, mount, vy)
         path = SampledPath(cx, cy, simulator.DT, t_start=t0, loop=loop)
-        lifts = []
-        if sim.lift_rate > 0:
-            rng = random.Random(sim.seed * 1000 + i)
-            t = t0
-            horizon = t0 + 24 * 3600
-            while t < horizon and len(lifts) < 200_000:
-                t += rng.expovariate(sim.lift_rate)
-                lifts.append((t, t + sim.lift_duration))
-                t += sim.lift_duration
-        buses[dev] = EmulatedPLN2033(
+        kwargs: dict[str, object] = dict(
             motion=path,
-            regmap=regmap,
-            lift_windows=lifts,
+            lift_windows=_windows(sim.lift_rate, sim.lift_duration, sim.seed * 1000 + i, t0),
             noise_counts=sim.noise_counts,
             fault_windows=[(t0 + a, t0 + b, "raise") for a, b in fails[dev]],
             seed=sim.seed + i,
         )
+        poor = _windows(sim.low_quality_rate, sim.low_quality_duration, sim.seed * 7919 + i, t0)
+        if poor:
+            kwargs["low_quality_windows"] = poor
+        if chip == registry.DEFAULT_CHIP:
+            kwargs["regmap"] = regmap
+        emulator_class = registry._load(registry._spec(chip).emulator)
+        takes = set(inspect.signature(emulator_class).parameters)
+        for key in EMULATOR_OPTIONS:
+            if key in cfg.chip_options and key in takes:
+                kwargs[key] = cfg.chip_options[key]
+        buses[dev] = registry.make_emulator(chip, **kwargs)
     return buses

@@ -184,8 +184,8 @@ def test_bring_up_state_cpi_and_events():
         assert (t.state, t.reinits, t.cpi_x, t.cpi_y, t.seq) == (ss.STATE_UP, 1, 2400, 2400, 0)
         assert (emu.cpi_x, emu.cpi_y) == (2400, 2400)
     assert rig.events() == [
-        ("up", DEVICES[0], "initialised at 2400 CPI"),
-        ("up", DEVICES[1], "initialised at 2400 CPI"),
+        ("up", DEVICES[0], "Philips PLN2033 initialised at 2400 CPI"),
+        ("up", DEVICES[1], "Philips PLN2033 initialised at 2400 CPI"),
     ]
 
 
@@ -675,7 +675,7 @@ def test_fault_window_down_other_channel_keeps_polling_then_reinit():
     assert (t.state, t.reinits) == (ss.STATE_UP, 2)
     assert (t.cpi_x, t.cpi_y) == (1600, 1600) == (rig.emus[0].cpi_x, rig.emus[0].cpi_y)
     ev = rig.events()
-    assert ev == [("up", DEVICES[0], "initialised at 1600 CPI")]
+    assert ev == [("up", DEVICES[0], "Philips PLN2033 initialised at 1600 CPI")]
     # counts are conserved again from the re-initialisation on
     base0 = measured(rig.emus[0])
     tot0 = (t.x_total, t.y_total)
@@ -718,7 +718,7 @@ def test_start_up_failure_retries_after_the_interval():
     t = rig.snap(0)
     assert t.state == ss.STATE_UP and t.reinits == 1
     assert emu.stats.faulted_transfers == 3
-    assert rig.events() == [("up", DEVICES[0], "initialised at 1600 CPI")]
+    assert rig.events() == [("up", DEVICES[0], "Philips PLN2033 initialised at 1600 CPI")]
     assert t.seq == rig.k - 300  # polled from 0.3 s on (the poll that re-inits records nothing)
 
 
