@@ -1,0 +1,219 @@
+"""The poller with mixed chips (issue 15): the real drivers against their emulators.
+
+Each test builds a real :class:`Poller` on a plain bytearray and polls it by hand on a
+fake clock (as tests/beagle/test_poller.py does for the PLN2033); each device's emulator
+comes from :func:`pln2033.chips.make_emulator`. Parametrised over every registered chip:
+a chip whose family is not installed yet is skipped with a reason.
+"""
+
+from __future__ import annotations
+
+from multiprocessing import Pipe
+
+import pytest
+from fakes import FakeClock
+
+from mm_beagle import chip_config
+from mm_beagle import shared_state as ss
+from mm_beagle.poller import Poller, PollerConfig
+from mm_beagle.sim_backend import SimConfig
+from pln2033 import chips as registry
+from pln2033.motion import ConstantVelocity
+
+T0 = 100.0
+PERIOD = 1e-3
+OTHERS = [c for c in registry.chip_names() if c != registry.DEFAULT_CHIP]
+
+
+def need(chip: str) -> None:
+    if not chip_config.available(chip):
+        pytest.skip(f"the {chip} driver is not in this tree yet")
+
+
+class Rig:
+    """A Poller over one emulator per device (its chip's), on a fake clock."""
+
+    def __init__(self, chips, emu_kw=None, cpi=1600, options=None, ring=65536):
+        n = len(chips)
+        self.clock = FakeClock(T0)
+        self.state = ss.SharedState(bytearray(ss.SharedState.size(n, ring)), n, ring)
+        self.cmd, cmd_child = Pipe()
+        self.ev, ev_child = Pipe()
+        self.cfg = PollerConfig(
+            devices=[f"/dev/spidev1.{i}" for i in range(n)],
+            backend="sim",
+            cpi=cpi,
+            chips=list(chips),
+            chip_options=dict(options or {}),
+            ring_size=ring,
+            sim=SimConfig(trajectory="straight"),
+        )
+        self.poller = Poller(self.cfg, self.state, cmd_child, ev_child)
+        self.poller.driver_extra = {"sleep": self.sleep}
+        self.emus = []
+        self.t_init = []  # when each channel's counting started (bring-up waits move the clock)
+        for ch, kw in zip(self.poller.channels, emu_kw or [{}] * n, strict=True):
+            emu = registry.make_emulator(ch.chip, clock=self.clock, **kw)
+            ch.bus = emu
+            self.emus.append(emu)
+            self.poller.try_init(ch, self.clock.t)
+            self.t_init.append(self.clock.t)
+        self.k = 0
+        self.t_start = self.clock.t
+
+    def sleep(self, s: float) -> None:
+        self.clock.t += s
+
+    def run(self, polls: int) -> None:
+        for _ in range(polls):
+            self.k += 1
+            self.clock.t = self.t_start + self.k * PERIOD
+            for ch in self.poller.channels:
+                self.poller.poll(ch, round(self.clock.t * 1e9), self.clock.t)
+
+    def events(self):
+        out = []
+        while self.ev.poll():
+            out.append(self.ev.recv())
+        return out
+
+
+@pytest.mark.parametrize("chip", OTHERS)
+def test_mixed_chips_poll_every_count_with_quality(chip):
+    """A PLN2033 and another chip on one poller: both up, every counted count measured,
+    the quality ring -1 for the PLN2033 and the chip's figure for the other."""
+    need(chip)
+    motion = ConstantVelocity(0.05, 0.2)
+    rig = Rig(["pln2033", chip], [{"motion": motion}, {"motion": motion}])
+    ev = rig.events()
+    assert [e[0] for e in ev] == ["up", "up"], ev
+    rig.run(500)
+    info = rig.poller.channels[1].info
+    for i in range(2):
+        t = rig.state.snapshot(i)
+        assert t.state == ss.STATE_UP and t.seq == 500
+        stats = rig.emus[i].stats
+        assert stats.protocol_errors == 0
+        # every count that entered the chip's counter is in the measured totals
+        assert (t.x_total, t.y_total) == (t.gen_x, t.gen_y)
+        assert t.y_total > 100
+        # metres: within 2 % of the true path (optical flow: its scale model, exactly)
+        assert t.y_total_m == pytest.approx(0.2 * (rig.clock.t - rig.t_init[i]), rel=0.02)
+        _f, _n, _d, arr = rig.state.samples(i, 0, 0)
+        q = arr["quality"]
+        if i == 0:
+            assert (q == -1).all() and t.quality == -1
+        else:
+            assert info.quality_name, "every chip besides the PLN2033 reports a quality"
+            assert (q >= info.quality_threshold).all() and t.quality == int(q[-1])
+            assert not (arr["flags"] & ss.FLAG_LOW_QUALITY).any()
+        assert t.low_quality_total == 0
+
+
+@pytest.mark.parametrize("chip", OTHERS)
+def test_low_quality_window_is_treated_like_a_lift(chip):
+    """A 30 ms poor-surface window: its polls carry FLAG_LOW_QUALITY and are counted;
+    the lift-gap estimate fills the motion the chip did not count (the emulator's ground
+    truth) within 15 %, and the measured totals still hold every counted count."""
+    need(chip)
+    info = registry.chip_info(chip)
+    if info.quality_threshold <= 0:
+        pytest.skip(f"the {chip} has no quality threshold")
+    motion = ConstantVelocity(0.0, 0.3)
+    start = T0 + 1.0  # after the slowest bring-up (the PMW3901's init waits)
+    rig = Rig([chip], [{"motion": motion, "low_quality_windows": [(start, start + 0.03)]}])
+    assert rig.clock.t < start - 0.2
+    rig.run(round((start + 0.3 - rig.clock.t) / PERIOD))
+    t = rig.state.snapshot(0)
+    _f, _n, _d, arr = rig.state.samples(0, 0, 0)
+    poor = (arr["flags"] & ss.FLAG_LOW_QUALITY) != 0
+    assert 28 <= poor.sum() <= 32, poor.sum()
+    assert t.low_quality_total == int(poor.sum())
+    assert (arr["quality"][poor] < info.quality_threshold).all()
+    assert not (arr["flags"] & ss.FLAG_LIFT).any()  # a low quality is not a lift bit
+    assert (t.x_total, t.y_total) == (t.gen_x, t.gen_y)
+    lost = t.lift_lost_y  # counts the chip did not count in the window (ground truth)
+    window_counts = 0.3 * 0.03 / (t.y_total_m / t.y_total)
+    assert lost == pytest.approx(window_counts, rel=0.1)
+    assert t.y_est_counts == pytest.approx(lost, rel=0.15)
+    # measured + estimate = the true path within 1 %
+    true_m = 0.3 * (rig.clock.t - rig.t_init[0])
+    assert t.y_total_m + t.y_est_m == pytest.approx(true_m, rel=0.01)
+    assert t.y_total_m < true_m - 0.3 * 0.03 * 0.8  # without the estimate: the window short
+
+
+@pytest.mark.parametrize("chip", OTHERS)
+def test_cpi_is_refused_outside_each_chips_own_range(chip):
+    need(chip)
+    rig = Rig(["pln2033", chip])
+    info = rig.poller.channels[1].info
+    serve = rig.poller.serve_command
+    bad = info.cpi.max + info.cpi.step if not info.cpi.fixed else 1600
+    status, text = serve(("set_cpi", 1, bad))
+    assert status == "invalid"
+    assert chip in text and str(bad) in text
+    if info.cpi.fixed:
+        assert "fixed" in text and "height_m" in text
+        assert serve(("set_cpi", 1, info.cpi.min))[0] == "ok"
+    else:
+        good = info.cpi.max
+        assert serve(("set_cpi", 1, good)) == ("ok", good)
+        assert rig.state.snapshot(1).cpi_y == good
+    # the PLN2033 next to it keeps its own rules
+    status, text = serve(("set_cpi", 0, 16000))
+    assert status == "invalid" and "pln2033" in text
+
+
+@pytest.mark.parametrize("chip", ["pln2033", *OTHERS])
+def test_settings_reply_names_the_chip_its_dump_and_range(chip):
+    need(chip)
+    rig = Rig([chip])
+    status, reply = rig.poller.serve_command(("settings", 0))
+    assert status == "ok"
+    info = rig.poller.channels[0].info
+    assert reply["chip"] == chip
+    assert reply["cpi_range"] == [info.cpi.min, info.cpi.max, info.cpi.step]
+    assert len(reply["registers"]) >= 5
+    assert all(isinstance(v, int) for v in reply["registers"].values())
+
+
+def test_fixed_chip_ignores_cpi_and_uses_the_exact_scale():
+    need("pmw3901")
+    rig = Rig(["pmw3901"], cpi=3200, options={"height_m": 0.08})
+    ch = rig.poller.channels[0]
+    assert ch.cpi_y == ch.driver.cpi  # the rounded effective CPI, not 3200
+    assert ch.scale_y == ch.driver.metres_per_count  # the float, for metres
+    assert any("fixed" in n for n in rig.poller.notes)
+
+
+@pytest.mark.parametrize(
+    ("chips", "options", "cpi", "needle"),
+    [
+        (["pmw9999"], {}, 1600, "allowed: pln2033"),
+        (["pln2033", "pln2033", "pln2033"], {}, 1600, "give one per device"),
+        (["pmw3360"], {"hieght_m": 0.1}, 1600, "no configured chip takes"),
+        (["pmw3901"], {"height_m": 5.0}, 1600, "working range"),
+        (["pmw3360"], {}, 16000, "PMW3360 allows 100..12000"),
+        (["pln2033", "pmw3389"], {}, 12000, "PLN2033 allows"),
+        (["pmw3360"], {"pmw3389.product_id": 0x42}, 1600, "no configured chip takes"),
+    ],
+)
+def test_bad_chip_configuration_says_what_is_allowed(chips, options, cpi, needle):
+    for chip in chips:
+        if chip in registry.CHIPS:
+            need(chip)
+    with pytest.raises(ValueError, match=needle):
+        chip_config.check_board_config(["/dev/spidev1.0", "/dev/spidev1.1"], chips, options, cpi)
+
+
+def test_chip_options_parse_and_reach_only_the_chips_that_take_them():
+    opts = chip_config.parse_chip_options(
+        ["height_m=0.08", "pmw3389.product_id=0x42", "check_crc=false", ""]
+    )
+    assert opts == {"height_m": 0.08, "pmw3389.product_id": 0x42, "check_crc": False}
+    need("pmw3389")
+    assert chip_config.options_for("pmw3389", opts) == {"check_crc": False, "product_id": 0x42}
+    assert chip_config.options_for("pln2033", opts) == {}
+    for bad in ("height_m", "=3", "pmw9.x=1"):
+        with pytest.raises(ValueError, match=r"key=value|allowed"):
+            chip_config.parse_chip_options([bad])
