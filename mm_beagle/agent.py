@@ -333,7 +333,7 @@ def make_state(cfg: PollerConfig) -> ss.SharedState:
 
 def _names(text: str) -> list[str]:
     """``"pmw3360,pln2033"`` -> ["pmw3360", "pln2033"]."""
-    return [t.strip() for t in text.split(",") if t.strip()]
+    return chip_config.split_names([text])
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -485,6 +485,8 @@ def config_from_args(args: argparse.Namespace) -> AgentConfig:
         raise ValueError("'retry_interval' must be 0.1..60 s")
     if values["ring_seconds"] < MIN_RING_S:
         raise ValueError(f"'ring_seconds' must be >= {MIN_RING_S:g} (the link's replay window)")
+    for name in ("chips", "sim_chips"):  # a config file may write "a,b" too
+        values[name] = chip_config.split_names(values[name])
     options = chip_config.parse_chip_options(values["chip_options"])
     chip_config.check_board_config(
         devices, values["chips"], options, values["cpi"], values["register_map"]

@@ -31,6 +31,10 @@ mm-bench poll --seconds S [--clients N] [--rate HZ] [--cursor ack|shared] --json
     the service round-trip time. Also a bare sleep loop measured in the same run
     (``baseline_sleep_p99_us``): on a virtual machine the wake-up latency of
     an idle vCPU dominates the period tail, and the ratio tells code from host.
+    ``--chip NAME`` (both devices that chip) or ``--chips a,b`` (one per device)
+    runs the emulators of those chips behind their real drivers: the poller's
+    CPU per poll (``cpu_us_per_poll``, emulator included) and ``counts_lost``
+    per device (``counts_lost_per_device``) for each chip.
 """
 
 from __future__ import annotations
@@ -188,14 +192,23 @@ def _poller_process(node_pid: int) -> psutil.Process:
     raise RuntimeError("the poller process of mm_beagle was not found")
 
 
-def bench_poll(seconds: float, rate: float, n_clients: int, cursor: str = "ack") -> dict:
+def bench_poll(
+    seconds: float, rate: float, n_clients: int, cursor: str = "ack", chips: list[str] | None = None
+) -> dict:
     import rclpy
 
     baseline = sleep_loop_periods(2.0)
     use_isolated_ros_env()
     echo = baseline_rtt()
     motion_s = max(1.0, seconds - 2.0)
-    params = {"backend": "sim", "sim_trajectory": "figure_eight", "sim_duration": motion_s}
+    params: dict[str, object] = {
+        "backend": "sim",
+        "sim_trajectory": "figure_eight",
+        "sim_duration": motion_s,
+    }
+    if chips:
+        devices = [f"/dev/spidev1.{i}" for i in range(max(2, len(chips)))]
+        params.update(devices=devices, chips=chips)
     ctx = mp.get_context("spawn")
     with beagle_process(params, env=dict(os.environ)) as proc:
         client = BeagleClient("mm_bench")
@@ -251,8 +264,18 @@ def bench_poll(seconds: float, rate: float, n_clients: int, cursor: str = "ack")
         )
     rtts = np.array([x for r in results for x in r["rtts"]])
     base_p50, base_p99 = np.percentile(baseline, [50, 99])
+    cpu_percent = 100 * ((cpu1.user + cpu1.system) - (cpu0.user + cpu0.system)) / (wall1 - wall0)
+    rate_hz = min(r["rate_hz"] for r in results)
     return {
         "benchmark": "poll",
+        "chips": {d: final[d].get("chip", "pln2033") for d in devices},
+        "cpu_us_per_poll": round(cpu_percent / 100 / rate_hz * 1e6, 1) if rate_hz else None,
+        "counts_lost_per_device": {
+            d: max(
+                sum(abs(generated[d][k] - served_by(r)[d][k]) for k in (0, 1)) for r in results
+            )
+            for d in devices
+        },
         "seconds": seconds,
         "clients": n_clients,
         "client_rate_hz": rate if rate > 0 else "flat out",
@@ -262,9 +285,7 @@ def bench_poll(seconds: float, rate: float, n_clients: int, cursor: str = "ack")
         "period_p99_us": float(final[devices[0]]["period_p99_us"]),
         "late_polls": int(final[devices[0]]["late_polls"]),
         "polls": int(final[devices[0]]["polls"]),
-        "cpu_percent": round(
-            100 * ((cpu1.user + cpu1.system) - (cpu0.user + cpu0.system)) / (wall1 - wall0), 2
-        ),
+        "cpu_percent": round(cpu_percent, 2),
         "counts_generated": sum(abs(v) for g in generated.values() for v in g),
         "counts_served": [sum(abs(v) for s in served_by(r).values() for v in s) for r in results],
         "counts_lost": max(lost(served_by(r)) for r in results),
@@ -303,6 +324,8 @@ def main(argv: list[str] | None = None) -> int:
         default="ack",
         help="read-and-clear per client with ack_seq (default), or the node's shared cursor",
     )
+    poll.add_argument("--chip", help="the chip of both emulated sensors (default pln2033)")
+    poll.add_argument("--chips", help="one chip per emulated sensor, comma-separated")
     poll.add_argument("--json", action="store_true", help="print JSON only (the default)")
     pose = sub.add_parser("pose", help="accuracy and speed of every odometry method (simulated)")
     pose.add_argument("--json", action="store_true", help="print JSON only (the default)")
@@ -350,7 +373,17 @@ def main(argv: list[str] | None = None) -> int:
     elif args.what == "poll":
         if not args.seconds >= 3 or not args.rate >= 0 or not 1 <= args.clients <= 64:
             parser.error("need --seconds >= 3, --rate >= 0 (0: flat out), 1 <= --clients <= 64")
-        result = bench_poll(args.seconds, args.rate, args.clients, args.cursor)
+        chips = [c.strip() for c in (args.chips or args.chip or "").split(",") if c.strip()]
+        if args.chip and args.chips:
+            parser.error("give --chip or --chips, not both")
+        if chips:
+            from .chip_config import resolve_chips
+
+            try:
+                resolve_chips(chips, ["a", "b"] if len(chips) == 1 else chips)
+            except ValueError as e:
+                parser.error(str(e))
+        result = bench_poll(args.seconds, args.rate, args.clients, args.cursor, chips)
     print(json.dumps(result, indent=None if args.json else 2))
     return 0
 

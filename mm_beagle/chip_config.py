@@ -30,6 +30,12 @@ def chips_help() -> str:
     return ", ".join(registry.chip_names())
 
 
+def split_names(items: Sequence[str]) -> list[str]:
+    """``["pmw3360,pln2033"]`` or ``["pmw3360", "pln2033"]`` -> ["pmw3360", "pln2033"]
+    (a launch argument arrives as one string); empty entries dropped."""
+    return [n.strip() for item in items for n in str(item).split(",") if n.strip()]
+
+
 def parse_value(text: str) -> object:
     low = text.strip().lower()
     if low in ("true", "false"):

@@ -1,7 +1,8 @@
 """./compile demo: mm-beagle on emulated sensors driving a figure eight, plus a live view.
 
-The node runs as its own process with the sim backend (two emulated PLN2033s
-behind the real driver, fed by the ground-truth simulator); the live text view
+The node runs as its own process with the sim backend (two emulated sensors,
+PLN2033s unless ``--sim-chips`` names others, behind the real drivers, fed by the
+ground-truth simulator); the live text view
 (mm-watch) shows what it serves until Ctrl-C, or for ``--duration`` seconds.
 Both use a private ROS_DOMAIN_ID and localhost-only discovery.
 """
@@ -20,6 +21,11 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="./compile demo", description=__doc__.split("\n\n")[0])
     parser.add_argument("--duration", type=float, default=0.0, help="seconds; 0 = until Ctrl-C")
     parser.add_argument("--trajectory", default="figure_eight", help="sim path of the robot")
+    parser.add_argument(
+        "--sim-chips",
+        default="",
+        help="emulated chip of each sensor, e.g. pmw3360,pmw3360 (default pln2033)",
+    )
     args = parser.parse_args(argv)
     if args.duration < 0:
         parser.error("--duration must be >= 0")
@@ -30,7 +36,9 @@ def main(argv: list[str] | None = None) -> int:
         f"ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}); node log: {log}",
         flush=True,
     )
-    params = {"backend": "sim", "sim_trajectory": args.trajectory}
+    params: dict[str, object] = {"backend": "sim", "sim_trajectory": args.trajectory}
+    if args.sim_chips:
+        params["chips"] = [args.sim_chips]
     with beagle_process(params, env=env, log_path=log) as proc:
         client = BeagleClient("mm_demo")
         ready = client.wait(30)

@@ -178,20 +178,31 @@ def agent_process(
 
 @contextmanager
 def emulated_sensors(
-    trajectory: str, env: dict[str, str], log_path: str, through_agent: bool = False
+    trajectory: str,
+    env: dict[str, str],
+    log_path: str,
+    through_agent: bool = False,
+    chips: str = "",
 ) -> Iterator[subprocess.Popen]:
     """mm-beagle on emulated sensors: its own sim backend, or (``through_agent``) an
     mm-beagle-agent on emulated sensors and the node in backend:=remote on its link,
-    the whole BBB chain on this machine. Yields the node's process."""
+    the whole BBB chain on this machine. ``chips``: "pmw3360,pmw3360" (one per device,
+    or one for all; '' = PLN2033s). Yields the node's process."""
+    chip_param = {"chips": [chips]} if chips else {}
     if not through_agent:
-        with beagle_process({"backend": "sim", "sim_trajectory": trajectory}, env, log_path) as p:
+        params = {"backend": "sim", "sim_trajectory": trajectory, **chip_param}
+        with beagle_process(params, env, log_path) as p:
             yield p
         return
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     agent_opts = {"backend": "sim", "sim_trajectory": trajectory, "listen": [endpoint]}
+    if chips:
+        agent_opts["chips"] = chips
     with (
         agent_process(agent_opts, log_path + ".agent"),
-        beagle_process({"backend": "remote", "agent": endpoint}, env, log_path) as node,
+        beagle_process(
+            {"backend": "remote", "agent": endpoint, **chip_param}, env, log_path
+        ) as node,
     ):
         yield node
 

@@ -79,7 +79,7 @@ PARAMETERS = {
         [""],
         _plain(
             "the chip of each device, in device order, or one name for all ('' = all "
-            f"pln2033); allowed: {chip_config.chips_help()}"
+            f"pln2033; 'a,b' in one string works too); allowed: {chip_config.chips_help()}"
         ),
     ),
     "chip_options": (
@@ -251,12 +251,12 @@ def declare(node: Node) -> NodeSettings:
         lift_rate=p["sim_lift_rate"],
         noise_counts=p["sim_noise_counts"],
         fail_windows=fails,
-        chips=[c for c in p["sim_chips"] if c],
+        chips=chip_config.split_names(p["sim_chips"]),
         low_quality_rate=p["sim_low_quality_rate"],
     )
     if p["backend"] == "sim":
         check_trajectory(sim.trajectory)
-    chips = [c for c in p["chips"] if c]
+    chips = chip_config.split_names(p["chips"])
     options = chip_config.parse_chip_options(list(p["chip_options"]))
     chip_config.check_board_config(devices, chips, options, p["cpi"], p["register_map"])
     cfg = poller_config(

@@ -3,13 +3,35 @@
 The parameters come from ``params_file`` (default: the installed config/mm_beagle.yaml, every
 parameter with its default); ``backend`` overrides the file's, since it is the one a user
 switches most (spidev on the board, sim on a PC without sensors, remote for an agent).
+``chips:=pmw3360,pln2033`` and ``sim_chips:=...`` (one chip per device, comma-separated, or
+one for all) override the file's only when given.
 """
 
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument
+from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
 from launch_ros.substitutions import FindPackageShare
+
+
+def _node(context):
+    """The node, with chips/sim_chips from the command line only when they were given."""
+    overrides = {"backend": LaunchConfiguration("backend")}
+    given = {
+        "chips": LaunchConfiguration("chips").perform(context),
+        "sim_chips": LaunchConfiguration("sim_chips").perform(context),
+    }
+    overrides.update({k: [v] for k, v in given.items() if v})  # the node splits "a,b"
+    return [
+        Node(
+            package="mm_beagle",
+            executable="mm-beagle",
+            name="mm_beagle",
+            namespace=LaunchConfiguration("namespace"),
+            parameters=[LaunchConfiguration("params_file"), overrides],
+            output="screen",
+        )
+    ]
 
 
 def generate_launch_description() -> LaunchDescription:
@@ -25,17 +47,17 @@ def generate_launch_description() -> LaunchDescription:
             DeclareLaunchArgument(
                 "backend", default_value="spidev", description="spidev | sim | remote"
             ),
-            DeclareLaunchArgument("namespace", default_value="", description="node namespace"),
-            Node(
-                package="mm_beagle",
-                executable="mm-beagle",
-                name="mm_beagle",
-                namespace=LaunchConfiguration("namespace"),
-                parameters=[
-                    LaunchConfiguration("params_file"),
-                    {"backend": LaunchConfiguration("backend")},
-                ],
-                output="screen",
+            DeclareLaunchArgument(
+                "chips",
+                default_value="",
+                description="chip per device, comma-separated, or one for all ('' = the file's)",
             ),
+            DeclareLaunchArgument(
+                "sim_chips",
+                default_value="",
+                description="sim backend: emulated chip per device ('' = the file's / chips)",
+            ),
+            DeclareLaunchArgument("namespace", default_value="", description="node namespace"),
+            OpaqueFunction(function=_node),
         ]
     )

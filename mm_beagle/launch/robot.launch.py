@@ -2,8 +2,9 @@
 
 mm-beagle (sensors), mm-odometry (pose from them) and mm-fusion (map pose from it and the
 other sensors), each from its own launch file with its installed parameters file;
-``monitor:=true`` adds the Qt window (on a machine with a display). The launch files of
-each node are included, not copied, so each node is configured in one place.
+``chips:=`` / ``sim_chips:=`` go to mm-beagle; ``monitor:=true`` adds the Qt window (on a
+machine with a display). The launch files of each node are included, not copied, so each
+node is configured in one place.
 """
 
 from launch import LaunchDescription
@@ -35,7 +36,21 @@ def generate_launch_description() -> LaunchDescription:
             DeclareLaunchArgument(
                 "monitor", default_value="false", description="also open mm-monitor"
             ),
-            _include("mm_beagle", "beagle.launch.py", {"backend": backend}),
+            DeclareLaunchArgument(
+                "chips", default_value="", description="mm-beagle: chip per device ('' = file's)"
+            ),
+            DeclareLaunchArgument(
+                "sim_chips", default_value="", description="mm-beagle: emulated chip per device"
+            ),
+            _include(
+                "mm_beagle",
+                "beagle.launch.py",
+                {
+                    "backend": backend,
+                    "chips": LaunchConfiguration("chips"),
+                    "sim_chips": LaunchConfiguration("sim_chips"),
+                },
+            ),
             _include("mm_pc", "odometry.launch.py", {"beagle": "mm_beagle"}),
             _include("mm_pc", "fusion.launch.py", {}),
             _include(

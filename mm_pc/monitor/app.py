@@ -55,6 +55,11 @@ def _parser() -> argparse.ArgumentParser:
         help="with --sim: the BBB chain, mm-beagle-agent on emulated sensors and mm-beagle "
         "backend:=remote on its link",
     )  # fmt: skip
+    p.add_argument(
+        "--sim-chips", default="", metavar="CHIPS",
+        help="with --sim: the emulated chip of each sensor, e.g. pmw3360,pmw3360 (one for "
+        "all, or one per sensor; default pln2033); ./compile demo takes sim_chips:=CHIPS",
+    )  # fmt: skip
     p.add_argument("--replay", type=Path, default=None, help="replay an MCAP recording")
     p.add_argument(
         "--record", type=Path, default=None, metavar="PATH",
@@ -307,7 +312,9 @@ def _run(args, headless: bool) -> int:
                 f"ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}); node log: {log}",
                 flush=True,
             )
-            node = stack.enter_context(emulated_sensors(args.sim, env, str(log), args.agent))
+            node = stack.enter_context(
+                emulated_sensors(args.sim, env, str(log), args.agent, args.sim_chips)
+            )
         app = QApplication.instance() or QApplication([sys.argv[0]])
         app.setApplicationName("Mouse Monitor")
         bridge = None

@@ -486,7 +486,9 @@ def test_applying_a_block_never_puts_the_agents_lock_word_into_the_node_state():
     ints = np.zeros(ss.N_INT, np.int64)
     ints[ss.I_VERSION] = 12345  # odd: the agent's own lock word mid-write
     ints[ss.I_SEQ], ints[ss.I_Y_TOTAL] = 3, 7
-    arrays = tuple(np.zeros(3, dt).tobytes() for dt in ("<i8", "<i2", "<i2", "<u2", "<u2", "u1"))
+    from mm_beagle.remote import RING_DTYPES
+
+    arrays = tuple(np.zeros(3, dt).tobytes() for dt in RING_DTYPES)
     block = link.Block(0, 0, 3, ints.tobytes(), np.zeros(ss.N_FLOAT).tobytes(), arrays)
     before = int(st[ss.I_VERSION])
     remote._apply(block, fetch_gaps=False)
