@@ -22,6 +22,11 @@ mm-bench agent [--seconds S] [--drops N] [--drop-seconds D] --json
     link bandwidth and latency, counts lost over N forced link drops.
     See mm_beagle.bench_agent.
 
+mm-bench chips [--polls N] --json
+    CPU per poll of every installed chip's driver in the real poller, in this
+    process: with a constant-reply stub (driver + poller only) and with the
+    chip's emulator. See mm_beagle.bench_chips.
+
 mm-bench poll --seconds S [--clients N] [--rate HZ] [--cursor ack|shared] --json
     mm-beagle on emulated sensors (separate process) while N (2) client
     processes call get_sensor_data at HZ (100; 0 = flat out) each. Reports the
@@ -345,8 +350,17 @@ def main(argv: list[str] | None = None) -> int:
     agent.add_argument("--drops", type=int, default=5, help="forced link drops")
     agent.add_argument("--drop-seconds", type=float, default=3.0, help="length of each drop")
     agent.add_argument("--json", action="store_true", help="print JSON only (the default)")
+    chips = sub.add_parser("chips", help="CPU per poll of each chip's driver in the poller")
+    chips.add_argument("--polls", type=int, default=20000)
+    chips.add_argument("--json", action="store_true", help="print JSON only (the default)")
     args = parser.parse_args(argv)
-    if args.what == "agent":
+    if args.what == "chips":
+        from .bench_chips import bench_chips
+
+        if args.polls < 1000:
+            parser.error("need --polls >= 1000")
+        result = bench_chips(args.polls)
+    elif args.what == "agent":
         from .bench_agent import bench_agent
 
         if not args.seconds >= 1 or args.drops < 0 or not args.drop_seconds > 0:
