@@ -99,7 +99,8 @@ def test_health_plots_quality_with_the_chips_threshold(qtbot):
     assert {k: line.value() for k, line in view.threshold_lines.items()} == {0: 16.0, 1: 16.0}
     assert "SQUAL threshold 16" in view.threshold_lines[0].label.toPlainText()
     assert view.quality_plot.isVisible() or not view.isVisible()
-    assert "PixArt PMW3360, SQUAL" in view.quality_plot.titleLabel.text
+    assert f"{DEFAULT_DEVICES[0]} (PMW3360)" in view.quality_plot.titleLabel.text
+    assert view.quality_plot.getAxis("left").labelText == "SQUAL"
     assert view.quality_note.text() == ""
     # the Health table's low-quality row, from the node's /diagnostics
     row = [key for _t, key, _tip in DIAG_COLUMNS].index("low_quality_events")
@@ -183,6 +184,26 @@ def _settings(device, chip, names=(), values=(), **kw):
     return SimpleNamespace(**base)
 
 
+def real_dump(chip: str):
+    """The register dump the real driver reads from its register-level emulator."""
+    from fakes import FakeClock
+
+    from pln2033.chips import chip_info, make_driver, make_emulator
+    from pln2033.motion import ConstantVelocity
+
+    clock = FakeClock()
+
+    def sleep(s: float) -> None:
+        clock.t += s
+
+    emu = make_emulator(chip, motion=ConstantVelocity(0.0, 0.1), clock=clock, seed=1)
+    drv = make_driver(chip, emu, name=DEFAULT_DEVICES[0], sleep=sleep)
+    drv.initialise(chip_info(chip).cpi_default)
+    clock.t += 0.01
+    _motion, regs = drv.read_all_registers()
+    return tuple(regs), tuple(regs.values())
+
+
 def test_registers_view_shows_any_chips_dump_beside_a_pln2033(qtbot):
     bridge = FakeBridge()
     ctx = MonitorContext(MonitorSession(devices=DEFAULT_DEVICES), bridge=bridge)
@@ -204,3 +225,33 @@ def test_registers_view_shows_any_chips_dump_beside_a_pln2033(qtbot):
     assert view.table.item(4, 1).text() == "0x0090" and view.table.item(4, 0) is None
     assert view.table.item(0, 1) is None
     assert "bits set: motion, lift" in view.status_labels[DEFAULT_DEVICES[1]].text()
+
+
+@pytest.mark.screenshot
+def test_quality_and_chip_screenshots(qtbot, screenshot):
+    """docs/images/health-quality.png: a PMW3360 and a PMW3389 with a SQUAL dip below the
+    threshold; registers-pmw3360.png: a PMW3360's dump beside an old node's PLN2033."""
+    bridge = FakeBridge()
+    ctx = make_ctx(("pmw3360", "pmw3389"), bridge)
+    view = HealthView(ctx)
+    qtbot.addWidget(view)
+    view.resize(1000, 900)
+    view.show()
+    bridge.diagnostics_received.emit({d: {"level": 0, "low_quality_events": str(200 - 200 * k),
+                                          "lift_events": "0"}
+                                      for k, d in enumerate(DEFAULT_DEVICES)})
+    view.refresh()
+    img = screenshot(view, "health-quality.png")
+    assert img.width() >= 1000 and view.quality_plot.isVisible()
+    regs = RegistersView(MonitorContext(MonitorSession(devices=DEFAULT_DEVICES), bridge=bridge))
+    qtbot.addWidget(regs)
+    regs.resize(900, 600)
+    regs.show()
+    names, values = real_dump("pmw3360")
+    bridge.settings_received.emit(DEFAULT_DEVICES[0], _settings(DEFAULT_DEVICES[0], "pmw3360",
+                                                                names, values))
+    old = _settings(DEFAULT_DEVICES[1], "")
+    old.status_register = 0x0080
+    bridge.settings_received.emit(DEFAULT_DEVICES[1], old)
+    screenshot(regs, "registers-pmw3360.png")
+    assert regs.rows[: len(names)] == list(names) and len(regs.rows) == len(names) + len(FIELDS)

@@ -45,7 +45,7 @@ from PySide6.QtWidgets import (
 )
 
 from mm_pc.monitor.context import MonitorContext
-from mm_pc.monitor.model.chips import chip_title, quality_label, quality_threshold
+from mm_pc.monitor.model.chips import chip_key, chip_title, quality_label, quality_threshold
 
 __all__ = ["DIAG_COLUMNS", "LEVEL_COLOURS", "BucketMax", "HealthView", "bucket_max"]
 
@@ -358,15 +358,16 @@ class HealthView(QWidget):
         for line in self.threshold_lines.values():
             self.quality_plot.removeItem(line)
         self.threshold_lines.clear()
-        with_figure, without = [], []
+        with_figure, without, names = [], [], set()
         for k, (dev, chip) in enumerate(zip(devices, chips, strict=True)):
             name = quality_label(chip)
             if not chip or not name:
                 without.append(f"{dev}: no quality figure (chip {chip_title(chip)})")
                 continue
             pen = SENSOR_PENS[k % len(SENSOR_PENS)]
-            with_figure.append(f'<span style="color:{pen}">&#9644; {dev} ({chip_title(chip)},'
-                               f' {name})</span>')
+            with_figure.append(f'<span style="color:{pen}">&#9644; {dev} '
+                               f'({chip_key(chip).upper()})</span>')
+            names.add(name)
             limit = quality_threshold(chip)
             if limit > 0:
                 line = pg.InfiniteLine(
@@ -378,8 +379,9 @@ class HealthView(QWidget):
                 self.threshold_lines[k] = line
         self.quality_plot.setVisible(bool(with_figure))
         if with_figure:
-            self.quality_plot.setTitle("Surface quality, newest poll per reply; dashed: the "
-                                       f"chip's threshold ({', '.join(with_figure)})")
+            self.quality_plot.setTitle(
+                f"Surface quality, dashed: the chip's threshold ({', '.join(with_figure)})")
+            self.quality_plot.setLabel("left", " / ".join(sorted(names)))
         self.quality_note.setText(
             ("Surface quality: " + "; ".join(without)) if without else "")
 
