@@ -255,3 +255,20 @@ def test_quality_and_chip_screenshots(qtbot, screenshot):
     bridge.settings_received.emit(DEFAULT_DEVICES[1], old)
     screenshot(regs, "registers-pmw3360.png")
     assert regs.rows[: len(names)] == list(names) and len(regs.rows) == len(names) + len(FIELDS)
+
+
+def test_the_status_bar_names_the_chips(qtbot, tmp_path):
+    from mm_pc.monitor.context import MonitorConfig
+    from mm_pc.monitor.main_window import MainWindow
+
+    config = MonitorConfig(rate_hz=100.0, calibration_file=tmp_path / "cal.yaml")
+    ctx = MonitorContext(MonitorSession(), None, config)
+    window = MainWindow(ctx)
+    qtbot.addWidget(window)
+    for r in chip_replies(("pmw3360", ""), seconds=0.2):
+        ctx.on_reply(r)
+    window.frame()
+    assert window.chips_label.text() == "PMW3360 + PLN2033"
+    tip = window.chips_label.toolTip()
+    assert f"{DEFAULT_DEVICES[0]}: PixArt PMW3360" in tip
+    assert f"{DEFAULT_DEVICES[1]}: Philips PLN2033 (the node names none)" in tip
