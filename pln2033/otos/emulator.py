@@ -156,14 +156,14 @@ class EmulatedOTOS(CountingCore):
         self._cal_start = start
         self._cal_samples = max(1, samples)
         self._busy_until = start + self._cal_samples * _T
-        self._cal_yaw_start = self.true_yaw
+        self._cal_yaw_start: float | None = None  # set when the truth reaches ``start``
         self.mem[regs.IMU_CALIB] = samples
 
     def _end_calibration(self) -> None:
         t = self._busy_until
         self._advance_truth(t)
         # the yaw during the calibration window counts as gyro offset (firmware: the mean)
-        yaw_cal = self.true_yaw - self._cal_yaw_start
+        yaw_cal = self.true_yaw - (self._cal_yaw_start or self.true_yaw)
         duration = t - self._cal_start
         mean_rate = yaw_cal / duration if duration > 0 else 0.0
         noise = self._rng.gauss(0.0, self.gyro_noise_rps / math.sqrt(self._cal_samples))
@@ -177,9 +177,14 @@ class EmulatedOTOS(CountingCore):
 
     def _advance_truth(self, t: float) -> None:
         """Heading truth up to ``t`` while the loop is blocked (no update is made)."""
-        if t > self._t_yaw:
-            self.true_yaw += self.heading_source.yaw(self._t_yaw, t)
-            self._t_yaw = t
+        if t <= self._t_yaw:
+            return
+        if self._cal_yaw_start is None and self._t_yaw <= self._cal_start <= t:
+            self.true_yaw += self.heading_source.yaw(self._t_yaw, self._cal_start)
+            self._t_yaw = self._cal_start
+            self._cal_yaw_start = self.true_yaw  # the calibration's samples start here
+        self.true_yaw += self.heading_source.yaw(self._t_yaw, t)
+        self._t_yaw = t
 
     def run(self, now: float | None = None) -> None:
         """The firmware's main loop up to ``now``: host writes applied, 416 Hz updates."""
@@ -304,12 +309,12 @@ class EmulatedOTOS(CountingCore):
         off = self._pose_from(regs.OFFSET)
         if host is None and off is None:
             return
+        if host is None:  # the robot's pose as last computed, under the old offset
+            host = self._host_pose()
         if off is not None:
             self.offset = off
             c, s = math.cos(off[2]), math.sin(off[2])
             self._offset_inv = (-off[0] * c - off[1] * s, off[0] * s - off[1] * c, -off[2])
-        if host is None:
-            host = self._host_pose()
         # transformPose(host, offset): the sensor's pose for the host pose
         ox, oy, oh = self.offset
         c, s = math.cos(host[2]), math.sin(host[2])
