@@ -1,7 +1,7 @@
 """The SparkFun OTOS driver (PAA5160 optical chip + LSM6DSO IMU + STM32 fusion, I2C 0x17).
 
 No ROS here. The driver talks to any :class:`~pln2033.i2c.I2cBus`. Facts and their
-sources: :mod:`pln2033.otos.regs`, docs/sensors-otos.md.
+sources: :mod:`pln2033.otos.regs`, docs/sensors.md (OTOS section).
 
 Two outputs:
 
@@ -15,7 +15,7 @@ Two outputs:
   CPI (:data:`EFFECTIVE_CPI`). No count is lost or doubled whatever the poll rate, as
   long as the sensor moves less than 10 m (the int16 position range) between two reads.
   These counts are fused (optical + accelerometer, SparkFun's velocity lookup table), not
-  raw optical counts: docs/sensors-otos.md says so.
+  raw optical counts: docs/sensors.md (OTOS section) says so.
 - :meth:`OTOS.read_pose` / :attr:`OTOS.last_pose` -- the on-chip pose and velocity, for a
   second nav_msgs/Odometry.
 
@@ -64,7 +64,7 @@ OTOS_INFO = ChipInfo(
     firmware="",
     source=(
         "SparkFun_Qwiic_OTOS_Arduino_Library sfDevOTOS.h/.cpp, qwiic_otos_py, "
-        "SparkFun_Optical_Tracking_Odometry_Sensor Firmware/ (docs/sensors-otos.md)"
+        "SparkFun_Optical_Tracking_Odometry_Sensor Firmware/ (docs/sensors.md (OTOS section))"
     ),
 )
 

@@ -19,7 +19,7 @@ motion source has no rotation) scaled by the angular scalar, plus the gyro's res
 (``gyro_noise_rps`` / sqrt(samples), plus minus the mean true yaw rate during it when the
 robot turned while calibrating): a heading drift at rest, as users report.
 
-Simplifications (docs/sensors-otos.md): no Kalman filter or velocity lookup table, the
+Simplifications (docs/sensors.md (OTOS section)): no Kalman filter or velocity lookup table, the
 status tracking warning is set exactly while lifted or over a poor surface, acceleration and
 std-dev registers stay 0, the PAA burst holds only the deltas (bytes 2..5).
 """

@@ -13,7 +13,7 @@ Sources (read for facts; no code copied):
 - [hw]   the same repository, docs/hardware_overview.md (2.5 m/s tracking speed, 20 000 DPI,
          IO9 "data ready").
 
-docs/sensors-otos.md tells the story; every constant below names its source.
+docs/sensors.md (OTOS section) tells the story; every constant below names its source.
 """
 
 from __future__ import annotations
