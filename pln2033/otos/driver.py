@@ -64,7 +64,7 @@ OTOS_INFO = ChipInfo(
     firmware="",
     source=(
         "SparkFun_Qwiic_OTOS_Arduino_Library sfDevOTOS.h/.cpp, qwiic_otos_py, "
-        "SparkFun_Optical_Tracking_Odometry_Sensor Firmware/ (docs/sensors.md (OTOS section))"
+        "SparkFun_Optical_Tracking_Odometry_Sensor Firmware/ (docs/sensors.md, OTOS section)"
     ),
 )
 
