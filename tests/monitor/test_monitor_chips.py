@@ -172,6 +172,10 @@ def test_resolution_panel_uses_the_chips_own_range_and_disables_a_fixed_one(qtbo
         chip="pmw3360", cpi_min=100, cpi_max=3200, cpi_step=100))
     a.edit.setText("4000")
     assert not panel.apply(DEFAULT_DEVICES[0]) and "allows 100..3200" in a.error.text()
+    from mm_pc.monitor.widgets.resolution_panel import fixed_tip
+
+    otos = fixed_tip("otos", 1000)
+    assert "fixed resolution (1000 CPI now)" in otos and "height" not in otos
     with pytest.raises(ValueError, match=r"PixArt PMW3389 allows 50\.\.16000 in steps of 50"):
         validate_cpi("75", cpi_range("pmw3389"), "pmw3389")
 

@@ -40,15 +40,23 @@ _ALLOWED_CPI = _REGMAP.allowed_cpi
 CPI_MIN, CPI_MAX, CPI_STEP = _ALLOWED_CPI.start, _ALLOWED_CPI.stop - 1, _ALLOWED_CPI.step
 ALLOWED = f"allowed: {CPI_MIN}..{CPI_MAX} in steps of {CPI_STEP}"
 RED = ERROR_STYLE
+#: chips whose resolution follows their height (the optical-flow sensors)
+OPTICAL_FLOW = ("pmw3901", "paa5100")
 
 
 def fixed_tip(chip: str, cpi: int | None = None) -> str:
     """Why a fixed-resolution chip's field is disabled, and what to do instead."""
     now = f" ({cpi} CPI now)" if cpi else ""
+    if chip_key(chip) in OPTICAL_FLOW:
+        return (
+            f"the {chip_title(chip)} has a fixed resolution{now}: it follows the sensor's "
+            "height above the floor, not a register. Set the height in the node's options "
+            "and calibrate the sensor's scale (docs/pose-math.md, optical-flow sensors)."
+        )
     return (
-        f"the {chip_title(chip)} has a fixed resolution{now}: it follows the sensor's height "
-        "above the floor, not a register. Set the height in the node's options and "
-        "calibrate the sensor's scale (docs/pose-math.md, optical-flow sensors)."
+        f"the {chip_title(chip)} has a fixed resolution{now}: its driver reports motion at "
+        "that rate and there is nothing to set. Calibrate the sensor's scale instead "
+        "(docs/pose-math.md; the OTOS: docs/sensors.md)."
     )
 
 
