@@ -19,13 +19,18 @@ class FakeRing:
     ``v``, ``w`` (and optionally ``vy``): the 1 kHz twist script of
     :mod:`mm_pc.sim.robot`; each poll's counts are the floor of the cumulative
     true counts at ``cpi`` (like the emulator), lifted polls count nothing and
-    carry flag 1. Poll k (0-based) of every sensor has stamp ``t0_ns + (k+1) ms``.
+    carry flag 1. ``low_quality`` (same shape as ``lifted``): polls whose chip saw the
+    floor too poorly: flag 32, quality ``quality_low`` and the counts of ``junk``
+    (n, k, 2) instead of the motion (default nothing), the others quality ``quality_ok``;
+    ``quality_ok=None``: a chip without a figure (empty quality arrays, as an old node).
+    Poll k (0-based) of every sensor has stamp ``t0_ns + (k+1) ms``.
     ``totals(k)`` are the node's totals after k polls; ``samples(i, since, max)``
     a ``get_samples`` reply (SimpleNamespace) with the ring's ``ring_size``.
     """
 
     def __init__(self, v, w, mounts=None, cpi=1600, lifted=None, ring_size=65536,
-                 t0_ns=1_700_000_000_000_000_000, vy=None):
+                 t0_ns=1_700_000_000_000_000_000, vy=None, low_quality=None, junk=None,
+                 quality_ok=None, quality_low=5):
         import numpy as np
 
         from mm_pc.sim import robot
@@ -44,10 +49,22 @@ class FakeRing:
         if lifted is not None:
             lm = np.asarray(lifted, bool)
             self.lifted[:] = lm[:, None] if lm.ndim == 1 else lm
-        step[self.lifted] = 0.0
+        self.low_quality = np.zeros((n, k), bool)
+        if low_quality is not None:
+            lq = np.asarray(low_quality, bool)
+            self.low_quality[:] = lq[:, None] if lq.ndim == 1 else lq
+        step[self.lifted | self.low_quality] = 0.0
         cum = np.floor(np.concatenate([np.zeros((1, k, 2)), np.cumsum(step, axis=0)]))
         self.counts = np.diff(cum, axis=0).astype(np.int64)  # (n, k, 2) per poll
-        self.cum = cum.astype(np.int64)
+        if junk is not None:
+            self.counts[self.low_quality] = np.asarray(junk, np.int64)[self.low_quality]
+        self.cum = np.concatenate(
+            [np.zeros((1, k, 2), np.int64), np.cumsum(self.counts, axis=0)]
+        )
+        self.quality = (
+            None if quality_ok is None
+            else np.where(self.low_quality, quality_low, quality_ok).astype(np.int64)
+        )
         self.n_polls = n
         self.scale = INCH_M / cpi
 
@@ -80,5 +97,6 @@ class FakeRing:
             stamp_ns=self.stamp(np.arange(first, end) + 1),
             dx=self.counts[sl, i, 0], dy=self.counts[sl, i, 1],
             status=np.zeros(end - first, np.int64),
-            flags=np.where(self.lifted[sl, i], 1, 2),
+            flags=np.where(self.lifted[sl, i], 1, 2) | np.where(self.low_quality[sl, i], 32, 0),
+            quality=() if self.quality is None else self.quality[sl, i],
         )

@@ -26,7 +26,9 @@ the reply ends before the totals' ``seq``; no reply; its counts disagree with th
 totals; a CPI change inside the interval), the interval becomes one gap step carrying
 the whole displacement from the totals, so nothing is lost and the caller can mark it.
 
-Lifts: the polls of a lifted sensor are filled by
+Lifts: a poll counts as lifted when its lift bit or its low-quality bit is set
+(:func:`unseen`: the chip saw the floor too poorly to trust the counts, issue 15); the
+polls of a lifted sensor are filled by
 :func:`mm_pc.core.filters.interpolate_lift_gaps`; a step is held back while a lift of
 any sensor is open or closed fewer than :data:`LIFT_CONTEXT_POLLS` polls ago, and the
 last :data:`LIFT_CONTEXT_POLLS` steps are kept as the filler's left context, so the
@@ -49,15 +51,18 @@ from pln2033 import INCH_M
 __all__ = [
     "FLAG_COMMAND_READ",
     "FLAG_LIFT",
+    "FLAG_LOW_QUALITY",
     "FLAG_MOTION",
     "FLAG_OVERFLOW",
     "FLAG_SPI_ERROR",
+    "FLAG_UNSEEN",
     "LIFT_CONTEXT_POLLS",
     "PollBatch",
     "PollSteps",
     "PollTracker",
     "SensorTotals",
     "integrate_steps",
+    "unseen",
 ]
 
 # the bits of GetSamples' flags (the same as mm_beagle.shared_state's FLAG_*)
@@ -66,6 +71,20 @@ FLAG_MOTION = 2
 FLAG_OVERFLOW = 4
 FLAG_SPI_ERROR = 8
 FLAG_COMMAND_READ = 16
+#: the chip's surface-quality figure (SQUAL, ...) was below its threshold
+#: (``pln2033.chips.chip_info(chip).quality_threshold``): the counts are unreliable.
+FLAG_LOW_QUALITY = 32
+
+#: The flags after which a poll's counts are not a measurement of the floor: the sensor
+#: was lifted, or it saw the floor too poorly. The pose math treats both the same
+#: (gap filling, dropped equations of ``two-sensor``, the held-back steps): the one rule.
+FLAG_UNSEEN = FLAG_LIFT | FLAG_LOW_QUALITY
+
+
+def unseen(flags) -> np.ndarray:
+    """Bool array, True where a poll's ``flags`` say its sensor did not see the floor
+    (:data:`FLAG_UNSEEN`: lifted, or surface quality below the chip's threshold)."""
+    return (np.asarray(flags, dtype=np.int64) & FLAG_UNSEEN) != 0
 
 #: Polls on each side of a lift the gap filling may look at (its window must fit).
 LIFT_CONTEXT_POLLS = 64
@@ -187,7 +206,8 @@ class PollSteps:
     ``stamp_ns`` (N,): end of each step (ns); ``dt`` (N,): its length (s, > 0);
     ``d`` (N, n_sensors, 2): sensor-frame displacement (dX right, dY forward) in
     metres, lifted polls filled; ``counts`` (N, n_sensors, 2): the measured counts
-    (0 for gap steps); ``lifted`` (N, n_sensors): the sensor's lift bit; ``gap`` (N,):
+    (0 for gap steps); ``lifted`` (N, n_sensors): the sensor's lift or low-quality bit
+(:func:`unseen`); ``gap`` (N,):
     True for a step that stands for missing polls (its displacement from the totals).
     """
 
@@ -434,7 +454,7 @@ class PollTracker:
             np.add.at(counts[:, i, 0], idx, p.dx[:m])
             np.add.at(counts[:, i, 1], idx, p.dy[:m])
             own = p.stamp[:m] == ticks[idx]
-            lifted[idx[own], i] = (p.flags[:m][own] & FLAG_LIFT) != 0
+            lifted[idx[own], i] = unseen(p.flags[:m][own])
             # polls this sensor made while another had none -- but not those of a tick
             # whose other polls fell before the baseline (the totals of the sensors
             # of one reply are read one after the other, so they may end a tick apart)

@@ -32,6 +32,7 @@ from PySide6.QtWidgets import (
 from mm_pc.core.odometry import METHODS
 from mm_pc.monitor.context import MonitorContext
 from mm_pc.monitor.help import METHOD_LABELS, method_label, method_tooltip
+from mm_pc.monitor.model.chips import chip_key, chip_title
 from mm_pc.monitor.ros_bridge import validate_rate
 from mm_pc.monitor.widgets.style import ERROR_STYLE
 
@@ -393,7 +394,10 @@ class MainWindow(QMainWindow):
         self.rows_label = QLabel("")
         self.rtt_label.setToolTip("round-trip time of a data request, median of the last ones")
         self.rate_label.setToolTip("replies per second achieved (the last 2 s)")
-        for w in (self.state_label, self.rtt_label, self.rate_label, self.rows_label):
+        self.chips_label = QLabel("")
+        self._chips_shown: tuple = ()
+        for w in (self.state_label, self.chips_label, self.rtt_label, self.rate_label,
+                  self.rows_label):
             self.statusBar().addPermanentWidget(w)
 
     # -- periodic ---------------------------------------------------------------------------
@@ -408,7 +412,21 @@ class MainWindow(QMainWindow):
         hist = self.ctx.session.history
         if hist is not None:
             self.rows_label.setText(f"{len(hist)} samples")
+        self._show_chips()
         self.frame_ms.append((time.perf_counter() - t0) * 1e3)
+
+    def _show_chips(self) -> None:
+        """The sensors' chips in the status bar ("PMW3360 + PMW3389"), each named in the
+        tooltip; cheap when they did not change."""
+        session = self.ctx.session
+        shown = tuple((d, session.chip(d)) for d in session.devices)
+        if shown == self._chips_shown:
+            return
+        self._chips_shown = shown
+        self.chips_label.setText(" + ".join(chip_key(c).upper() for _d, c in shown))
+        self.chips_label.setToolTip("sensor chips: " + "; ".join(
+            f"{d}: {chip_title(c)}" + ("" if c else " (the node names none)")
+            for d, c in shown))
 
     def _on_state(self, state: str) -> None:
         bar = getattr(self, "replay_bar", None)

@@ -211,6 +211,9 @@ _INT_RANGES = {
     "x_total_counts": (-(2**63), 2**63 - 1),
     "y_total_counts": (-(2**63), 2**63 - 1),
     "stamp_ns": (0, (2**31 - 1) * 1_000_000_000),
+    "quality": (-(2**15), 2**15 - 1),
+    "low_quality_events": (0, 2**32 - 1),
+    "low_quality_events_total": (0, 2**64 - 1),
 }
 
 
@@ -227,6 +230,8 @@ def _polls_msg(device: str, res):
         stamp_ns=[int(v) for v in stamps], dx=[int(v) for v in res.dx],
         dy=[int(v) for v in res.dy], status=[int(v) for v in res.status],
         flags=[int(v) for v in res.flags],
+        # one figure per poll; empty: none (a chip without one, an old node or recording)
+        quality=[int(v) for v in getattr(res, "quality", ())],
     )  # fmt: skip
 
 
@@ -269,6 +274,10 @@ def _serialize_reading(r: Reading) -> bytes:
             x_lift_est_total_disp=r.x_lift_total,
             y_lift_est_total_disp=r.y_lift_total,
             instance_id=r.instance_id,
+            chip=r.chip,
+            quality=r.quality,
+            low_quality_events=r.low_quality_events,
+            low_quality_events_total=r.low_quality_events_total,
         ))  # fmt: skip
     except (AssertionError, TypeError, ValueError, OverflowError, SystemError) as e:
         raise ValueError(

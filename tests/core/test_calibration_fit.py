@@ -108,3 +108,33 @@ def test_refuses_sideways_motion_a_missing_step_and_a_far_scale():
         CalibrationStep("hop", np.zeros((1, 2, 2)))
     with pytest.raises(ValueError, match="spin angle must be a finite number"):
         fit_mounts(steps, DEV, DEFAULT_MOUNTS, spin_angle=math.nan)
+
+
+@pytest.mark.parametrize("off", [(1 / 1.1, 1.0), (1 / 1.1, 1 / 1.1), (1.1, 1.1)])
+def test_optical_flow_height_error_is_recovered_with_the_measured_distance(off):
+    """A PMW3901 whose effective CPI is 10 % off (mounted 10 % higher or lower than the
+    driver's height_m: counts scale with 1/height, both axes alike) at its own 104 CPI: with
+    the straights' measured length the fit's per-axis scales undo it within their stated
+    accuracy (docs/pose-math.md, "Optical-flow sensors")."""
+    from pln2033 import INCH_M
+
+    gains = np.array([[g, g] for g in off])
+    steps = guided_at(gains, cpi=104)
+    fit = fit_mounts(steps, DEV, DEFAULT_MOUNTS, true_distance=0.5, resolution_m=INCH_M / 104)
+    for c, g in zip(fit.sensors, gains, strict=True):
+        assert abs(c.scale_y * g[1] - 1.0) < min(2 * c.scale_y_se, 1e-3)
+        assert abs(c.scale_x * g[0] - 1.0) < min(2 * c.scale_x_se, 5e-3)
+    # without the measured length the mean Y scale is fixed at 1: a height error shared by
+    # both sensors is not seen; only one sensor's error relative to the other is
+    fit = fit_mounts(steps, DEV, DEFAULT_MOUNTS, resolution_m=INCH_M / 104)
+    corrected = [c.scale_y * g[1] for c, g in zip(fit.sensors, gains, strict=True)]
+    assert corrected[0] / corrected[1] == pytest.approx(1.0, abs=1e-3)
+    # (the fit's mean Y scale is 1, so what is left is 1 / mean(1 / gain) on each)
+    assert corrected == pytest.approx([1 / np.mean(1 / gains[:, 1])] * 2, rel=2e-3)
+
+
+def guided_at(gains, cpi):
+    """:func:`guided` at another resolution (the optical-flow chips' effective CPI)."""
+    v, w = sim.guided_calibration_run()
+    r = sim.request_samples(v, w, BUILT, 1000.0, cpi=cpi, rng=1, gains=gains)
+    return [CalibrationStep(k, r.d[a:b]) for k, a, b in sim.guided_calibration_steps()]

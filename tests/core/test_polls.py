@@ -161,6 +161,43 @@ def test_lifted_polls_are_filled_the_same_whatever_the_request_boundaries(s_curv
     assert np.all(one.d[1500:1530, 0, 1] > 0)
 
 
+def test_a_low_quality_stretch_gives_the_pose_of_a_lift_there(s_curve_ring):
+    """Flag 32 (surface quality below the chip's threshold) is treated like a lift: the
+    junk counts the chip reported there are replaced by the gap fill, in both methods."""
+    n = 6000
+    v, w = s_curve_ring.v[:n], s_curve_ring.w[:n]
+    stretch = np.zeros((n, 2), bool)
+    stretch[1500:1560, 0] = True  # sensor 0 on a poor surface for 60 ms
+    stretch[3990:4040, 1] = True  # sensor 1 across a request boundary
+    junk = np.random.default_rng(3).integers(-40, 41, size=(n, 2, 2))
+    lift = FakeRing(v, w, lifted=stretch)
+    poor = FakeRing(v, w, low_quality=stretch, junk=junk, quality_ok=120, quality_low=4)
+    ends = robot.request_boundaries(n, 15.0)
+    a, _ = _run(lift, ends)
+    b, _ = _run(poor, ends)
+    assert len(a) == len(b) == n and np.array_equal(a.lifted, b.lifted)
+    assert b.lifted.sum() == 110
+    # the measured counts differ (the junk), the filled displacements do not
+    assert not np.array_equal(a.counts, b.counts)
+    assert np.allclose(a.d, b.d, atol=1e-15)
+    for method in ("exact", "two-sensor"):
+        pa, pb = _pose(a, method), _pose(b, method)
+        assert np.allclose(pa, pb, atol=1e-12, rtol=0)
+    # the same junk without the flag moves the pose: the rule is what makes them equal
+    blind = FakeRing(v, w, low_quality=stretch, junk=junk)
+    blind.low_quality[:] = False
+    c, _ = _run(blind, ends)
+    assert np.hypot(*(_pose(c)[:2] - _pose(a)[:2])) > 1e-3
+
+
+def test_unseen_is_the_lift_or_the_low_quality_bit():
+    from mm_pc.core.polls import FLAG_LIFT, FLAG_LOW_QUALITY, FLAG_UNSEEN, unseen
+
+    assert (FLAG_LOW_QUALITY, FLAG_UNSEEN) == (32, FLAG_LIFT | 32)
+    assert unseen([0, 1, 2, 32, 34, 16, 33, 8]).tolist() == [
+        False, True, False, True, True, False, True, False]
+
+
 def test_an_open_lift_holds_the_steps_back_until_it_closes():
     n = 3000
     v, w = robot.trajectory("s_curves")

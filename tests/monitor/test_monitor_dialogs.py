@@ -653,7 +653,8 @@ def fake_polls(n: int, first_seq: int):
         success=True, first_seq=first_seq, next_seq=first_seq + n, dropped=0, cpi=1600,
         stamp_ns=(1_700_000_000_000_000_000 + (first_seq + k) * 1_000_000).tolist(),
         dx=(np.round(3 * np.sin(k / 40))).astype(int).tolist(),
-        dy=(12 + (k % 3)).tolist(), status=[0x80] * n, flags=[2] * (n - 1) + [3],
+        dy=(12 + (k % 3)).tolist(), status=[0x80] * n,
+        flags=[2] * (n - 3) + [34, 34, 3], quality=[90] * (n - 3) + [4, 4, 0],
     )
 
 
@@ -712,6 +713,7 @@ def test_debug_view_lists_manual_replies_and_single_polls(qtbot, ctx, screenshot
     assert len(py) == 300 and py[0] == 12 and px[1] == pytest.approx(0.001)
     assert "300 polls (seq 4000..4299)" in view.polls_label.text()
     assert "1 lifted" in view.polls_label.text()
+    assert "2 below the chip's quality threshold" in view.polls_label.text()
     qtbot.mouseClick(view.fetch_buttons[D0], Qt.LeftButton)
     assert asked[-1] == (D0, 4300, 2000)  # goes on after the polls already shown
     bridge.samples_received.emit(D1, fake_polls(250, 4100))

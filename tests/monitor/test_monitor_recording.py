@@ -69,6 +69,11 @@ def odd_reply() -> Reply:
             y_lift_est_counts=-2.5,
             x_lift_est_disp=0.0000238,
             y_lift_est_disp=-0.0000397,
+            # one chip with its quality figure, one old node (no chip, no figure)
+            chip=("pmw3360", "")[k],
+            quality=(42, -1)[k],
+            low_quality_events=2 - k,
+            low_quality_events_total=9 + k,
         )
         for k, dev in enumerate(DEVICES)
     )
@@ -720,3 +725,65 @@ def test_recordings_made_before_the_chip_fields_still_decode():
     old_polls = polls[: polls.rfind(bytes([2, 34])) + 2]
     got = recording._decode_polls(recording.POLLS_TYPE, old_polls)
     assert (list(got.dx), list(got.flags), list(got.quality)) == ([4, 5], [2, 34], [])
+
+
+def test_an_old_recording_reads_as_a_pln2033_without_a_quality_figure():
+    """The zero-filled quality of a reply from before issue 15 is no SQUAL 0."""
+    from mm_pc.monitor import recording
+    from mm_pc.monitor.model.chips import chip_title, quality_figure
+
+    before = serialize_message(SensorData(id="/dev/spidev1.0", seq=7, instance_id=99))
+    old_bytes = before[: before.rfind((99).to_bytes(8, "little")) + 8]
+    r = Reading.from_msg(recording._deserialize_appended(old_bytes, SensorData))
+    assert (r.chip, r.quality, r.low_quality_events) == ("", -1, 0)
+    assert chip_title(r.chip) == "Philips PLN2033" and math.isnan(quality_figure(r.chip, 0))
+    new = SensorData(id="/dev/spidev1.0", seq=7, chip="pmw3360", quality=0)
+    assert Reading.from_msg(new).quality == 0  # a real SQUAL 0 stays 0
+
+
+def test_per_poll_quality_is_recorded_and_old_polls_without_it_replay(tmp_path):
+    """The quality arrays go into the file and come back; polls recorded without them
+    (empty arrays) give the same per-poll pose."""
+    from fakes import FakeRing
+    from test_monitor_session import DEVS, _poll_replies
+
+    from mm_pc.sim.robot import trajectory
+
+    v, w = trajectory("s_curves")
+    poor = np.zeros(3000, bool)
+    poor[1200:1260] = True
+    ring = FakeRing(v[:3000], w[:3000], low_quality=poor, quality_ok=90, quality_low=3)
+    replies = _poll_replies(ring, [0, 700, 1400, 2000, 3000])
+    path = tmp_path / "q.mcap"
+    rec = McapRecorder(path)
+    for r in replies:
+        rec.write_reply(r)
+    rec.close()
+    back = read_replies(path)
+    got = back[2].polls[DEVS[0]]
+    assert list(got.quality) == [int(q) for q in replies[2].polls[DEVS[0]].quality]
+    assert sorted(set(got.quality)) == [3, 90] and list(got.flags).count(34) == 60
+
+    def without_quality(reply):
+        return Reply(reply.readings, reply.received_s, reply.rtt_s,
+                     {d: _strip(p) for d, p in reply.polls.items()})
+
+    def _strip(p):
+        from types import SimpleNamespace
+        return SimpleNamespace(**{**{k: getattr(p, k) for k in (
+            "first_seq", "next_seq", "dropped", "cpi", "stamp_ns", "dx", "dy", "status",
+            "flags")}, "quality": ()})
+
+    path_old = tmp_path / "old.mcap"
+    rec = McapRecorder(path_old)
+    for r in replies:
+        rec.write_reply(without_quality(r))
+    rec.close()
+    old = read_replies(path_old)
+    assert list(old[2].polls[DEVS[0]].quality) == []
+    a, b = MonitorSession(devices=DEVS), MonitorSession(devices=DEVS)
+    for r in back:
+        a.process(r)
+    for r in old:
+        b.process(r)
+    assert a.pose == b.pose and a.stats.polls == b.stats.polls == 3000

@@ -52,10 +52,19 @@ class Reading:
     #: the node's random identity drawn at its start (0: unknown, e.g. an old recording);
     #: a different value is a restart whatever ``seq`` says
     instance_id: int = 0
+    #: the sensor's chip ('' = an old node or recording: a PLN2033, no quality figure),
+    #: the newest poll's quality figure (-1 = none; an old node's zero-filled 0 becomes
+    #: -1 here), and the polls below the chip's quality threshold in the interval / in all
+    chip: str = ""
+    quality: int = -1
+    low_quality_events: int = 0
+    low_quality_events_total: int = 0
 
     @classmethod
     def from_msg(cls, msg) -> Reading:
-        """From an ``mm_interfaces/SensorData`` (or anything with its fields)."""
+        """From an ``mm_interfaces/SensorData`` (or anything with its fields; the issue-15
+        fields may be missing)."""
+        chip = str(getattr(msg, "chip", "") or "")
         return cls(
             id=str(msg.id),
             stamp_ns=int(msg.stamp.sec) * 1_000_000_000 + int(msg.stamp.nanosec),
@@ -82,6 +91,10 @@ class Reading:
             x_lift_est_disp=float(msg.x_lift_est_disp),
             y_lift_est_disp=float(msg.y_lift_est_disp),
             instance_id=int(getattr(msg, "instance_id", 0)),
+            chip=chip,
+            quality=int(getattr(msg, "quality", -1)) if chip else -1,
+            low_quality_events=int(getattr(msg, "low_quality_events", 0)),
+            low_quality_events_total=int(getattr(msg, "low_quality_events_total", 0)),
         )
 
 

@@ -56,6 +56,7 @@ from mm_pc.core.filters import SensorMedianFilter
 from mm_pc.core.geometry import DEFAULT_MOUNTS, SensorMount
 from mm_pc.core.odometry import METHODS, Odometry, Pose2D, Sample
 from mm_pc.core.polls import PollBatch, PollTracker, SensorTotals, integrate_steps
+from mm_pc.monitor.model.chips import quality_figure
 from mm_pc.monitor.model.history import History
 from mm_pc.monitor.model.readings import Reading, Reply
 
@@ -68,7 +69,11 @@ __all__ = ["Gap", "LogEntry", "MonitorSession", "SessionStats", "sensor_columns"
 #: wx/wy          the sensor's position in odom (m)
 #: lifts          polls with the lift bit set in the interval
 #: cpi            resolution in force
-SENSOR_FIELDS = ("raw_dx", "raw_dy", "dx", "dy", "vx", "vy", "wx", "wy", "lifts", "cpi")
+#: quality        the chip's surface-quality figure at the newest poll (SQUAL, ...; NaN: the
+#:                chip has none, or an old node / recording)
+#: lowq           polls below the chip's quality threshold in the interval (treated like lifts)
+SENSOR_FIELDS = ("raw_dx", "raw_dy", "dx", "dy", "vx", "vy", "wx", "wy", "lifts", "cpi",
+                 "quality", "lowq")
 #: Robot columns: t (s since the first reply), dt (s), rtt (s), x/y/yaw (odom, m, rad),
 #: residual (m; two-sensor method only, else NaN), calibrating (1 while the wizard records).
 ROBOT_FIELDS = ("t", "dt", "rtt", "x", "y", "yaw", "residual", "calibrating")
@@ -458,6 +463,12 @@ class MonitorSession:
 
     # -- processing --------------------------------------------------------------------
 
+    def chip(self, device: str) -> str:
+        """The chip the newest reply named for ``device`` ('' = not known yet, or an old
+        node: a PLN2033; :mod:`mm_pc.monitor.model.chips` tells what it is)."""
+        r = self._prev.get(device)
+        return r.chip if r is not None else ""
+
     def _total(self, r: Reading) -> tuple[float, float]:
         if self.use_lift_estimates:
             return r.x_total + r.x_lift_total, r.y_total + r.y_lift_total
@@ -551,7 +562,8 @@ class MonitorSession:
         c, s = math.cos(pose.yaw), math.sin(pose.yaw)
         for r, (rx, ry), (dx, dy), m in zip(now, raw, processed, self._mounts, strict=True):
             wx, wy = pose.x + c * m.x - s * m.y, pose.y + s * m.x + c * m.y
-            row += [rx, ry, dx, dy, dx / dt, dy / dt, wx, wy, r.lift_events, r.cpi]
+            row += [rx, ry, dx, dy, dx / dt, dy / dt, wx, wy, r.lift_events, r.cpi,
+                    quality_figure(r.chip, r.quality), r.low_quality_events]
             self.log.append(
                 LogEntry(
                     t, r.id, r.x_counts, r.y_counts, rx, ry, dx, dy,

@@ -27,6 +27,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from mm_pc.monitor.model.chips import chip_title
 from mm_pc.monitor.model.history import History
 from mm_pc.monitor.model.session import sensor_columns
 from mm_pc.monitor.settings import last_folder, remember_folder
@@ -330,6 +331,8 @@ class DataListView(QWidget):
             "path starts at 0 again (live and recorded rows are never mixed)"
         )
         self.csv_prefix = ""
+        self._built_for: tuple[str, ...] = ()
+        self._chips: tuple[str, ...] = ()
         self.waiting = QLabel("waiting for the first reply")
         lay = QVBoxLayout(self)
         lay.addWidget(self.note)
@@ -342,17 +345,32 @@ class DataListView(QWidget):
             self._build(ctx.session.devices)
 
     def _build(self, devices: tuple[str, ...]) -> None:
-        shown = tuple(self.tabs.tabText(i) for i in range(self.tabs.count()))
-        if len(self.tables) == len(devices) and shown == tuple(devices):
+        if len(self.tables) == len(devices) and self._built_for == tuple(devices):
             return
         self.tabs.clear()
         self.tables = []
+        self._built_for = tuple(devices)
+        self._chips: tuple[str, ...] = ()
         for k, dev in enumerate(devices):
             table = SensorTable(self.ctx, k, self)
             table.csv_prefix = self.csv_prefix
             self.tables.append(table)
             self.tabs.addTab(table, dev)
+        self._show_chips()
         self.waiting.hide()
+
+    def _show_chips(self) -> None:
+        """Each sensor's tab names its chip once a reply said which it is."""
+        chips = tuple(self.ctx.session.chip(d) for d in self._built_for)
+        if chips == self._chips or self.tabs.count() != len(chips):  # (tabs being added)
+            return
+        self._chips = chips
+        for k, (dev, chip) in enumerate(zip(self._built_for, chips, strict=True)):
+            title = chip_title(chip) if chip else ""
+            self.tabs.setTabText(k, f"{dev} ({title})" if title else dev)
+            self.tabs.setTabToolTip(
+                k, f"sensor {k + 1}: {dev}, chip {title}" if title else
+                f"sensor {k + 1}: {dev} (the node names no chip: a PLN2033 or an old node)")
 
     def set_time_base(self, text: str, csv_prefix: str = "") -> None:
         """Say what the t column counts from; ``csv_prefix`` starts the CSV file names (the
@@ -374,6 +392,7 @@ class DataListView(QWidget):
             if not self.ctx.session.devices:
                 return
             self._build(self.ctx.session.devices)
+        self._show_chips()
         table = self.tables[self.tabs.currentIndex()] if self.tables else None
         if table is not None:
             table.model.sync()

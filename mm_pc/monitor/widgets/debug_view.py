@@ -37,6 +37,7 @@ from PySide6.QtWidgets import (
 )
 
 from mm_pc.core.frames import counts_to_m
+from mm_pc.core.polls import FLAG_LIFT, FLAG_LOW_QUALITY
 from mm_pc.monitor.context import MonitorContext
 from mm_pc.monitor.model.readings import Reply
 from mm_pc.monitor.widgets.style import ERROR_STYLE
@@ -258,11 +259,14 @@ class DebugView(QWidget):
         self.next_seq[device] = int(res.next_seq)
         self.polls[device] = res
         n = len(res.dx)
-        lifts = int(np.count_nonzero(np.asarray(res.flags, dtype=np.uint8) & 1)) if n else 0
+        flags = np.asarray(res.flags, dtype=np.int64)
+        lifts = int(np.count_nonzero(flags & FLAG_LIFT)) if n else 0
+        poor = int(np.count_nonzero(flags & FLAG_LOW_QUALITY)) if n else 0
         self.polls_label.setText(
             f"{device}: {n} polls (seq {res.first_seq}..{int(res.next_seq) - 1}), "
             f"{res.dropped} older polls no longer kept by the node (it keeps its newest "
-            f"ring_size polls, 65 s at the default), {lifts} lifted, CPI {res.cpi}; "
+            f"ring_size polls, 65 s at the default), {lifts} lifted, "
+            f"{poor} below the chip's quality threshold (treated as lifted), CPI {res.cpi}; "
             f"sums dX {int(np.sum(res.dx))}, dY {int(np.sum(res.dy))} counts"
         )
         self._draw_polls()

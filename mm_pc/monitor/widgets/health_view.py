@@ -7,6 +7,11 @@
 * A plot of the two-sensor residual over time (history column ``residual``,
   metres, drawn in mm; NaN -- and said so -- unless the pose method is
   ``two-sensor``) and of the lift events per sample (``s{k}_lifts``).
+* A plot of each sensor's surface-quality figure (history column ``s{k}_quality``: SQUAL
+  of a PMW33xx/PMW3901 at the newest poll of each reply) with the chip's threshold as a
+  dashed line: below it a poll is treated like a lift. A chip without a figure (the
+  PLN2033, an old node or recording) says so ("no quality figure (chip X)") instead of an
+  empty plot; the per-sensor "Low-quality polls" row counts the polls below the threshold.
 * The session's counters (replies, used, restarts, incomplete) and the
   bridge's (dropped requests, skipped ticks).
 
@@ -40,6 +45,7 @@ from PySide6.QtWidgets import (
 )
 
 from mm_pc.monitor.context import MonitorContext
+from mm_pc.monitor.model.chips import chip_key, chip_title, quality_label, quality_threshold
 
 __all__ = ["DIAG_COLUMNS", "LEVEL_COLOURS", "BucketMax", "HealthView", "bucket_max"]
 
@@ -60,6 +66,10 @@ DIAG_COLUMNS = (
      "repeated)"),
     ("Lifts", "lift_events", "reads in which the sensor saw no surface (lifted off the "
      "ground): its motion is estimated there"),
+    ("Low-quality polls", "low_quality_events", "reads in which the chip saw the floor too "
+     "poorly to trust its counts (its surface-quality figure, e.g. SQUAL, below the chip's "
+     "threshold: a shiny, glass or very dark floor, or too high above it): treated like a "
+     "lift, its motion is estimated there. Chips without a quality figure: always 0"),
     ("Overflows", "overflows", "reads in which the chip's counter ran over (counts lost: "
      "should stay 0)"),
     ("Poller CPU (%)", "poller_cpu_percent", "CPU time of the node's read loop, percent of "
@@ -158,6 +168,19 @@ class HealthView(QWidget):
         self.lift_plot.setXLink(self.residual_plot)
         # no legend item over the curves: the title names each sensor's colour
         self.lift_curves: list[pg.PlotDataItem] = []
+        self.quality_plot = self.plots.addPlot(row=2, col=0, title="Surface quality")
+        self.quality_plot.setLabel("left", "quality figure")
+        self.quality_plot.setLabel("bottom", "time (s)")
+        for axis in ("left", "bottom"):
+            self.quality_plot.getAxis(axis).enableAutoSIPrefix(False)
+        self.quality_plot.setXLink(self.residual_plot)
+        self.quality_curves: list[pg.PlotDataItem] = []
+        #: sensor index -> the dashed line at its chip's threshold
+        self.threshold_lines: dict[int, pg.InfiniteLine] = {}
+        #: what the quality plot says about sensors without a figure ('' = all have one)
+        self.quality_note = QLabel("")
+        self.quality_note.setWordWrap(True)
+        self._chips: tuple[str, ...] = ()
 
         top = QWidget()
         tl = QVBoxLayout(top)
@@ -168,6 +191,7 @@ class HealthView(QWidget):
         tl.addWidget(self.session_label)
         tl.addWidget(self.bridge_label)
         tl.addWidget(self.residual_note)
+        tl.addWidget(self.quality_note)
         split = QSplitter(Qt.Vertical)
         split.addWidget(top)
         split.addWidget(self.plots)
@@ -250,22 +274,28 @@ class HealthView(QWidget):
         self._version, self._method = hist.version, method
         self._draw(hist, method)
 
-    def _thinned(self, hist, name: str, t_all: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The column ``name`` for the plot's time range, thinned to MAX_POINTS."""
-        y_all = hist.column(name)
-        cache = self._caches.setdefault(name, BucketMax())
+    def _thinned(
+        self, hist, name: str, t_all: np.ndarray, lowest: bool = False
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The column ``name`` for the plot's time range, thinned to MAX_POINTS (each point
+        the largest of its bucket; ``lowest``: the smallest, so a dip is never hidden)."""
+        sign = -1.0 if lowest else 1.0
+        y_all = sign * hist.column(name) if lowest else hist.column(name)
+        cache = self._caches.setdefault(f"-{name}" if lowest else name, BucketMax())
         cache.update(t_all, y_all)
         vb = self.residual_plot.getViewBox()
         if vb.autoRangeEnabled()[0] or len(t_all) == 0:
-            return cache.points()
+            t, y = cache.points()
+            return t, sign * y
         x0, x1 = vb.viewRange()[0]
         lo, hi = np.searchsorted(t_all, [x0, x1])
         lo, hi = max(int(lo) - 1, 0), min(int(hi) + 1, len(t_all))
         if hi - lo <= ZOOM_ROWS:
-            return bucket_max(t_all[lo:hi], y_all[lo:hi])
+            t, y = bucket_max(t_all[lo:hi], y_all[lo:hi])
+            return t, sign * y
         t, y = cache.points()
         keep = (t >= t_all[lo]) & (t <= t_all[hi - 1])
-        return t[keep], y[keep]
+        return t[keep], sign * y[keep]
 
     def _draw(self, hist, method: str) -> None:
         key = (id(hist), hist.dropped_rows)
@@ -302,6 +332,66 @@ class HealthView(QWidget):
             if np.isfinite(ly).any():
                 top = max(top, float(np.nanmax(ly)))
         self.lift_plot.setYRange(0.0, top, padding=0.05)
+        self._draw_quality(hist, t_all)
+
+    def _draw_quality(self, hist, t_all: np.ndarray) -> None:
+        """Quality curves of the sensors whose chip has a figure, each chip's threshold as a
+        dashed line; the others named in :attr:`quality_note`."""
+        session = self.ctx.session
+        devices = session.devices
+        chips = tuple(session.chip(d) for d in devices)
+        if chips != self._chips:
+            self._chips = chips
+            self._build_quality(devices, chips)
+        for k, curve in enumerate(self.quality_curves):
+            if k < len(chips) and quality_label(chips[k]) and chips[k]:
+                qt, qy = self._thinned(hist, f"s{k}_quality", t_all, lowest=True)
+                curve.setData(qt, qy)
+            else:
+                curve.setData([], [])
+
+    def _build_quality(self, devices, chips) -> None:
+        while len(self.quality_curves) < len(devices):
+            k = len(self.quality_curves)
+            self.quality_curves.append(self._curve(self.quality_plot,
+                                                   SENSOR_PENS[k % len(SENSOR_PENS)]))
+        for line in self.threshold_lines.values():
+            self.quality_plot.removeItem(line)
+        self.threshold_lines.clear()
+        with_figure, without, names = [], [], set()
+        for k, (dev, chip) in enumerate(zip(devices, chips, strict=True)):
+            name = quality_label(chip)
+            if not chip or not name:
+                without.append(f"{dev}: no quality figure (chip {chip_title(chip)})")
+                continue
+            pen = SENSOR_PENS[k % len(SENSOR_PENS)]
+            with_figure.append(f'<span style="color:{pen}">&#9644; {dev} '
+                               f'({chip_key(chip).upper()})</span>')
+            names.add(name)
+            limit = quality_threshold(chip)
+            if limit > 0:
+                line = pg.InfiniteLine(
+                    pos=float(limit), angle=0, movable=False,
+                    pen=pg.mkPen(pen, width=1, style=Qt.DashLine),
+                    label=f"{name} threshold {limit}", labelOpts={"color": pen, "position": 0.1},
+                )  # fmt: skip
+                self.quality_plot.addItem(line)
+                self.threshold_lines[k] = line
+        self.quality_plot.setVisible(bool(with_figure))
+        if with_figure:
+            self.quality_plot.setTitle(
+                f"Surface quality, dashed: the chip's threshold ({', '.join(with_figure)})")
+            self.quality_plot.setLabel("left", " / ".join(sorted(names)))
+        self.quality_note.setText(
+            ("Surface quality: " + "; ".join(without)) if without else "")
+
+    def quality_data(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """What sensor ``k``'s quality curve shows now (t in s, the figure)."""
+        if k >= len(self.quality_curves):
+            return np.empty(0), np.empty(0)
+        x, y = self.quality_curves[k].getOriginalDataset()
+        return (np.asarray(x) if x is not None else np.empty(0),
+                np.asarray(y) if y is not None else np.empty(0))
 
     def _show_counters(self) -> None:
         s = self.ctx.session.stats

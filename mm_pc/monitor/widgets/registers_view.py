@@ -7,6 +7,11 @@ node decoded them, the status register's bits 15..0, the names of the bits
 that are set (by the default register map, an assumption documented in
 docs/pln2033.md), the resolution and the time of the read. Errors of a read
 are shown in red under the button.
+
+Other chips (issue 15): a ``SensorSettings`` that names its chip and carries its own
+register dump (``register_names`` / ``register_values``) is shown by those names; the
+table's rows are the names of every sensor read so far, in order (the 13 PLN2033 rows for a
+PLN2033, or for an old node that names no chip), so mixed chips sit side by side.
 """
 
 from __future__ import annotations
@@ -26,10 +31,12 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from mm_pc.monitor.model.chips import chip_key, chip_title
 from mm_pc.monitor.widgets.style import ERROR_STYLE
+from pln2033.chips import DEFAULT_CHIP
 from pln2033.regmap import REGISTER_NAMES, RegisterMap
 
-__all__ = ["FIELDS", "RegistersView", "decode_status", "status_bits"]
+__all__ = ["FIELDS", "RegistersView", "decode_status", "register_dump", "status_bits"]
 
 #: SensorSettings field names, in the seed's order
 FIELDS: tuple[str, ...] = tuple(f"{name}_register" for name in REGISTER_NAMES)
@@ -58,6 +65,17 @@ def decode_status(value: int, regmap: RegisterMap | None = None) -> list[str]:
     return [name for name, mask in named if value & mask]
 
 
+def register_dump(msg) -> tuple[str, tuple[tuple[str, int], ...]]:
+    """(chip, ((register name, value), ...)) of a ``SensorSettings``: the chip's own dump
+    when it carries one, else the 13 PLN2033 fields (a PLN2033, or an old node)."""
+    chip = chip_key(str(getattr(msg, "chip", "") or ""))
+    names = list(getattr(msg, "register_names", ()) or ())
+    values = list(getattr(msg, "register_values", ()) or ())
+    if chip != DEFAULT_CHIP and names:
+        return chip, tuple(zip(names, (int(v) for v in values), strict=False))
+    return chip, tuple((name, int(getattr(msg, name))) for name in FIELDS)
+
+
 class RegistersView(QWidget):
     """Register table (rows: registers, columns: sensors) with the decoded status below."""
 
@@ -68,6 +86,9 @@ class RegistersView(QWidget):
         self.devices: list[str] = []
         #: device -> (SensorSettings, local time of the answer)
         self.settings: dict[str, tuple[object, float]] = {}
+        #: device -> (chip, its register dump) of the newest answer
+        self.dumps: dict[str, tuple[str, tuple[tuple[str, int], ...]]] = {}
+        self.rows: list[str] = list(FIELDS)
         self.errors: dict[str, str] = {}
 
         self.refresh_button = QPushButton("Refresh")
@@ -161,11 +182,9 @@ class RegistersView(QWidget):
 
     def on_settings(self, device: str, msg) -> None:
         """Fill one sensor's column and status from a SensorSettings message."""
-        col = self._column(device)
-        for row, name in enumerate(FIELDS):
-            item = QTableWidgetItem(f"0x{int(getattr(msg, name)):04X}")
-            item.setFont(self._mono)
-            self.table.setItem(row, col, item)
+        self._column(device)
+        self.dumps[device] = register_dump(msg)
+        self._fill_table()
         now = time.time()
         self.settings[device] = (msg, now)
         self.errors.pop(device, None)
@@ -173,7 +192,46 @@ class RegistersView(QWidget):
         self.status_labels[device].setText(self.status_text(msg, now))
         self.note.setText(f"read {time.strftime('%H:%M:%S', time.localtime(now))}")
 
+    def _fill_table(self) -> None:
+        """Rows: every register name of the sensors read so far, in order; one column each."""
+        rows: list[str] = []
+        for dev in self.devices:
+            for name, _v in self.dumps.get(dev, ("", ()))[1]:
+                if name not in rows:
+                    rows.append(name)
+        self.rows = rows or list(FIELDS)
+        self.table.setRowCount(len(self.rows))
+        self.table.setVerticalHeaderLabels(self.rows)
+        for col, dev in enumerate(self.devices):
+            chip, dump = self.dumps.get(dev, ("", ()))
+            values = dict(dump)
+            wide = chip == DEFAULT_CHIP or any(v > 0xFF for v in values.values())
+            for r, name in enumerate(self.rows):
+                if name not in values:
+                    self.table.setItem(r, col, None)
+                    continue
+                v = values[name]
+                item = QTableWidgetItem(f"0x{v:04X}" if wide else f"0x{v:02X}")
+                item.setFont(self._mono)
+                item.setToolTip(f"{dev} ({chip_title(chip)}): {name} = {v}")
+                self.table.setItem(r, col, item)
+            head = self.table.horizontalHeaderItem(col)
+            if head is not None and dev in self.dumps:
+                head.setText(f"{dev}\n{chip_title(chip)}")
+
     def status_text(self, msg, stamp: float) -> str:
+        chip = chip_key(str(getattr(msg, "chip", "") or ""))
+        if chip != DEFAULT_CHIP:
+            yes = {True: "yes", False: "no"}
+            n = len(self.dumps.get(str(getattr(msg, "spi_device", "")), ("", ()))[1]) or len(
+                getattr(msg, "register_names", ()) or ())
+            return "\n".join((
+                f"chip: {chip_title(chip)}",
+                f"lifted: {yes[bool(msg.lifted)]}    motion: {yes[bool(msg.motion)]}",
+                f"{n} registers, by the chip's own names (docs/sensors.md)",
+                f"cpi {int(msg.cpi)}  (x_cpi {int(msg.x_cpi)}, y_cpi {int(msg.y_cpi)})",
+                f"read at {time.strftime('%H:%M:%S', time.localtime(stamp))}",
+            ))  # fmt: skip
         status = int(msg.status_register)
         names = ", ".join(decode_status(status, self._regmap)) or "none"
         yes = {True: "yes", False: "no"}

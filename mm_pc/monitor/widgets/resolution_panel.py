@@ -7,6 +7,13 @@ explained next to its field and never sent. An accepted value goes to the node's
 ``set_resolution``; its answer (the CPI read back from the sensor, or the node's reason
 for refusing) appears next to the field when the bridge reports it. The CPI in force is
 also shown from the newest reply.
+
+Other chips (issue 15): each sensor's chip comes with every reply (``SensorData.chip``);
+its own range is checked instead (``SensorSettings`` cpi_min/max/step once the Registers
+view has read them, until then the registry's :func:`pln2033.chips.chip_info`). A chip
+whose resolution cannot be set (the PMW3901/PAA5100 optical-flow sensors: it follows
+their height above the floor) gets its field and Set button disabled, the tooltip
+saying why and what to do instead (calibrate the scale, docs/pose-math.md).
 """
 
 from __future__ import annotations
@@ -20,8 +27,11 @@ from PySide6.QtWidgets import (
     QVBoxLayout,
 )
 
+from mm_pc.monitor.model.chips import chip_key, chip_title, cpi_range
 from mm_pc.monitor.widgets.style import ERROR_STYLE
 from pln2033 import RegisterMap
+from pln2033.chips import DEFAULT_CHIP
+from pln2033.sensor import CpiRange
 
 __all__ = ["CPI_MAX", "CPI_MIN", "CPI_STEP", "ResolutionPanel", "validate_cpi"]
 
@@ -30,15 +40,42 @@ _ALLOWED_CPI = _REGMAP.allowed_cpi
 CPI_MIN, CPI_MAX, CPI_STEP = _ALLOWED_CPI.start, _ALLOWED_CPI.stop - 1, _ALLOWED_CPI.step
 ALLOWED = f"allowed: {CPI_MIN}..{CPI_MAX} in steps of {CPI_STEP}"
 RED = ERROR_STYLE
+#: chips whose resolution follows their height (the optical-flow sensors)
+OPTICAL_FLOW = ("pmw3901", "paa5100")
 
 
-def validate_cpi(value) -> int:
-    """The CPI in ``value`` (text or number); ValueError saying what is allowed otherwise."""
+def fixed_tip(chip: str, cpi: int | None = None) -> str:
+    """Why a fixed-resolution chip's field is disabled, and what to do instead."""
+    now = f" ({cpi} CPI now)" if cpi else ""
+    if chip_key(chip) in OPTICAL_FLOW:
+        return (
+            f"the {chip_title(chip)} has a fixed resolution{now}: it follows the sensor's "
+            "height above the floor, not a register. Set the height in the node's options "
+            "and calibrate the sensor's scale (docs/pose-math.md, optical-flow sensors)."
+        )
+    return (
+        f"the {chip_title(chip)} has a fixed resolution{now}: its driver reports motion at "
+        "that rate and there is nothing to set. Calibrate the sensor's scale instead "
+        "(docs/pose-math.md; the OTOS: docs/sensors.md)."
+    )
+
+
+def validate_cpi(value, allowed: CpiRange | None = None, chip: str = "") -> int:
+    """The CPI in ``value`` (text or number); ValueError saying what is allowed otherwise.
+
+    ``allowed``: the chip's range (default: the PLN2033's, by the default register map);
+    ``chip``: its name, for the message."""
     text = str(value).strip()
+    what = ALLOWED if allowed is None else f"{chip_title(chip)} allows {allowed.describe()}"
     try:
         cpi = int(text)
     except ValueError:
-        raise ValueError(f"CPI must be a whole number, got {text!r} ({ALLOWED})") from None
+        raise ValueError(f"CPI must be a whole number, got {text!r} ({what})") from None
+    if allowed is not None:
+        problem = allowed.problem(cpi, chip_title(chip))
+        if problem:
+            raise ValueError(problem)
+        return cpi
     problem = _REGMAP.cpi_problem(cpi)
     if problem:
         raise ValueError(problem)
@@ -64,6 +101,43 @@ class _SensorRow:
         self.error = QLabel("")
         self.error.setStyleSheet(RED)
         self.error.setWordWrap(True)
+        self.name = QLabel(device)
+        self.name.setToolTip(device)
+        #: the chip named by the newest reply ('' = not known / an old node: PLN2033)
+        self.chip = ""
+        #: its range from the node's SensorSettings (None: not read yet)
+        self.settings_range: CpiRange | None = None
+        self.online = True
+
+    def allowed(self) -> CpiRange | None:
+        """The range to check against (None: the PLN2033 register map's)."""
+        if self.settings_range is None and chip_key(self.chip) == DEFAULT_CHIP:
+            return None
+        return self.settings_range or cpi_range(self.chip)
+
+    def fixed(self) -> bool:
+        allowed = self.allowed()
+        return allowed is not None and allowed.fixed
+
+    def show_chip(self, cpi: int | None = None) -> None:
+        """Name, placeholder, tooltips and enabled state for the chip now known."""
+        title = chip_title(self.chip) if self.chip else ""
+        self.name.setText(f"{self.device} ({title})" if title else self.device)
+        allowed = self.allowed()
+        if allowed is not None and allowed.fixed:
+            tip = fixed_tip(self.chip, cpi)
+            self.edit.setPlaceholderText(f"fixed {cpi or allowed.min}")
+            self.edit.setToolTip(tip)
+            self.set_button.setToolTip(tip)
+            self.edit.setEnabled(False)
+            self.set_button.setEnabled(False)
+            return
+        if allowed is not None:
+            self.edit.setPlaceholderText(f"{allowed.min}..{allowed.max}")
+            self.edit.setToolTip(f"counts per inch of both axes, {title} allows "
+                                 f"{allowed.describe()} (Enter sets)")
+        self.edit.setEnabled(self.online)
+        self.set_button.setEnabled(self.online)
 
 
 class ResolutionPanel(QGroupBox):
@@ -83,6 +157,8 @@ class ResolutionPanel(QGroupBox):
         lay.addWidget(self.note)
         if ctx.bridge is not None:
             ctx.bridge.resolution_done.connect(self.on_resolution_done)
+            if hasattr(ctx.bridge, "settings_received"):
+                ctx.bridge.settings_received.connect(self.on_settings)
         ctx.devices_known.connect(self._build)
         ctx.reply_processed.connect(self._on_reply)
         self._build(ctx.session.devices)
@@ -94,13 +170,11 @@ class ResolutionPanel(QGroupBox):
             row = _SensorRow(dev)
             row.set_button.clicked.connect(lambda _=False, d=dev: self.apply(d))
             row.edit.returnPressed.connect(lambda d=dev: self.apply(d))
-            online = self.ctx.bridge is not None
-            row.edit.setEnabled(online)
-            row.set_button.setEnabled(online)
+            row.online = self.ctx.bridge is not None
+            row.edit.setEnabled(row.online)
+            row.set_button.setEnabled(row.online)
             base = 4 * len(self.rows)  # name; field, Set, now; read back; error
-            name = QLabel(dev)
-            name.setToolTip(dev)
-            self.grid.addWidget(name, base, 0, 1, 3)
+            self.grid.addWidget(row.name, base, 0, 1, 3)
             self.grid.addWidget(row.edit, base + 1, 0)
             self.grid.addWidget(row.set_button, base + 1, 1)
             self.grid.addWidget(row.current, base + 1, 2)
@@ -124,8 +198,11 @@ class ResolutionPanel(QGroupBox):
         value is refused or there is no node.
         """
         row = self.rows[device]
+        if row.fixed():
+            row.error.setText(fixed_tip(row.chip))
+            return False
         try:
-            cpi = validate_cpi(row.edit.text())
+            cpi = validate_cpi(row.edit.text(), row.allowed(), row.chip)
         except ValueError as e:
             row.error.setText(str(e))
             self._restore_field(device)
@@ -141,6 +218,15 @@ class ResolutionPanel(QGroupBox):
         return True
 
     # -- answers ------------------------------------------------------------------------
+
+    def on_settings(self, device: str, msg) -> None:
+        """A ``SensorSettings``: the chip's own range (cpi_min/max/step) from the node."""
+        row = self.rows.get(device)
+        if row is None:
+            return
+        row.chip = str(getattr(msg, "chip", "") or row.chip)
+        row.settings_range = cpi_range(row.chip, msg) if getattr(msg, "cpi_max", 0) else None
+        row.show_chip(self.cpi_in_force(device))
 
     def on_resolution_done(self, device: str, ok: bool, message: str, cpi: int) -> None:
         """The node's answer: the CPI read back, or its message in red."""
@@ -185,3 +271,7 @@ class ResolutionPanel(QGroupBox):
             text = f"now: {hist.last(f's{k}_cpi'):.0f} CPI"
             if row.current.text() != text:
                 row.current.setText(text)
+            chip = self.ctx.session.chip(dev)
+            if chip != row.chip:
+                row.chip = chip
+                row.show_chip(self.cpi_in_force(dev))
