@@ -9,7 +9,8 @@ driver takes that keyword (``height_m=0.08`` reaches the PMW3901/PAA5100 drivers
 (``pmw3389.product_id=0x42``) reaches only that chip's driver and wins over a plain
 ``key``. A key no configured chip's driver takes is a configuration error (exit 2), as
 is a value the driver refuses.
-Values: ``true``/``false``, integers (``0x47`` too), floats, else the string.
+Values: ``true``/``false``, integers (``0x47`` too), floats, comma-separated tuples
+(``offset=0.05,0,0``), else the string.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from pln2033 import chips as registry
 from pln2033.sensor import ChipInfo
 
 # constructor keywords that are not user options: the poller passes them, or they are objects
-_NOT_OPTIONS = frozenset(("self", "bus", "name", "regmap", "sleep", "optics"))
+_NOT_OPTIONS = frozenset(("self", "bus", "name", "regmap", "sleep", "clock", "optics"))
 
 
 def chips_help() -> str:
@@ -37,6 +38,10 @@ def split_names(items: Sequence[str]) -> list[str]:
 
 
 def parse_value(text: str) -> object:
+    """``true``/``false``, an int (``0x47``), a float, ``a,b,c`` -> a tuple of those (the
+    OTOS's ``offset=0.05,0,0``), else the string."""
+    if "," in text:
+        return tuple(parse_value(part) for part in text.split(","))
     low = text.strip().lower()
     if low in ("true", "false"):
         return low == "true"

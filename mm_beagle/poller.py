@@ -91,10 +91,10 @@ def poller_config(values: dict, ring_size: int, sim: SimConfig) -> PollerConfig:
 
 def _open_bus(dev: str, cfg: PollerConfig, info: ChipInfo) -> object:
     """The real bus of one device, in its chip's SPI mode, clock capped to its maximum."""
-    if info.bus == "i2c":
-        from pln2033 import i2c  # type: ignore[attr-defined]
+    if info.bus == "i2c":  # /dev/i2c-N through smbus2's i2c_rdwr (the OTOS)
+        from pln2033.i2c import Smbus2Bus
 
-        return i2c.open_bus(dev)
+        return Smbus2Bus(dev)
     from pln2033.bus import SpidevBus
 
     speed, _note = chip_config.spi_speed(info, cfg.spi_speed_hz)
@@ -143,6 +143,7 @@ class Channel:
         self.exact_scale = 0.0  # metres per count of a fixed-resolution chip (0: from the CPI)
         self.sim_stats = None  # the emulator's ground truth, sim backend only
         self.sim_base = (0, 0, 0, 0)
+        self.sim_ratio = 1.0  # driver counts per emulator count (1: the chip's own counter)
         # the hot path's view of the driver (see attach)
         self._xfer = None
         self._tx: list[int] = []
@@ -277,12 +278,19 @@ class Channel:
         ints[ss.I_VERSION] += 1  # even: consistent
 
     def _sim_truth(self) -> None:
-        """The emulator's ground truth since initialisation (sim backend only)."""
-        ints, stats, base = self.ints, self.sim_stats, self.sim_base
-        ints[ss.I_GEN_X] = stats.counted_x - base[0]
-        ints[ss.I_GEN_Y] = stats.counted_y - base[1]
-        ints[ss.I_LIFT_LOST_X] = stats.lift_cleared_x + round(stats.lift_motion_x) - base[2]
-        ints[ss.I_LIFT_LOST_Y] = stats.lift_cleared_y + round(stats.lift_motion_y) - base[3]
+        """The emulator's ground truth since initialisation (sim backend only), in the
+        driver's counts (the OTOS's emulator counts at the PAA5160's 20 000 CPI, its driver
+        reports 1000 CPI: ``sim_ratio``)."""
+        ints, stats, base, k = self.ints, self.sim_stats, self.sim_base, self.sim_ratio
+        gen_x, gen_y = stats.counted_x - base[0], stats.counted_y - base[1]
+        lost_x = stats.lift_cleared_x + round(stats.lift_motion_x) - base[2]
+        lost_y = stats.lift_cleared_y + round(stats.lift_motion_y) - base[3]
+        if k != 1.0:
+            gen_x, gen_y, lost_x, lost_y = (round(v * k) for v in (gen_x, gen_y, lost_x, lost_y))
+        ints[ss.I_GEN_X] = gen_x
+        ints[ss.I_GEN_Y] = gen_y
+        ints[ss.I_LIFT_LOST_X] = lost_x
+        ints[ss.I_LIFT_LOST_Y] = lost_y
 
     def _update_lift_gap(self, dx: int, dy: int, lifted: bool) -> None:
         """Feed one poll to the estimators; add their estimate when it is complete."""
@@ -447,12 +455,20 @@ class Poller:
         if stats is not None and ch.sim_stats is None:
             # Counts before the first initialisation were discarded on purpose.
             ch.sim_stats = stats
+            emulated_cpi = getattr(ch.bus, "cpi_y", 0) or ch.cpi_y
+            ratio = ch.cpi_y / emulated_cpi if emulated_cpi else 1.0
+            ch.sim_ratio = 1.0 if abs(ratio - 1.0) < 0.01 else ratio
+            k = ch.sim_ratio
             ints = ch.ints  # non-zero only after a restart: the truth carries on too
             ch.sim_base = (
-                stats.counted_x - ints[ss.I_GEN_X],
-                stats.counted_y - ints[ss.I_GEN_Y],
-                stats.lift_cleared_x + round(stats.lift_motion_x) - ints[ss.I_LIFT_LOST_X],
-                stats.lift_cleared_y + round(stats.lift_motion_y) - ints[ss.I_LIFT_LOST_Y],
+                stats.counted_x - round(ints[ss.I_GEN_X] / k),
+                stats.counted_y - round(ints[ss.I_GEN_Y] / k),
+                stats.lift_cleared_x
+                + round(stats.lift_motion_x)
+                - round(ints[ss.I_LIFT_LOST_X] / k),
+                stats.lift_cleared_y
+                + round(stats.lift_motion_y)
+                - round(ints[ss.I_LIFT_LOST_Y] / k),
             )
         ch.ints[ss.I_REINITS] += 1
         ch.ints[ss.I_STATE] = ss.STATE_UP

@@ -94,8 +94,10 @@ def test_mixed_chips_poll_every_count_with_quality(chip):
         assert t.state == ss.STATE_UP and t.seq == 500
         stats = rig.emus[i].stats
         assert stats.protocol_errors == 0
-        # every count that entered the chip's counter is in the measured totals
-        assert (t.x_total, t.y_total) == (t.gen_x, t.gen_y)
+        # every count that entered the chip's counter is in the measured totals (the OTOS:
+        # counts from its fused position, 0.305 mm per LSB = 12 counts: within that)
+        slack = 12 if rig.poller.channels[i].sim_ratio != 1.0 else 0
+        assert abs(t.x_total - t.gen_x) <= slack and abs(t.y_total - t.gen_y) <= slack
         assert t.y_total > 100
         # metres: within 2 % of the true path (optical flow: its scale model, exactly)
         assert t.y_total_m == pytest.approx(0.2 * (rig.clock.t - rig.t_init[i]), rel=0.02)
@@ -120,7 +122,7 @@ def test_low_quality_window_is_treated_like_a_lift(chip):
     if info.quality_threshold <= 0:
         pytest.skip(f"the {chip} has no quality threshold")
     motion = ConstantVelocity(0.0, 0.3)
-    start = T0 + 1.0  # after the slowest bring-up (the PMW3901's init waits)
+    start = T0 + 2.0  # after the slowest bring-up (the OTOS's IMU calibration: 0.6 s)
     rig = Rig([chip], [{"motion": motion, "low_quality_windows": [(start, start + 0.03)]}])
     assert rig.clock.t < start - 0.2
     rig.run(round((start + 0.3 - rig.clock.t) / PERIOD))
@@ -131,7 +133,8 @@ def test_low_quality_window_is_treated_like_a_lift(chip):
     assert t.low_quality_total == int(poor.sum())
     assert (arr["quality"][poor] < info.quality_threshold).all()
     assert not (arr["flags"] & ss.FLAG_LIFT).any()  # a low quality is not a lift bit
-    assert (t.x_total, t.y_total) == (t.gen_x, t.gen_y)
+    slack = 12 if rig.poller.channels[0].sim_ratio != 1.0 else 0
+    assert abs(t.x_total - t.gen_x) <= slack and abs(t.y_total - t.gen_y) <= slack
     lost = t.lift_lost_y  # counts the chip did not count in the window (ground truth)
     window_counts = 0.3 * 0.03 / (t.y_total_m / t.y_total)
     assert lost == pytest.approx(window_counts, rel=0.1)
@@ -153,7 +156,7 @@ def test_cpi_is_refused_outside_each_chips_own_range(chip):
     assert status == "invalid"
     assert chip in text and str(bad) in text
     if info.cpi.fixed:
-        assert "fixed" in text and "height_m" in text
+        assert "fixed" in text
         assert serve(("set_cpi", 1, info.cpi.min))[0] == "ok"
     else:
         good = info.cpi.max
