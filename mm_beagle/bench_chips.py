@@ -13,6 +13,9 @@ chip's emulator (the real driver's bring-up), then polled flat out:
 - ``emulated_us``: the same with the emulator answering every poll (what the sim backend
   costs).
 
+The OTOS's stub answers its one I2C read (status + position + velocity) with a constant
+reply, so its stub figure leaves out the pose arithmetic of a moving chip (a few µs more).
+
 No ROS; numpy only for the emulator's motion source. Prints one JSON object.
 """
 
@@ -52,13 +55,23 @@ class ConstantBurst:
             return [list(r) for r in self.reply]
         return self.emulator.xfer_segments(segments)
 
+    def write_read(self, addr, write, read_len):  # I2C (the OTOS's one motion read)
+        if write is self.burst:
+            if self.reply is None:
+                self.reply = self.emulator.write_read(addr, write, read_len)
+            return bytes(self.reply)
+        return self.emulator.write_read(addr, write, read_len)
+
+    def write(self, addr, data):
+        return self.emulator.write(addr, data)
+
     def close(self) -> None:
         pass
 
 
 def _burst_of(driver) -> object:
     """The transfer list the driver sends for each motion read (built once)."""
-    for name in ("_burst_tx", "motion_tx"):
+    for name in ("_burst_tx", "motion_tx", "_motion_ptr"):
         tx = getattr(driver, name, None)
         if tx is not None:
             return tx
