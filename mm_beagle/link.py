@@ -36,7 +36,8 @@ from pathlib import Path
 from . import shared_state as ss
 
 MAGIC = b"MMB1"
-VERSION = 3  # 2: four lift-estimate variances (N_FLOAT 10); 3: quality per poll, N_INT 19
+VERSION = 3  # 2: four lift-estimate variances (N_FLOAT 10); 3: quality per poll, N_INT 20,
+# N_FLOAT 16 (the chip's own pose)
 HEADER = struct.Struct("<4sBBHQQ")
 BLOCK = struct.Struct("<BxxxIQ")
 GLOB_BYTES = 8 * ss.N_GLOBAL

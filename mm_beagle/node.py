@@ -112,6 +112,7 @@ class BeagleNode(Node):
         self.onboard = None
         if self.settings.odometry.rate > 0:
             self._start_onboard_odometry()
+        self._start_chip_odometry()
         self.create_timer(0.2, self.relay_poller_events)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.clock_watch = ClockWatch(self)
@@ -464,6 +465,51 @@ class BeagleNode(Node):
 
         create_reset_service(self, reset)
         self.create_timer(1.0 / o.rate, tick)
+
+    def _start_chip_odometry(self) -> None:
+        """The OTOS's on-chip pose as a second nav_msgs/Odometry (issue 15 part 5).
+
+        One topic per OTOS device: ``~/otos/odom`` for the first, ``~/otos/odom_<index>``
+        (its index in ``devices``) for any further one; frame ids as the onboard odometry's
+        (``odom_frame``, ``base_frame``); at ``publish_rate`` (0: none), a message only when
+        the chip's pose is newer than the last one sent. The chip gives no covariance: the
+        first element of each matrix is -1 (unknown), the rest 0; do not fuse it as is.
+        """
+        rate = self.settings.publish_rate
+        otos = [i for i, c in enumerate(self.chips) if c == "otos"]
+        if not otos or rate <= 0:
+            return
+        from nav_msgs.msg import Odometry as OdometryMsg
+
+        pubs = {
+            i: self.create_publisher(
+                OdometryMsg, "~/otos/odom" if k == 0 else f"~/otos/odom_{i}", 10
+            )
+            for k, i in enumerate(otos)
+        }
+        sent = dict.fromkeys(otos, 0)
+
+        def tick() -> None:
+            o = self.settings.odometry
+            for i, pub in pubs.items():
+                try:
+                    t = self.poller.state.snapshot(i)
+                except ss.PollerBusyError:
+                    continue
+                if t.chip_pose_ns == sent[i] or t.state != ss.STATE_UP:
+                    continue
+                sent[i] = t.chip_pose_ns
+                pub.publish(
+                    messages.chip_odometry(
+                        t, node_stamp(self, t.chip_pose_ns), o.odom_frame, o.base_frame
+                    )
+                )
+
+        self.create_timer(1.0 / rate, tick)
+        self.get_logger().info(
+            "OTOS on-chip pose on "
+            + ", ".join(f"{pub.topic_name} ({self.devices[i]})" for i, pub in pubs.items())
+        )
 
     def _send_static_frames(self) -> None:
         """base_link -> each sensor frame at its (calibrated) mount, latched on /tf_static."""

@@ -22,6 +22,7 @@ into the totals -- a settings read never eats counts.
 from __future__ import annotations
 
 import ctypes
+import math
 import os
 import signal
 import time
@@ -174,10 +175,38 @@ class Channel:
                 self._read = driver.read_motion
                 self.info = driver.info  # the PMW3901's follows its height
                 self._threshold = self.info.quality_threshold
+                if hasattr(driver, "last_pose"):  # the OTOS: its on-chip pose too
+                    self.poll = self._poll_with_pose  # type: ignore[method-assign]
 
     def _poll_generic(self, stamp_ns: int) -> None:
         """One motion read of a chip other than the PLN2033, recorded. Raises Pln2033Error."""
         self.record(stamp_ns, self._read())
+
+    def _poll_with_pose(self, stamp_ns: int) -> None:
+        """The OTOS: its motion read also brings the on-chip pose; both are stored."""
+        m = self._read()
+        reading = self.driver.last_pose  # type: ignore[union-attr]
+        if reading is not None:
+            self.store_chip_pose(reading, stamp_ns)
+        self.record(stamp_ns, m)
+
+    def store_chip_pose(self, reading, stamp_ns: int) -> None:
+        """The chip's own pose and velocity (OTOS frame: x right, y forward, heading CCW)
+        into the shared state in base_link terms (REP 103: x forward, y left)."""
+        pose, vel = reading.pose, reading.velocity
+        yaw = pose.h
+        vxw, vyw = vel.y, -vel.x  # world velocity in the odometry frame's axes
+        c, s = math.cos(yaw), math.sin(yaw)
+        ints, f = self.ints, self.floats
+        ints[ss.I_VERSION] += 1  # odd: writing
+        f[ss.F_CHIP_X] = pose.y
+        f[ss.F_CHIP_Y] = -pose.x
+        f[ss.F_CHIP_YAW] = yaw
+        f[ss.F_CHIP_VX] = c * vxw + s * vyw
+        f[ss.F_CHIP_VY] = -s * vxw + c * vyw
+        f[ss.F_CHIP_WZ] = vel.h
+        ints[ss.I_CHIP_POSE_NS] = stamp_ns
+        ints[ss.I_VERSION] += 1  # even: consistent
 
     def poll(self, stamp_ns: int) -> None:
         """One motion burst, recorded: the 1 kHz hot path. Raises Pln2033Error.

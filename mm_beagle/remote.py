@@ -353,7 +353,8 @@ class RemoteAgent:
                 fields[ss.I_STAMP_NS] += self._offset_ns
             st[1 : ss.I_RING_FROM] = fields[1 : ss.I_RING_FROM]
             st[ss.I_RING_FROM + 1 :] = fields[ss.I_RING_FROM + 1 :]
-            self.state.floats[i] = floats + self.base_f[i]
+            self.state.floats[i] = floats
+            self.state.floats[i][: ss.N_TOTAL_FLOAT] += self.base_f[i][: ss.N_TOTAL_FLOAT]
             self.next_agent[i] = end
         st[ss.I_VERSION] += 1  # even: consistent
 

@@ -39,8 +39,9 @@ I_LIFT_LOST_X = 14  # emulator ground truth: counts cleared by lifts
 I_LIFT_LOST_Y = 15
 I_LOW_QUALITY = 16  # polls whose quality was below the chip's threshold (treated like a lift)
 I_QUALITY = 17  # the newest poll's quality figure (-1: the chip has none)
-I_RING_FROM = 18  # oldest seq the ring holds (the remote backend starts mid-run)
-N_INT = 19
+I_CHIP_POSE_NS = 18  # system time of the newest on-chip pose (the OTOS; 0 = none)
+I_RING_FROM = 19  # oldest seq the ring holds (the remote backend starts mid-run)
+N_INT = 20
 
 # int64 fields that only grow: a restarted agent's are added to what came before
 MONOTONE_INTS = (
@@ -69,7 +70,16 @@ F_X_EST_VAR_COUNTS = 6  # variance of those estimates (count^2, m^2): gaps add u
 F_Y_EST_VAR_COUNTS = 7
 F_X_EST_VAR_M = 8
 F_Y_EST_VAR_M = 9
-N_FLOAT = 10
+N_TOTAL_FLOAT = 10  # the floats above only grow (a restarted agent's are added on)
+# the chip's own pose estimate (the OTOS: on-chip fusion), base_link frame (REP 103):
+# x, y (m), yaw (rad) in the chip's odometry frame, and the velocity in base_link
+F_CHIP_X = 10
+F_CHIP_Y = 11
+F_CHIP_YAW = 12
+F_CHIP_VX = 13  # m/s, base_link
+F_CHIP_VY = 14
+F_CHIP_WZ = 15  # rad/s
+N_FLOAT = 16
 
 # poller-wide int64 fields
 G_POLLS = 0
@@ -133,6 +143,7 @@ class Totals:
     lift_lost_y: int
     low_quality_total: int  # polls below the chip's quality threshold
     quality: int  # the newest poll's quality figure (-1: none)
+    chip_pose_ns: int  # when the chip's own pose below was read (0: the chip has none)
     x_total_m: float
     y_total_m: float
     x_est_counts: float
@@ -143,10 +154,16 @@ class Totals:
     y_est_var_counts: float
     x_est_var_m: float  # m^2
     y_est_var_m: float
+    chip_x: float  # the chip's own pose (F_CHIP_*), m, m, rad, m/s, m/s, rad/s
+    chip_y: float
+    chip_yaw: float
+    chip_vx: float
+    chip_vy: float
+    chip_wz: float
 
     @classmethod
     def zero(cls, stamp_ns: int = 0) -> Totals:
-        return cls(*([0] * 9), stamp_ns, *([0] * 7), *([0.0] * N_FLOAT))
+        return cls(*([0] * 9), stamp_ns, *([0] * 8), *([0.0] * N_FLOAT))
 
 
 class SharedState:

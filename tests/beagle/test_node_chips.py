@@ -171,6 +171,33 @@ def test_diagnostics_name_each_sensors_chip(node, client):
         assert "low_quality_events" in diag[dev] and "quality" in diag[dev]
 
 
+def test_otos_on_chip_pose_is_a_second_odometry(node, client):
+    """~/otos/odom: the OTOS's fused pose as nav_msgs/Odometry in the node's frames,
+    moving forward along the straight path (0.2 m/s), no covariance claimed."""
+    if "otos" not in CHIPS:
+        pytest.skip("the otos driver is not in this tree")
+    from nav_msgs.msg import Odometry
+
+    got: list = []
+    sub = client.node.create_subscription(Odometry, f"{NS}/otos/odom", got.append, 10)
+    deadline = time.monotonic() + 10
+    while len(got) < 20 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    client.node.destroy_subscription(sub)
+    assert len(got) >= 20
+    first, last = got[0], got[-1]
+    assert (last.header.frame_id, last.child_frame_id) == ("odom", "base_link")
+    dt = (last.header.stamp.sec - first.header.stamp.sec) + (
+        last.header.stamp.nanosec - first.header.stamp.nanosec
+    ) * 1e-9
+    dx = last.pose.pose.position.x - first.pose.pose.position.x
+    # 0.2 m/s, less the poor-surface windows (10 % of the time: no optical counts there)
+    assert dt > 0.2 and 0.14 < dx / dt < 0.22, dx / dt
+    assert abs(last.pose.pose.position.y - first.pose.pose.position.y) < 0.01 + 0.05 * dt
+    assert 0.0 <= last.twist.twist.linear.x < 0.25
+    assert last.pose.covariance[0] == -1.0
+
+
 # --- bad configuration: exit 2 with the registry's message -------------------------------
 
 

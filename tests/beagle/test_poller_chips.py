@@ -220,3 +220,26 @@ def test_chip_options_parse_and_reach_only_the_chips_that_take_them():
     for bad in ("height_m", "=3", "pmw9.x=1"):
         with pytest.raises(ValueError, match=r"key=value|allowed"):
             chip_config.parse_chip_options([bad])
+
+
+def test_otos_on_chip_pose_reaches_the_shared_state_in_base_link_terms():
+    """The OTOS's fused pose (its frame: x right, y forward) is stored as base_link
+    (x forward, y left): 0.2 m/s forward and 0.05 m/s right -> x grows, y falls."""
+    need("otos")
+    motion = ConstantVelocity(0.05, 0.2)
+    rig = Rig(["otos"], [{"motion": motion}])
+    rig.run(100)
+    t0, c0 = rig.state.snapshot(0), rig.clock.t
+    rig.run(500)
+    t = rig.state.snapshot(0)
+    moved = rig.clock.t - c0  # (the chip's pose also ran during its bring-up)
+    assert t.chip_pose_ns == round(rig.clock.t * 1e9)
+    assert t.chip_x - t0.chip_x == pytest.approx(0.2 * moved, abs=0.002)  # 0.305 mm LSB
+    assert t.chip_y - t0.chip_y == pytest.approx(-0.05 * moved, abs=0.002)
+    assert abs(t.chip_yaw) < 1e-3
+    assert t.chip_vx == pytest.approx(0.2, abs=0.02)
+    assert t.chip_vy == pytest.approx(-0.05, abs=0.02)
+    # the PLN2033 next to it has none
+    rig2 = Rig(["pln2033"])
+    rig2.run(10)
+    assert rig2.state.snapshot(0).chip_pose_ns == 0
