@@ -62,6 +62,11 @@ class BeagleNode(Node):
         cfg = self.settings.poller
         self.devices = cfg.devices
         self.chips = chip_config.resolve_chips(cfg.chips, cfg.devices)
+        for dev, opts in cfg.device_options.items():
+            self.get_logger().info(
+                f"{dev}: from calibration_file, written at every start: "
+                + ", ".join(f"{k} {v}" for k, v in opts.items())
+            )
         if cfg.backend == "remote":
             r = self.settings.remote
             self.poller: PollerClient | RemoteAgent = RemoteAgent(

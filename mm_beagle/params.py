@@ -10,6 +10,7 @@ from rclpy.node import Node
 from mm_pc.ros.tf import frame_ids_problem, sensor_frame_names
 
 from . import chip_config, link
+from .otos_calibration import otos_options
 from .poller import PollerConfig, poller_config
 from .sim_backend import SimConfig, check_trajectory, parse_fail_windows
 
@@ -128,7 +129,13 @@ PARAMETERS = {
         [0.049, -0.0395, 0.0, 0.049, 0.0395, 0.0],
         _plain("odometry: x, y, yaw (base_link m, rad) of each sensor, flattened"),
     ),
-    "calibration_file": ("", _plain("odometry: YAML calibration to apply ('' = none)")),
+    "calibration_file": (
+        "",
+        _plain(
+            "odometry: YAML calibration to apply ('' = none); an OTOS also gets its linear "
+            "scalar and offset from it, written at every start"
+        ),
+    ),
     "odom_frame": ("odom", _plain("odometry: frame_id")),
     "base_frame": ("base_link", _plain("odometry: child_frame_id")),
     "publish_tf": (
@@ -266,6 +273,9 @@ def declare(node: Node) -> NodeSettings:
         from .sim_backend import sim_chips
 
         sim_chips(cfg)  # a bad name now, with a clear message
+    cfg.device_options = otos_options(
+        devices, chip_config.resolve_chips(chips, devices), p["calibration_file"], p["mounts"]
+    )
     flat = list(p["mounts"])
     if p["odometry_rate"] > 0 and len(flat) != 3 * len(devices):
         raise ValueError(

@@ -58,6 +58,9 @@ class PollerConfig:
     chips: list[str] = field(default_factory=list)  # one per device, one for all, [] = pln2033
     chip_options: dict[str, object] = field(default_factory=dict)  # see chip_config
     srom_file: str = ""  # SROM for chips whose firmware is "srom", inside patch_dir
+    # per-device driver options (the OTOS's scalars and offset from calibration_file);
+    # chip_options given explicitly win over them
+    device_options: dict[str, dict[str, object]] = field(default_factory=dict)
     realtime_priority: int = 0
     retry_interval: float = 1.0
     ring_size: int = 65536
@@ -442,7 +445,10 @@ class Poller:
         """The driver of ``ch``'s chip on its bus, with the chip options it takes."""
         if ch.fast:
             return PLN2033(ch.bus, self.regmap, name=ch.device)  # type: ignore[arg-type]
-        opts = chip_config.options_for(ch.chip, {**self.cfg.chip_options, **self.driver_extra})
+        opts = {
+            **self.cfg.device_options.get(ch.device, {}),
+            **chip_config.options_for(ch.chip, {**self.cfg.chip_options, **self.driver_extra}),
+        }
         return registry.make_driver(ch.chip, ch.bus, ch.device, **opts)
 
     def _sim_buses(self) -> dict[str, object]:

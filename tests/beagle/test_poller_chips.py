@@ -243,3 +243,34 @@ def test_otos_on_chip_pose_reaches_the_shared_state_in_base_link_terms():
     rig2 = Rig(["pln2033"])
     rig2.run(10)
     assert rig2.state.snapshot(0).chip_pose_ns == 0
+
+
+def test_otos_settings_from_the_calibration_file_are_written_at_every_start(tmp_path):
+    """calibration_file -> each OTOS's linear scalar and offset (issue 15 part 5c), written
+    by the driver at bring-up and again after the chip lost them (a re-initialisation)."""
+    need("otos")
+    from mm_beagle.otos_calibration import otos_options
+    from mm_pc.core.calibration import Calibration, SensorCalibration
+
+    dev = "/dev/spidev1.0"
+    cal = Calibration({dev: SensorCalibration(scale_x=1.04, scale_y=1.04, x=0.05, y=0.02)})
+    path = tmp_path / "cal.yaml"
+    cal.save(path)
+    opts = otos_options([dev], ["otos"], str(path), [0.049, -0.0395, 0.0])
+    assert opts[dev]["linear_scalar"] == pytest.approx(1.04)
+    assert opts[dev]["offset"] == pytest.approx((-0.02, 0.05, 0.0))  # OTOS frame: -y, x
+    assert otos_options([dev], ["pln2033"], str(path), [0, 0, 0]) == {}
+    rig = Rig(["otos"])
+    rig.poller.cfg.device_options = opts
+    ch, emu = rig.poller.channels[0], rig.emus[0]
+    rig.poller.try_init(ch, rig.clock.t)
+    assert ch.driver.linear_scalar == pytest.approx(1.04)
+    assert emu.linear_scalar == pytest.approx(1.04, abs=0.001)  # the chip's register
+    emu.power_cycle()  # the chip forgets
+    assert emu.linear_scalar == 1.0
+    rig.poller.try_init(ch, rig.clock.t)
+    assert emu.linear_scalar == pytest.approx(1.04, abs=0.001)
+    bad = Calibration({dev: SensorCalibration(scale_x=1.3, scale_y=1.3)})
+    bad.save(path)
+    with pytest.raises(ValueError, match="calibration_file"):
+        otos_options([dev], ["otos"], str(path), [0.049, -0.0395, 0.0])
