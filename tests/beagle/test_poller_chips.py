@@ -274,3 +274,36 @@ def test_otos_settings_from_the_calibration_file_are_written_at_every_start(tmp_
     bad.save(path)
     with pytest.raises(ValueError, match="calibration_file"):
         otos_options([dev], ["otos"], str(path), [0.049, -0.0395, 0.0])
+
+
+def test_srom_file_goes_to_srom_chips_and_is_ignored_by_the_others(tmp_path):
+    """srom_file (in patch_dir) is uploaded and verified at bring-up of a PMW3360; the
+    PLN2033 next to it takes the patch_file rule, and a PMW3901 ignores both, said once."""
+    need("pmw3360")
+    need("pmw3901")
+    from mm_beagle.poller import poller_config
+    from pln2033.pmw33xx import regs as R  # noqa: N812
+
+    blob = bytes((i * 7 + 3) & 0xFF for i in range(R.SROM_LENGTH))
+    (tmp_path / "srom.bin").write_bytes(blob)
+    values = {
+        "devices": ["/dev/spidev1.0", "/dev/spidev1.1"], "backend": "sim", "cpi": 1600,
+        "poll_rate": 1000.0, "spi_speed_hz": 3_000_000, "register_map": "", "patch_file": "",
+        "patch_dir": str(tmp_path), "srom_file": "srom.bin", "realtime_priority": 0,
+        "retry_interval": 1.0, "chips": ["pmw3360", "pmw3901"], "chip_options": {},
+    }  # fmt: skip
+    cfg = poller_config(values, 4096, SimConfig())
+    assert cfg.srom_file == str((tmp_path / "srom.bin").resolve())
+    rig = Rig(["pmw3360", "pmw3901"], [{"srom": blob}, {}])
+    rig.poller.cfg.srom_file = cfg.srom_file
+    rig.poller.firmware["pmw3360"] = list(blob)
+    ch = rig.poller.channels[0]
+    rig.poller.try_init(ch, rig.clock.t)
+    assert ch.driver is not None and ch.driver.srom_version == 0x04
+    assert rig.emus[0].srom_running and rig.emus[0].srom_intact
+    # the firmware kinds as the poller reads them from the config
+    pol = Poller(cfg, rig.state, Pipe()[1], Pipe()[1])
+    assert pol.firmware["pmw3360"] == list(blob) and pol.firmware["pmw3901"] is None
+    assert any("takes no firmware: srom_file ignored" in n for n in pol.notes)
+    with pytest.raises(ValueError, match="outside patch_dir"):
+        poller_config({**values, "srom_file": "/etc/hostname"}, 4096, SimConfig())
