@@ -315,11 +315,15 @@ def test_data_list_rows_newest_first_equal_the_history(qtbot, make_ctx):
     model = view.tables[0].model
     n = len(hist)
     assert model.rowCount() == n == 1000
-    assert [model.headerData(c, Qt.Horizontal) for c in range(9)] == [c[0] for c in COLUMNS]
+    assert [model.headerData(c, Qt.Horizontal) for c in range(11)] == [c[0] for c in COLUMNS]
     for r in (0, 1, 500, n - 1):
         for c, (_h, field, scale, fmt) in enumerate(COLUMNS):
             name = field if field == "t" else sensor_columns(0)[field]
             want = hist.column(name)[n - 1 - r] * scale
+            if np.isnan(want):  # the quality of a chip without a figure
+                assert np.isnan(model.value(r, c))
+                assert model.data(model.index(r, c)) == "\u2013"
+                continue
             assert model.value(r, c) == want
             assert model.data(model.index(r, c)) == fmt.format(want)
     assert model.value(0, 0) == hist.last("t")  # newest first
@@ -393,12 +397,14 @@ def test_export_csv_round_trip(tmp_path, make_ctx):
     with open(path, newline="") as fh:
         assert next(csv.reader(fh)) == list(CSV_HEADER)
     data = np.loadtxt(path, delimiter=",", skiprows=1)
-    assert data.shape == (len(hist), 9)
+    assert data.shape == (len(hist), 11)
     np.testing.assert_array_equal(data[:, 0], hist.column("t"))  # oldest first
     np.testing.assert_allclose(data[:, 1], hist.column("s1_dx") * 1e3, rtol=1e-15)
     np.testing.assert_allclose(data[:, 4], hist.column("s1_raw_dy") * 1e3, rtol=1e-15)
     np.testing.assert_allclose(data[:, 6], hist.column("s1_vy") * 1e3, rtol=1e-15)
     np.testing.assert_array_equal(data[:, 8], hist.column("s1_cpi"))
+    np.testing.assert_array_equal(data[:, 9], hist.column("s1_quality"))  # nan: no figure
+    np.testing.assert_array_equal(data[:, 10], hist.column("s1_lowq"))
 
 
 def test_export_csv_refuses_bad_input_and_shows_write_errors(qtbot, tmp_path, make_ctx):
