@@ -5,7 +5,8 @@ shared state from an mm-beagle-agent over zenoh (:mod:`mm_beagle.remote`), so
 everything below is one implementation for both.
 
 Services (private namespace, so /mm_beagle/... by default):
-  ~/get_sensor_data      read-and-clear sums (empty id = every sensor that is up)
+  ~/get_sensor_data      read-and-clear sums (empty id = every sensor that is up),
+                         with the single polls when asked (polls_ids)
   ~/get_sensor_settings  all registers of one sensor, without losing counts
   ~/set_resolution       CPI of one sensor (X and Y)
   ~/get_samples          single polls from the ring buffer

@@ -7,11 +7,14 @@ runs on the executor thread (where every rclpy object is used), and the
 answer comes back as a Qt signal, which Qt delivers on the GUI thread.
 
 Requests of the sample timer: at most one ``get_sensor_data`` is in flight.
-With ``fetch_polls`` (default) each reply is followed by one ``get_samples`` per
-sensor for exactly the polls its totals added since the previous reply, and the
-:class:`Reply` is emitted with them (``Reply.polls``), so the session integrates
-the pose per poll; a fetch that fails, takes longer than ``timeout_s`` or whose
-service disappears leaves that sensor's entry None (the session then steps over the interval with
+With ``fetch_polls`` (default) each reply brings exactly the polls its totals added
+since the previous reply, and the :class:`Reply` is emitted with them
+(``Reply.polls``), so the session integrates the pose per poll. The polls come
+inside the ``get_sensor_data`` reply (its ``polls_ids``/``polls_since_seq`` fields:
+one round trip a reply, docs/beagle-node.md section 3.1); for a sensor the reply
+has none for (a node without those fields, a busy ring) one ``get_samples`` follows.
+A fetch that fails, takes longer than ``timeout_s`` or whose service disappears
+leaves that sensor's entry None (the session then steps over the interval with
 the totals and marks the gap). The next ``get_sensor_data`` waits for the fetch.
 A tick that finds a request still outstanding is skipped (``skipped_ticks``):
 the next reply's totals cover the gap, so a slow link (WLAN latency) costs
