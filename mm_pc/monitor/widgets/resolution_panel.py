@@ -11,6 +11,7 @@ also shown from the newest reply.
 
 from __future__ import annotations
 
+from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import (
     QGridLayout,
     QGroupBox,
@@ -24,6 +25,9 @@ from mm_pc.monitor.widgets.style import ERROR_STYLE
 from pln2033 import RegisterMap
 
 __all__ = ["CPI_MAX", "CPI_MIN", "CPI_STEP", "ResolutionPanel", "validate_cpi"]
+
+#: how often (ms) the panel looks for a new CPI in the history
+REFRESH_MS = 200
 
 _REGMAP = RegisterMap.default()
 _ALLOWED_CPI = _REGMAP.allowed_cpi
@@ -84,7 +88,12 @@ class ResolutionPanel(QGroupBox):
         if ctx.bridge is not None:
             ctx.bridge.resolution_done.connect(self.on_resolution_done)
         ctx.devices_known.connect(self._build)
-        ctx.reply_processed.connect(self._on_reply)
+        # the CPI in force changes rarely: a look five times a second, not a slot per reply
+        # (at 500 Hz that is 500 queued calls a second for nothing; docs/benchmarks.md, gui)
+        self._timer = QTimer(self)
+        self._timer.setInterval(REFRESH_MS)
+        self._timer.timeout.connect(self.refresh)
+        self._timer.start()
         self._build(ctx.session.devices)
 
     def _build(self, devices) -> None:
@@ -169,9 +178,12 @@ class ResolutionPanel(QGroupBox):
         known = cpi or self.cpi_in_force(device)
         self.rows[device].edit.setText(str(known) if known else "")
 
-    def _on_reply(self, _reply) -> None:
-        self.refresh()
-
+        # the CPI in force changes rarely: a look five times a second, not a slot per reply
+        # (at 500 Hz that is 500 queued calls a second for nothing; docs/benchmarks.md, gui)
+        self._timer = QTimer(self)
+        self._timer.setInterval(REFRESH_MS)
+        self._timer.timeout.connect(self.refresh)
+        self._timer.start()
     def refresh(self) -> None:
         """Show the CPI of the newest history row (cheap: only when it changed)."""
         hist = self.ctx.session.history
