@@ -308,7 +308,7 @@ def test_get_sensor_data_carries_every_poll_once_when_asked(node, client):
         for d, p in zip(res.data, res.polls, strict=True):
             assert p.first_seq == cursor[d.id] and p.next_seq == d.seq and p.dropped == 0
             assert len(p.dx) == len(p.dy) == len(p.stamp_ns) == len(p.flags) == d.seq - p.first_seq
-            assert list(p.stamp_ns) == sorted(p.stamp_ns) and p.cpi == d.cpi == 1600
+            assert p.cpi == d.cpi == 1600
             if len(p.stamp_ns):
                 assert p.stamp.sec * 10**9 + p.stamp.nanosec == p.stamp_ns[-1]
             sums[d.id][0] += sum(p.dx)
