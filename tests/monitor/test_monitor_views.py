@@ -477,6 +477,27 @@ def test_registers_view_fills_from_the_bridge_signals(qtbot):
     assert view.error.text() == f"{DEFAULT_DEVICES[0]}: sensor down: no answer"
 
 
+def test_resolution_panel_follows_the_cpi_without_a_slot_per_reply(qtbot, make_ctx):
+    """The CPI in force shows within a few refreshes of the panel's own timer; the panel
+    does not listen to every reply (at 500 Hz that was 500 queued calls a second)."""
+    from PySide6.QtCore import SIGNAL
+
+    ctx = make_ctx(1.0)
+    panel = ResolutionPanel(ctx)
+    qtbot.addWidget(panel)
+    assert ctx.receivers(SIGNAL("reply_processed(PyObject)")) == 0
+    row = panel.rows[DEFAULT_DEVICES[0]]
+    assert row.current.text() == "now: 1600 CPI"
+    from dataclasses import replace
+
+    readings = [
+        replace(p, stamp_ns=p.stamp_ns + 10_000_000, seq=p.seq + 10, cpi=800)
+        for p in (ctx.session._prev[d] for d in ctx.session.devices)
+    ]
+    ctx.on_reply(Reply(tuple(readings), received_s=time.monotonic()))
+    qtbot.waitUntil(lambda: row.current.text() == "now: 800 CPI", timeout=2000)
+
+
 def test_registers_and_resolution_disabled_offline(qtbot, make_ctx):
     ctx = make_ctx(1.0)
     view = RegistersView(ctx)
