@@ -344,6 +344,11 @@ def main(argv: list[str] | None = None) -> int:
         "--live-seconds", type=float, default=10.0,
         help="seconds of each live CPU measurement at 100 and 500 Hz (0: none)",
     )
+    gui.add_argument(
+        "--polls", choices=("reply", "get_samples"), default="reply",
+        help="single polls inside the get_sensor_data reply (default), or one get_samples "
+        "per sensor and reply (the fallback for older nodes; for before/after comparisons)",
+    )
     gui.add_argument("--json", action="store_true", help="print JSON only (the default)")
     agent = sub.add_parser("agent", help="the board agent: CPU per poll, RSS, link, drops")
     agent.add_argument("--seconds", type=float, default=3.0, help="per measurement")
@@ -372,7 +377,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             result = bench_gui(
                 hours=args.hours, rate_hz=args.rate, frames=args.frames,
-                live_seconds=args.live_seconds,
+                live_seconds=args.live_seconds, polls=args.polls,
             )
         except ValueError as e:
             parser.error(str(e))

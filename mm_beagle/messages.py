@@ -9,7 +9,7 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
-from mm_interfaces.msg import SensorData, SensorSettings
+from mm_interfaces.msg import SensorData, SensorPolls, SensorSettings
 
 from .shared_state import Totals
 
@@ -116,6 +116,30 @@ def chip_odometry(t: Totals, stamp_msg, odom_frame: str, base_frame: str):
     msg.pose.covariance = unknown
     msg.twist.covariance = unknown
     return msg
+
+
+def fill_polls(out, first: int, nxt: int, dropped: int, arr: dict, cpi_now: int):
+    """Set the poll fields shared by GetSamples' response and SensorPolls on ``out``.
+
+    ``first``/``nxt``/``dropped``/``arr``: :meth:`~mm_beagle.shared_state.SharedState.samples`'
+    answer; ``cpi_now``: the CPI in force, for when no poll is returned. Returns ``out``.
+    """
+    out.first_seq, out.next_seq, out.dropped = first, nxt, dropped
+    out.cpi = int(arr["cpi"][-1]) if len(arr["cpi"]) else int(cpi_now)
+    out.stamp_ns = as_array("Q", arr["stamp_ns"])
+    out.dx = as_array("h", arr["dx"])
+    out.dy = as_array("h", arr["dy"])
+    out.status = as_array("H", arr["status"])
+    out.flags = as_array("B", arr["flags"])
+    out.quality = as_array("h", arr["quality"])  # the chip's figure per poll, -1 = none
+    return out
+
+
+def sensor_polls(device: str, first: int, nxt: int, dropped: int, arr: dict, cpi_now: int):
+    """A SensorPolls of ``device`` (stamp: its newest poll, 0 when empty); see fill_polls."""
+    stamps = arr["stamp_ns"]
+    msg = SensorPolls(id=device, stamp=stamp(int(stamps[-1]) if len(stamps) else 0))
+    return fill_polls(msg, first, nxt, dropped, arr, cpi_now)
 
 
 def as_array(typecode: str, values: np.ndarray) -> array:

@@ -5,7 +5,8 @@ shared state from an mm-beagle-agent over zenoh (:mod:`mm_beagle.remote`), so
 everything below is one implementation for both.
 
 Services (private namespace, so /mm_beagle/... by default):
-  ~/get_sensor_data      read-and-clear sums (empty id = every sensor that is up)
+  ~/get_sensor_data      read-and-clear sums (empty id = every sensor that is up),
+                         with the single polls when asked (polls_ids)
   ~/get_sensor_settings  all registers of one sensor, without losing counts
   ~/set_resolution       CPI of one sensor (X and Y)
   ~/get_samples          single polls from the ring buffer
@@ -287,7 +288,12 @@ class BeagleNode(Node):
                 )
                 return res
             res.message = f"down: {', '.join(down)}" if down else ""
+        polls_wanted, problem = self._polls_request(req, wanted)
+        if problem:
+            res.success, res.message = False, problem
+            return res
         data = []
+        ends: dict[int, int] = {}
         with self._lock:
             # every snapshot before any cursor moves: a busy poller changes nothing
             # (ClientCursors.serve also takes its snapshots before it changes a cursor)
@@ -318,9 +324,73 @@ class BeagleNode(Node):
                         self.devices[i], prev, now, self.instance_id, self.chips[i]
                     )
                 )
+                ends[i] = now.seq
         res.data = data
+        res.polls, busy = self._polls_for(polls_wanted, ends)
+        if busy:
+            note = f"no polls for {', '.join(busy)}: {ss.BUSY_MESSAGE} (ask get_samples)"
+            res.message = f"{res.message}; {note}" if res.message else note
         res.success = True
         return res
+
+    def _polls_request(self, req, wanted: list[int]) -> tuple[list[tuple[int, int]], str]:
+        """``req.polls_ids``/``polls_since_seq`` checked: ([(index, since_seq)], '') for the
+        sensors of ``wanted`` (a down sensor named there is left out: it has no data either),
+        or ([], why not) -- checked before any cursor moves, so a bad request changes nothing."""
+        ids, sinces = list(req.polls_ids), [int(s) for s in req.polls_since_seq]
+        if len(ids) != len(sinces):
+            return [], (
+                f"polls_ids has {len(ids)} entries and polls_since_seq {len(sinces)}; "
+                "give one since_seq per sensor id (both empty for no polls)"
+            )
+        out: list[tuple[int, int]] = []
+        seen: set[int] = set()
+        for dev, since in zip(ids, sinces, strict=True):
+            i = self.poller.index(dev)
+            if i is None:
+                return [], f"polls_ids: {self._unknown_id(dev)}"
+            if i in seen:
+                return [], f"polls_ids names {dev} twice; name each sensor at most once"
+            seen.add(i)
+            if req.id and dev != req.id:
+                return [], (
+                    f"polls_ids names {dev}, but this request reads only {req.id}; "
+                    "ask for the polls of the sensors you read"
+                )
+            seq_now = int(self.poller.state.ints[i][ss.I_SEQ])
+            if since > seq_now:
+                return [], (
+                    f"polls_since_seq {since} for {dev} is ahead of the newest poll "
+                    f"({seq_now}); ask with the next_seq of the previous polls "
+                    "(or 0 for the oldest stored), and after a node restart without polls once"
+                )
+            if i in wanted:
+                out.append((i, since))
+        return out, ""
+
+    def _polls_for(self, wanted: list[tuple[int, int]], ends: dict[int, int]):
+        """([SensorPolls], [devices whose ring was busy]): each sensor's polls from its
+        since_seq up to ``ends[i]``, the seq of its SensorData in this reply."""
+        polls, busy = [], []
+        state = self.poller.state
+        for i, since in wanted:
+            end = ends[i]
+            cpi_now = int(state.ints[i][ss.I_CPI_Y])
+            if end <= since:  # nothing new (or an interval served again after a lost reply)
+                empty = {k: () for k in ("stamp_ns", "dx", "dy", "status", "cpi", "flags")}
+                dev = self.devices[i]
+                polls.append(messages.sensor_polls(dev, since, since, 0, empty, cpi_now))
+                continue
+            try:
+                first, nxt, dropped, arr = state.samples(i, since, end - since)
+            except ss.PollerBusyError:
+                busy.append(self.devices[i])
+                continue
+            if nxt > end:  # since_seq had left the ring: stop at this reply's seq all the same
+                keep = max(0, end - first)
+                arr, nxt = {k: v[:keep] for k, v in arr.items()}, first + keep
+            polls.append(messages.sensor_polls(self.devices[i], first, nxt, dropped, arr, cpi_now))
+        return polls, busy
 
     def _poller_command(self, res, sensor_id: str, kind: str, *args) -> tuple[int, object]:
         """Run a poller command for one sensor id: (index, payload), or (-1, None) on failure.
@@ -379,17 +449,10 @@ class BeagleNode(Node):
         except ss.PollerBusyError:
             res.success, res.message = False, ss.BUSY_MESSAGE
             return res
-        res.first_seq, res.next_seq, res.dropped = first, nxt, dropped
-        res.instance_id = self.instance_id
-        res.cpi = (
-            int(arr["cpi"][-1]) if len(arr["cpi"]) else int(self.poller.state.ints[i][ss.I_CPI_Y])
+        messages.fill_polls(
+            res, first, nxt, dropped, arr, int(self.poller.state.ints[i][ss.I_CPI_Y])
         )
-        res.stamp_ns = messages.as_array("Q", arr["stamp_ns"])
-        res.dx = messages.as_array("h", arr["dx"])
-        res.dy = messages.as_array("h", arr["dy"])
-        res.status = messages.as_array("H", arr["status"])
-        res.flags = messages.as_array("B", arr["flags"])
-        res.quality = messages.as_array("h", arr["quality"])
+        res.instance_id = self.instance_id
         res.success = True
         if dropped:
             res.message = f"{dropped} polls had already left the ring buffer"

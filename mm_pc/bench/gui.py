@@ -160,6 +160,7 @@ def bench_gui(
     trajectory: str = "figure_eight",
     max_catch_up: int = 300,
     live_seconds: float = 10.0,
+    polls: str = "reply",
 ) -> dict:
     """Run the GUI benchmark (see the module doc); a JSON-ready dict.
 
@@ -169,7 +170,9 @@ def bench_gui(
     mm-beagle sim node while measuring; ``max_catch_up``: most unmeasured
     frames a tab gets to take in the history first (0 = measure from the
     first frame); ``live_seconds``: length of each live CPU measurement
-    (:data:`LIVE_RATES_HZ`, with the node; 0 = none).
+    (:data:`LIVE_RATES_HZ`, with the node; 0 = none); ``polls``: how the bridge gets
+    the single polls, ``reply`` (inside the get_sensor_data reply, one round trip) or
+    ``get_samples`` (one more call per sensor, the fallback for an older node).
     """
     from mm_pc.monitor.ros_bridge import validate_rate
 
@@ -182,6 +185,8 @@ def bench_gui(
         raise ValueError(f"max_catch_up must be an integer >= 0, got {max_catch_up!r}")
     if not (isinstance(live_seconds, (int, float)) and 0 <= live_seconds <= 600):
         raise ValueError(f"live_seconds must be in [0, 600], got {live_seconds!r}")
+    if polls not in ("reply", "get_samples"):
+        raise ValueError(f"polls must be 'reply' or 'get_samples', got {polls!r}")
     os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
     from PySide6.QtWidgets import QApplication
 
@@ -196,6 +201,8 @@ def bench_gui(
             params = {"backend": "sim", "sim_trajectory": trajectory}
             stack.enter_context(beagle_process(params, env, str(tmp / "beagle.log")))
         window, bridge = _build_window(tmp, rate_hz, node)
+        if bridge is not None:
+            bridge.polls_in_reply = polls == "reply"
         stack.callback(window.close)
         if bridge is not None:
             stack.callback(bridge.stop)
@@ -207,6 +214,8 @@ def bench_gui(
                 for hz in LIVE_RATES_HZ
             }
             result["live_tab"] = window.tabs.tabText(0)
+            result["live_polls"] = polls
+            result["live_poll_fetches"] = bridge.poll_fetches  # get_samples calls, whole run
             result["goal_live_cpu_percent"] = GOAL_LIVE_CPU_PERCENT
     return result
 

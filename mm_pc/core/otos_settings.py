@@ -88,3 +88,52 @@ def otos_settings(
     h = math.remainder(mount.yaw + cal.angle_offset, math.tau)
     return OtosSettings(lin, _in_chip_range("angular", angular, "measure it by a spin test"),
                         (-y, x, h))  # fmt: skip
+
+
+def chip_options(settings: OtosSettings) -> list[str]:
+    """The node's ``chip_options`` entries for these settings (docs/beagle-node.md)."""
+    x, y, h = settings.offset
+    return [
+        f"otos.linear_scalar={settings.linear_scalar:.3f}",
+        f"otos.angular_scalar={settings.angular_scalar:.3f}",
+        f"otos.offset={x:.4f},{y:.4f},{h:.4f}",
+    ]
+
+
+def _floats(text: str, n: int, what: str) -> list[float]:
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) != n or not all(math.isfinite(v) for v in values):
+        raise ValueError(f"{what} must be {n} comma-separated numbers, got {text!r}")
+    return values
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``mm-otos-settings CALIBRATION --device DEV --mount X,Y,YAW [--spin TRUE,CHIP]``:
+    print the node's chip_options for the OTOS; exit 2 naming what is wrong."""
+    import argparse
+    import sys
+
+    ap = argparse.ArgumentParser(
+        prog="mm-otos-settings",
+        description="The OTOS's linear/angular scalars and offset from a calibration file, as "
+        "the mm-beagle chip_options that re-apply them at every start.",
+    )
+    ap.add_argument("calibration", help="calibration YAML (the monitor's wizard writes it)")
+    ap.add_argument("--device", required=True, help="the OTOS's device id, e.g. /dev/i2c-2")
+    ap.add_argument("--mount", default="0,0,0", help="configured mount x,y,yaw (base_link m, rad)")
+    ap.add_argument("--spin", help="spin test: true turn,chip turn (rad) for the angular scalar")
+    args = ap.parse_args(argv)
+    try:
+        mount = SensorMount(*_floats(args.mount, 3, "--mount"))
+        angular = angular_scalar(*_floats(args.spin, 2, "--spin")) if args.spin else 1.0
+        settings = otos_settings(Calibration.load(args.calibration), args.device, mount, angular)
+    except (OSError, ValueError) as exc:
+        print(f"mm-otos-settings: {exc}", file=sys.stderr)
+        return 2
+    print("chip_options:")
+    for line in chip_options(settings):
+        print(f'  - "{line}"')
+    return 0

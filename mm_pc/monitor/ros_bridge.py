@@ -7,11 +7,14 @@ runs on the executor thread (where every rclpy object is used), and the
 answer comes back as a Qt signal, which Qt delivers on the GUI thread.
 
 Requests of the sample timer: at most one ``get_sensor_data`` is in flight.
-With ``fetch_polls`` (default) each reply is followed by one ``get_samples`` per
-sensor for exactly the polls its totals added since the previous reply, and the
-:class:`Reply` is emitted with them (``Reply.polls``), so the session integrates
-the pose per poll; a fetch that fails, takes longer than ``timeout_s`` or whose
-service disappears leaves that sensor's entry None (the session then steps over the interval with
+With ``fetch_polls`` (default) each reply brings exactly the polls its totals added
+since the previous reply, and the :class:`Reply` is emitted with them
+(``Reply.polls``), so the session integrates the pose per poll. The polls come
+inside the ``get_sensor_data`` reply (its ``polls_ids``/``polls_since_seq`` fields:
+one round trip a reply, docs/beagle-node.md section 3.1); for a sensor the reply
+has none for (a node without those fields, a busy ring) one ``get_samples`` follows.
+A fetch that fails, takes longer than ``timeout_s`` or whose service disappears
+leaves that sensor's entry None (the session then steps over the interval with
 the totals and marks the gap). The next ``get_sensor_data`` waits for the fetch.
 A tick that finds a request still outstanding is skipped (``skipped_ticks``):
 the next reply's totals cover the gap, so a slow link (WLAN latency) costs
@@ -131,6 +134,9 @@ class RosBridge(QObject):
         self.fetch_polls = bool(fetch_polls)
         #: device -> the seq up to which polls were fetched; executor thread only
         self._poll_cursor: dict[str, int] = {}
+        #: ask for the polls inside the get_sensor_data reply (its polls_ids fields);
+        #: False (or an interface without them) = one get_samples per sensor, as before
+        self.polls_in_reply = True
         #: a reply waiting for its polls: [Reply, {device: response or None}, {future: device},
         #: deadline]; executor thread only
         self._poll_fetch: list | None = None
@@ -333,9 +339,26 @@ class RosBridge(QObject):
             return
         self.requests += 1
         sent = time.monotonic()
-        future = client.call_async(self._types["get_sensor_data"].Request(id=""))
+        future = client.call_async(self._data_request())
         self._in_flight = (future, sent)
         future.add_done_callback(lambda f: self._on_data(f, sent))
+
+    def _data_request(self):
+        """``get_sensor_data`` for every sensor; with ``fetch_polls`` it asks for the polls of
+        every sensor with a cursor in the same reply (``polls_ids``), where the interface
+        has those fields (one round trip a reply instead of 1 + one ``get_samples`` each)."""
+        request_type = self._types["get_sensor_data"].Request
+        if not (
+            self.fetch_polls
+            and self.polls_in_reply
+            and self._poll_cursor
+            and hasattr(request_type, "polls_ids")
+        ):
+            return request_type(id="")
+        ids = list(self._poll_cursor)
+        return request_type(
+            id="", polls_ids=ids, polls_since_seq=[self._poll_cursor[d] for d in ids]
+        )
 
     def _on_data(self, future, sent: float) -> None:
         if self._in_flight is None or self._in_flight[0] is not future:
@@ -343,6 +366,14 @@ class RosBridge(QObject):
         self._in_flight = None
         now = time.monotonic()
         res = future.result()
+        if res is not None and not res.success and res.message.startswith("polls_"):
+            # the cursors do not fit this node (a restarted one counts from 0 again):
+            # ask again at once without polls; the next reply starts new cursors
+            self._poll_cursor.clear()
+            self.poll_fetch_failures += 1
+            self._owed = True
+            self._pay_owed()
+            return
         if res is None or not res.success:
             self.failed_replies += 1
             self.data_failed.emit(res.message if res is not None else "no reply")
@@ -357,15 +388,18 @@ class RosBridge(QObject):
         readings = tuple(Reading.from_msg(m) for m in res.data)
         reply = Reply(readings, received_s=now, rtt_s=now - sent)
         if self.fetch_polls:
-            self._fetch_polls(reply)
+            self._fetch_polls(reply, {p.id: p for p in getattr(res, "polls", ())})
         else:
             self.data_received.emit(reply)
             self._pay_owed()
 
     # -- the single polls of a reply (executor thread) --------------------------------------
 
-    def _fetch_polls(self, reply: Reply) -> None:
-        """Ask each sensor's polls since its cursor up to this reply's seq; emit when done."""
+    def _fetch_polls(self, reply: Reply, in_reply: dict[str, object]) -> None:
+        """Each sensor's polls since its cursor up to this reply's seq: those the reply
+        carried (``in_reply``, device -> SensorPolls, asked with the cursors of
+        :meth:`_data_request`), the others (a node without the polls fields, a busy
+        ring) asked with one ``get_samples`` per sensor; emit when all are there."""
         from types import SimpleNamespace
 
         polls: dict[str, object] = {}
@@ -380,6 +414,10 @@ class RosBridge(QObject):
                     first_seq=r.seq, next_seq=r.seq, dropped=0, cpi=r.cpi, stamp_ns=(),
                     dx=(), dy=(), status=(), flags=(),
                 )  # fmt: skip
+                continue
+            carried = in_reply.get(r.id)
+            if carried is not None and carried.first_seq - carried.dropped == since:
+                polls[r.id] = carried
                 continue
             if not client.service_is_ready():
                 polls[r.id] = None

@@ -27,9 +27,7 @@ std-dev registers stay 0, the PAA burst holds only the deltas (bytes 2..5).
 from __future__ import annotations
 
 import math
-import time
-from collections.abc import Callable, Sequence
-from typing import Protocol
+from typing import Any, Protocol
 
 from ..emulated import CountingCore
 from ..i2c import I2cError, I2cNoAckError
@@ -85,31 +83,18 @@ class EmulatedOTOS(CountingCore):
     def __init__(
         self,
         motion: MotionSource | None = None,
-        clock: Callable[[], float] = time.monotonic,
-        lift_windows: Sequence[tuple[float, float]] = (),
-        noise_counts: float = 0.0,
-        fault_windows: Sequence[tuple[float, float, str]] = (),
-        reset_after_fault: bool = True,
-        seed: int = 0,
-        record: bool = False,
-        low_quality_windows: Sequence[tuple[float, float]] = (),
+        *,
         heading_source: HeadingSource | None = None,
         product_id: int = regs.PRODUCT_ID,
         address: int = regs.ADDRESS,
         gyro_bias_rps: float = math.radians(1.0),
         gyro_noise_rps: float = 0.005,
         write_latency_s: float = 0.0005,
+        **core: Any,
     ) -> None:
         super().__init__(
             motion=motion,
-            clock=clock,
-            lift_windows=lift_windows,
-            noise_counts=noise_counts,
-            fault_windows=fault_windows,
-            reset_after_fault=reset_after_fault,
-            seed=seed,
-            record=record,
-            low_quality_windows=low_quality_windows,
+            **core,
             cpi=regs.PAA_CPI,
             counter_bits=16,
         )

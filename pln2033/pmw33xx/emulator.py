@@ -36,8 +36,8 @@ SQUAL [DS3360 SQUAL, Min_SQ_Run]: ``surface_squal`` (+-8) on a surface, 0..3 whi
 from __future__ import annotations
 
 import random
-import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 from ..emulated import CountingCore
 from ..errors import SpiError
@@ -61,14 +61,6 @@ class EmulatedPMW33xx(CountingCore):
     def __init__(
         self,
         motion: MotionSource | None = None,
-        clock: Callable[[], float] = time.monotonic,
-        lift_windows: Sequence[tuple[float, float]] = (),
-        noise_counts: float = 0.0,
-        fault_windows: Sequence[tuple[float, float, str]] = (),
-        reset_after_fault: bool = True,
-        seed: int = 0,
-        record: bool = False,
-        low_quality_windows: Sequence[tuple[float, float]] = (),
         *,
         srom: Sequence[int] | None = None,
         srom_id: int = 0x04,
@@ -76,6 +68,7 @@ class EmulatedPMW33xx(CountingCore):
         surface_squal: int = 0x40,
         require_srom: bool = False,
         product_id: int | None = None,
+        **core: Any,
     ) -> None:
         self.srom_reference = None if srom is None else bytes(srom)
         self.srom_id_intact = srom_id
@@ -87,17 +80,10 @@ class EmulatedPMW33xx(CountingCore):
         self.latch_x = self.latch_y = 0
         self.srom_image: bytes | None = None
         self.srom_intact = False
-        self._squal_rng = random.Random(seed + 1)
+        self._squal_rng = random.Random(core.get("seed", 0) + 1)
         super().__init__(
             motion=motion,
-            clock=clock,
-            lift_windows=lift_windows,
-            noise_counts=noise_counts,
-            fault_windows=fault_windows,
-            reset_after_fault=reset_after_fault,
-            seed=seed,
-            record=record,
-            low_quality_windows=low_quality_windows,
+            **core,
             cpi=self._decode_cpi(self.regs.cpi.registers),
         )
         self._power_on(now=self.clock(), ready=True)

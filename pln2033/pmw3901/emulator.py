@@ -29,8 +29,7 @@ What the chip does here (facts: :mod:`.regs`; assumptions marked):
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable, Sequence
+from typing import Any
 
 from ..emulated import CountingCore
 from ..errors import SpiError
@@ -90,20 +89,14 @@ class EmulatedPMW3901(CountingCore):
     def __init__(
         self,
         motion: MotionSource | None = None,
-        clock: Callable[[], float] = time.monotonic,
-        lift_windows: Sequence[tuple[float, float]] = (),
-        noise_counts: float = 0.0,
-        fault_windows: Sequence[tuple[float, float, str]] = (),
-        reset_after_fault: bool = True,
-        seed: int = 0,
-        record: bool = False,
-        low_quality_windows: Sequence[tuple[float, float]] = (),
+        *,
         height_m: float | None = None,
         optics: FlowOptics | None = None,
         product_id: int = regs.PRODUCT_ID_VALUE,
         revision: int = 0x00,
         squal: int = 0x60,
         trim: dict[int, int] | None = None,
+        **core: Any,
     ) -> None:
         self.optics = optics or self.OPTICS
         self.height_m = self.HEIGHT_DEFAULT_M if height_m is None else float(height_m)
@@ -119,19 +112,12 @@ class EmulatedPMW3901(CountingCore):
             for rule in ("px4", "pimoroni")
         }
         self._expected_lengths = {len(v) for v in self._expected.values()}
-        self._lq = sorted((float(a), float(b)) for a, b in low_quality_windows)
+        self._lq = sorted((float(a), float(b)) for a, b in core.get("low_quality_windows", ()))
         self._lq_i = 0
         self.latch_x = self.latch_y = 0
         super().__init__(
             motion=motion,
-            clock=clock,
-            lift_windows=lift_windows,
-            noise_counts=noise_counts,
-            fault_windows=fault_windows,
-            reset_after_fault=reset_after_fault,
-            seed=seed,
-            record=record,
-            low_quality_windows=low_quality_windows,
+            **core,
             cpi=self.optics.cpi(self.height_m),
             counter_bits=16,
         )

@@ -288,6 +288,79 @@ def test_get_samples_rejects_a_future_seq(node, client):
     assert not res.success and "ahead of the newest poll" in res.message
 
 
+def test_get_sensor_data_carries_every_poll_once_when_asked(node, client):
+    """polls_ids/polls_since_seq: the reply's SensorPolls chain poll by poll, end at each
+    sensor's seq, and their counts add up to the totals (one round trip, no get_samples)."""
+    test_failed_sensor_recovers(node, client)
+    first = client.call("get_sensor_data", id="")
+    assert first.success and not first.polls  # not asked: none (as before)
+    start = {d.id: d for d in first.data}
+    cursor = {d.id: d.seq for d in first.data}
+    sums = {d.id: [0, 0, 0] for d in first.data}
+    for _ in range(20):
+        time.sleep(0.01)
+        ids = list(cursor)
+        res = client.call(
+            "get_sensor_data", id="", polls_ids=ids, polls_since_seq=[cursor[d] for d in ids]
+        )
+        assert res.success, res.message
+        assert [p.id for p in res.polls] == [d.id for d in res.data] == ids
+        for d, p in zip(res.data, res.polls, strict=True):
+            assert p.first_seq == cursor[d.id] and p.next_seq == d.seq and p.dropped == 0
+            assert len(p.dx) == len(p.dy) == len(p.stamp_ns) == len(p.flags) == d.seq - p.first_seq
+            assert p.cpi == d.cpi == 1600
+            if len(p.stamp_ns):
+                assert p.stamp.sec * 10**9 + p.stamp.nanosec == p.stamp_ns[-1]
+            sums[d.id][0] += sum(p.dx)
+            sums[d.id][1] += sum(p.dy)
+            sums[d.id][2] += len(p.dx)
+            cursor[d.id] = p.next_seq
+    for d in res.data:
+        s0 = start[d.id]
+        assert sums[d.id] == [
+            d.x_total_counts - s0.x_total_counts,
+            d.y_total_counts - s0.y_total_counts,
+            d.seq - s0.seq,
+        ]
+    assert all(v[1] > 0 for v in sums.values())  # the robot drives forward
+
+
+def test_polls_of_one_sensor_and_of_nothing_new(node, client):
+    d0 = client.call("get_sensor_data", id=S0).data[0]
+    res = client.call("get_sensor_data", id=S0, polls_ids=[S0], polls_since_seq=[d0.seq])
+    assert res.success and [p.id for p in res.polls] == [S0]
+    (d1,), (p,) = res.data, res.polls
+    assert p.first_seq == d0.seq and p.next_seq == d1.seq == d0.seq + len(p.dx)
+    # since_seq 0: from the oldest still stored, up to this reply's seq all the same
+    res = client.call("get_sensor_data", id=S0, polls_ids=[S0], polls_since_seq=[0])
+    (d2,), (p,) = res.data, res.polls
+    assert p.next_seq == d2.seq and p.first_seq == p.dropped  # 0 while the ring holds all
+    assert p.next_seq - p.first_seq == len(p.dx)
+
+
+BAD_POLLS = [
+    ({"polls_ids": [S0, S1], "polls_since_seq": [0]}, "polls_ids has 2 entries"),
+    ({"polls_ids": [], "polls_since_seq": [5]}, "polls_ids has 0 entries"),
+    ({"polls_ids": [S0, S0], "polls_since_seq": [0, 0]}, "names /dev/spidev1.0 twice"),
+    ({"polls_ids": ["/dev/spidev9.9"], "polls_since_seq": [0]}, "unknown sensor id"),
+    ({"polls_ids": [S0], "polls_since_seq": [2**63]}, "is ahead of the newest poll"),
+    ({"polls_ids": [S0], "polls_since_seq": [2**64 - 1]}, "is ahead of the newest poll"),
+    ({"id": S0, "polls_ids": [S1], "polls_since_seq": [0]}, "this request reads only"),
+]
+
+
+@pytest.mark.parametrize(("fields", "expect"), BAD_POLLS)
+def test_bad_polls_fields_are_refused_and_change_nothing(node, client, fields, expect):
+    test_failed_sensor_recovers(node, client)
+    before = totals(client.call("get_sensor_data", id=""), S0)
+    res = client.call("get_sensor_data", **{"id": "", **fields})
+    assert not res.success and not res.data and not res.polls
+    assert expect in res.message and "polls_" in res.message, res.message
+    after = totals(client.call("get_sensor_data", id=""), S0)
+    # the refused request moved no cursor: the next read-and-clear covers the whole interval
+    assert after.seq - before.seq == after.samples
+
+
 def test_topic_carries_sensor_data(node, client):
     got: list[SensorData] = []
     sub = client.node.create_subscription(

@@ -66,3 +66,30 @@ def test_the_driver_writes_the_settings_at_every_start():
     assert drv.get_scalars() == (1.0, 1.0)
     drv.initialise(1000)  # ... and the next start writes them again
     assert drv.get_scalars() == (0.97, 1.02)
+
+
+def test_the_command_prints_chip_options_and_refuses_bad_input_with_exit_2(tmp_path, capsys):
+    from mm_pc.core.otos_settings import main
+
+    path = tmp_path / "calibration.yaml"
+    Calibration({DEV: SensorCalibration(scale_x=1.02, scale_y=1.02, x=0.0, y=0.01)}).save(path)
+    assert main([str(path), "--device", DEV, "--spin", "62.832,62.2"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out == [
+        "chip_options:",
+        '  - "otos.linear_scalar=1.020"',
+        '  - "otos.angular_scalar=1.010"',
+        '  - "otos.offset=-0.0100,0.0000,0.0000"',
+    ]
+    for argv, words in (
+        ([str(tmp_path / "none.yaml"), "--device", DEV], "none.yaml"),
+        ([str(path), "--device", DEV, "--mount", "1,2"], "--mount must be 3"),
+        ([str(path), "--device", DEV, "--spin", "6.28,-6.28"], "other way"),
+    ):
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("mm-otos-settings: ") and words in err and "Traceback" not in err
+    big = tmp_path / "big.yaml"
+    Calibration({DEV: SensorCalibration(scale_x=1.3, scale_y=1.3)}).save(big)
+    assert main([str(big), "--device", DEV]) == 2
+    assert "height above the floor" in capsys.readouterr().err

@@ -46,6 +46,8 @@ def test_bench_gui_reports_every_figure(qapp):
     assert all(3 <= n <= 300 for n in r["tab_catch_up_frames"].values())
     # the live CPU measurement at 100 and 500 Hz against the node in another process
     assert set(r["live"]) == {"100", "500"} and r["goal_live_cpu_percent"] == 50.0
+    # the polls came inside the data replies: not one get_samples call
+    assert r["live_polls"] == "reply" and r["live_poll_fetches"] == 0
     for hz, live in r["live"].items():
         assert 0 < live["achieved_hz"] <= float(hz) * 1.2, (hz, live)
         assert live["replies"] > 0 and 0 < live["cpu_percent_one_core"] < 200.0 + 1, live
@@ -56,7 +58,7 @@ def test_bench_gui_reports_every_figure(qapp):
 def test_bench_gui_refuses_bad_arguments(capsys):
     for bad in (
         {"hours": 0}, {"hours": -1.0}, {"rate_hz": 0}, {"frames": 0}, {"max_catch_up": -1},
-        {"live_seconds": -1.0}, {"live_seconds": "x"},
+        {"live_seconds": -1.0}, {"live_seconds": "x"}, {"polls": "both"},
     ):
         with pytest.raises(ValueError, match="must be"):
             bench_gui(**bad)

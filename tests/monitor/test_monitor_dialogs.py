@@ -667,6 +667,31 @@ def test_debug_view_without_bridge_is_disabled(qtbot, ctx):
     assert view.table.rowCount() == 0
 
 
+def test_debug_view_listens_to_replies_only_while_a_manual_request_waits(qtbot, ctx):
+    """No slot per reply at 500 Hz: the debug view connects to the bridge's data signals
+    when a manual request goes out and disconnects with its reply (or its failure)."""
+    pytest.importorskip("mm_interfaces")
+    bridge = RosBridge()  # not started
+    ctx.bridge = bridge
+    view = DebugView(ctx)
+    qtbot.addWidget(view)
+    data, failed = SIGNAL("data_received(PyObject)"), SIGNAL("data_failed(QString)")
+    assert bridge.receivers(data) == bridge.receivers(failed) == 0
+    replies = list(sim_replies("figure_eight", 20, seconds=1))
+    view.request_sample()
+    view.request_sample()  # pressed twice before the reply: still one listener
+    assert bridge.receivers(data) == bridge.receivers(failed) == 1
+    bridge.data_received.emit(replies[0])
+    assert view.table.rowCount() == 1
+    assert bridge.receivers(data) == bridge.receivers(failed) == 0
+    bridge.data_received.emit(replies[1])  # a periodic reply: not a row
+    assert view.table.rowCount() == 1
+    view.request_sample()
+    bridge.data_failed.emit("no reply within 2 s")
+    assert "manual request failed: no reply within 2 s" in view.error.text()
+    assert bridge.receivers(data) == bridge.receivers(failed) == 0
+
+
 @pytest.mark.screenshot
 def test_debug_view_lists_manual_replies_and_single_polls(qtbot, ctx, screenshot):
     pytest.importorskip("mm_interfaces")

@@ -315,11 +315,15 @@ def test_data_list_rows_newest_first_equal_the_history(qtbot, make_ctx):
     model = view.tables[0].model
     n = len(hist)
     assert model.rowCount() == n == 1000
-    assert [model.headerData(c, Qt.Horizontal) for c in range(9)] == [c[0] for c in COLUMNS]
+    assert [model.headerData(c, Qt.Horizontal) for c in range(11)] == [c[0] for c in COLUMNS]
     for r in (0, 1, 500, n - 1):
         for c, (_h, field, scale, fmt) in enumerate(COLUMNS):
             name = field if field == "t" else sensor_columns(0)[field]
             want = hist.column(name)[n - 1 - r] * scale
+            if np.isnan(want):  # the quality of a chip without a figure
+                assert np.isnan(model.value(r, c))
+                assert model.data(model.index(r, c)) == "\u2013"
+                continue
             assert model.value(r, c) == want
             assert model.data(model.index(r, c)) == fmt.format(want)
     assert model.value(0, 0) == hist.last("t")  # newest first
@@ -393,12 +397,14 @@ def test_export_csv_round_trip(tmp_path, make_ctx):
     with open(path, newline="") as fh:
         assert next(csv.reader(fh)) == list(CSV_HEADER)
     data = np.loadtxt(path, delimiter=",", skiprows=1)
-    assert data.shape == (len(hist), 9)
+    assert data.shape == (len(hist), 11)
     np.testing.assert_array_equal(data[:, 0], hist.column("t"))  # oldest first
     np.testing.assert_allclose(data[:, 1], hist.column("s1_dx") * 1e3, rtol=1e-15)
     np.testing.assert_allclose(data[:, 4], hist.column("s1_raw_dy") * 1e3, rtol=1e-15)
     np.testing.assert_allclose(data[:, 6], hist.column("s1_vy") * 1e3, rtol=1e-15)
     np.testing.assert_array_equal(data[:, 8], hist.column("s1_cpi"))
+    np.testing.assert_array_equal(data[:, 9], hist.column("s1_quality"))  # nan: no figure
+    np.testing.assert_array_equal(data[:, 10], hist.column("s1_lowq"))
 
 
 def test_export_csv_refuses_bad_input_and_shows_write_errors(qtbot, tmp_path, make_ctx):
@@ -469,6 +475,27 @@ def test_registers_view_fills_from_the_bridge_signals(qtbot):
     assert "cpi 1600  (x_cpi 1600, y_cpi 1600)" in text
     bridge.settings_failed.emit(DEFAULT_DEVICES[0], "sensor down: no answer")
     assert view.error.text() == f"{DEFAULT_DEVICES[0]}: sensor down: no answer"
+
+
+def test_resolution_panel_follows_the_cpi_without_a_slot_per_reply(qtbot, make_ctx):
+    """The CPI in force shows within a few refreshes of the panel's own timer; the panel
+    does not listen to every reply (at 500 Hz that was 500 queued calls a second)."""
+    from PySide6.QtCore import SIGNAL
+
+    ctx = make_ctx(1.0)
+    panel = ResolutionPanel(ctx)
+    qtbot.addWidget(panel)
+    assert ctx.receivers(SIGNAL("reply_processed(PyObject)")) == 0
+    row = panel.rows[DEFAULT_DEVICES[0]]
+    assert row.current.text() == "now: 1600 CPI"
+    from dataclasses import replace
+
+    readings = [
+        replace(p, stamp_ns=p.stamp_ns + 10_000_000, seq=p.seq + 10, cpi=800)
+        for p in (ctx.session._prev[d] for d in ctx.session.devices)
+    ]
+    ctx.on_reply(Reply(tuple(readings), received_s=time.monotonic()))
+    qtbot.waitUntil(lambda: row.current.text() == "now: 800 CPI", timeout=2000)
 
 
 def test_registers_and_resolution_disabled_offline(qtbot, make_ctx):

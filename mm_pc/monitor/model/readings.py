@@ -103,9 +103,10 @@ class Reply:
     """One answer of ``get_sensor_data``: the readings, and when and how fast it came.
 
     ``received_s``: monotonic time of arrival (s); ``rtt_s``: request to reply (s).
-    ``polls``: device -> its ``get_samples`` reply for the polls this reply's totals
-    cover (None: that fetch failed), or None when no polls were fetched at all (the
-    session then integrates the pose per reply).
+    ``polls``: device -> the polls this reply's totals cover: the ``SensorPolls`` the
+    ``get_sensor_data`` reply carried, or a ``get_samples`` reply (None: that fetch
+    failed); or None when no polls were fetched at all (the session then integrates
+    the pose per reply).
     """
 
     readings: tuple[Reading, ...]

@@ -10,6 +10,7 @@ inserted at the top, so a selection stays on the rows it was made on.
 from __future__ import annotations
 
 import csv
+import math
 from pathlib import Path
 
 from PySide6.QtCore import QAbstractTableModel, QEvent, QModelIndex, Qt, Signal
@@ -49,10 +50,13 @@ COLUMNS: tuple[tuple[str, str, float, str], ...] = (
     ("vY (mm/s)", "vy", 1e3, "{:.2f}"),
     ("lifts", "lifts", 1.0, "{:.0f}"),
     ("CPI", "cpi", 1.0, "{:.0f}"),
+    ("quality", "quality", 1.0, "{:.0f}"),  # the newest poll's figure; nan = the chip has none
+    ("low-q polls", "lowq", 1.0, "{:.0f}"),  # polls below the chip's threshold (taken as lifts)
 )
 #: CSV header names (units in the name; dX/dY processed = filtered and calibrated)
 CSV_HEADER = (
     "t_s", "dx_mm", "dy_mm", "raw_dx_mm", "raw_dy_mm", "vx_mm_s", "vy_mm_s", "lifts", "cpi",
+    "quality", "low_quality_polls",
 )
 
 
@@ -60,6 +64,11 @@ _DISPLAY = Qt.ItemDataRole.DisplayRole
 _ALIGNMENT_ROLE = Qt.ItemDataRole.TextAlignmentRole
 _RIGHT = Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignVCenter
 _HORIZONTAL = Qt.Orientation.Horizontal
+
+
+def _cell(fmt: str, value: float) -> str:
+    """A cell's text; a NaN (no quality figure, no value yet) shows as a dash."""
+    return "\u2013" if math.isnan(value) else fmt.format(value)
 
 
 def _column_name(sensor_index: int, field: str) -> str:
@@ -70,7 +79,8 @@ def export_csv(history: History | None, sensor_index: int, path: str | Path) -> 
     """Write every row of one sensor to a CSV file, oldest first; returns the row count.
 
     Columns (header line first): t_s, dx_mm, dy_mm (processed), raw_dx_mm,
-    raw_dy_mm, vx_mm_s, vy_mm_s, lifts, cpi. Raises ValueError for no data or
+    raw_dy_mm, vx_mm_s, vy_mm_s, lifts, cpi, quality (nan: the chip has none),
+    low_quality_polls. Raises ValueError for no data or
     a sensor the history does not have (no file written), OSError when the
     file cannot be written.
     """
@@ -144,7 +154,7 @@ class HistoryTableModel(QAbstractTableModel):
             if len(self._cache) > 4096:
                 self._cache.clear()
             texts = tuple(
-                fmt.format(float(hist_col[i]) * scale)
+                _cell(fmt, float(hist_col[i]) * scale)
                 for hist_col, (_h, _f, scale, fmt) in zip(self._cols, COLUMNS, strict=True)
             )
             self._cache[i] = texts

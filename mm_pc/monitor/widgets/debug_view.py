@@ -19,6 +19,7 @@
 from __future__ import annotations
 
 import time
+from contextlib import suppress
 from dataclasses import dataclass
 
 import numpy as np
@@ -135,8 +136,8 @@ class DebugView(QWidget):
 
         if bridge is not None:
             self.pause_button.setChecked(not bridge.polling)
-            bridge.data_received.connect(self._on_data)
-            bridge.data_failed.connect(self._on_data_failed)
+            # data_received / data_failed only while a manual request waits (_listen): a
+            # slot per reply at 500 Hz is CPU the window spends for nothing
             bridge.samples_received.connect(self.on_samples)
             bridge.samples_failed.connect(self._on_samples_failed)
         ctx.devices_known.connect(self._set_devices)
@@ -186,7 +187,7 @@ class DebugView(QWidget):
         """One data request; its reply (the next one) becomes a table row."""
         if self.ctx.bridge is None:
             return
-        self._awaiting = True
+        self._listen(True)
         self.error.hide()
         self.ctx.bridge.request_once()
         self.state.setText("request sent, waiting for the reply…")
@@ -207,15 +208,31 @@ class DebugView(QWidget):
 
     # -- bridge signals -------------------------------------------------------------------------
 
+    def _listen(self, on: bool) -> None:
+        """Wait for (True) or stop waiting for (False) the reply to a manual request."""
+        bridge = self.ctx.bridge
+        if bridge is None or on == self._awaiting:
+            return
+        self._awaiting = on
+        for signal, slot in (
+            (bridge.data_received, self._on_data),
+            (bridge.data_failed, self._on_data_failed),
+        ):
+            if on:
+                signal.connect(slot)
+            else:
+                with suppress(RuntimeError, TypeError):
+                    signal.disconnect(slot)
+
     def _on_data(self, reply: Reply) -> None:
         if not self._awaiting:
             return
-        self._awaiting = False
+        self._listen(False)
         self.add_manual_reply(reply)
 
     def _on_data_failed(self, message: str) -> None:
         if self._awaiting:
-            self._awaiting = False
+            self._listen(False)
             self.error.setText(f"manual request failed: {message}")
             self.error.show()
 

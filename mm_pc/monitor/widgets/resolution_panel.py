@@ -18,6 +18,7 @@ saying why and what to do instead (calibrate the scale, docs/pose-math.md).
 
 from __future__ import annotations
 
+from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import (
     QGridLayout,
     QGroupBox,
@@ -34,6 +35,9 @@ from pln2033.chips import DEFAULT_CHIP
 from pln2033.sensor import CpiRange
 
 __all__ = ["CPI_MAX", "CPI_MIN", "CPI_STEP", "ResolutionPanel", "validate_cpi"]
+
+#: how often (ms) the panel looks for a new CPI in the history
+REFRESH_MS = 200
 
 _REGMAP = RegisterMap.default()
 _ALLOWED_CPI = _REGMAP.allowed_cpi
@@ -160,7 +164,12 @@ class ResolutionPanel(QGroupBox):
             if hasattr(ctx.bridge, "settings_received"):
                 ctx.bridge.settings_received.connect(self.on_settings)
         ctx.devices_known.connect(self._build)
-        ctx.reply_processed.connect(self._on_reply)
+        # the CPI in force changes rarely: a look five times a second, not a slot per reply
+        # (at 500 Hz that is 500 queued calls a second for nothing; docs/benchmarks.md, gui)
+        self._timer = QTimer(self)
+        self._timer.setInterval(REFRESH_MS)
+        self._timer.timeout.connect(self.refresh)
+        self._timer.start()
         self._build(ctx.session.devices)
 
     def _build(self, devices) -> None:
@@ -255,9 +264,12 @@ class ResolutionPanel(QGroupBox):
         known = cpi or self.cpi_in_force(device)
         self.rows[device].edit.setText(str(known) if known else "")
 
-    def _on_reply(self, _reply) -> None:
-        self.refresh()
-
+        # the CPI in force changes rarely: a look five times a second, not a slot per reply
+        # (at 500 Hz that is 500 queued calls a second for nothing; docs/benchmarks.md, gui)
+        self._timer = QTimer(self)
+        self._timer.setInterval(REFRESH_MS)
+        self._timer.timeout.connect(self.refresh)
+        self._timer.start()
     def refresh(self) -> None:
         """Show the CPI of the newest history row (cheap: only when it changed)."""
         hist = self.ctx.session.history
