@@ -129,6 +129,21 @@ def test_get_samples_carry_quality_and_the_low_quality_flag(node, client):
         assert all(qq >= threshold for qq, p in zip(q, poor, strict=True) if not p and qq >= 0)
 
 
+def test_polls_inside_get_sensor_data_carry_quality(node, client):
+    _wait_up(client)
+    res = client.call(
+        "get_sensor_data", id="", client="q", polls_ids=DEVICES, polls_since_seq=[0] * len(DEVICES)
+    )
+    assert res.success, res.message
+    assert [p.id for p in res.polls] == DEVICES
+    for p, chip in zip(res.polls, CHIPS, strict=True):
+        assert len(p.quality) == len(p.dx) > 0
+        if registry.chip_info(chip).quality_name:
+            assert max(p.quality) >= 0
+        else:
+            assert set(p.quality) == {-1}
+
+
 def test_settings_reply_carries_any_chips_dump(node, client):
     _wait_up(client)
     for dev, chip in zip(DEVICES, CHIPS, strict=True):
