@@ -377,7 +377,8 @@ class BeagleNode(Node):
             end = ends[i]
             cpi_now = int(state.ints[i][ss.I_CPI_Y])
             if end <= since:  # nothing new (or an interval served again after a lost reply)
-                empty = {k: () for k in ("stamp_ns", "dx", "dy", "status", "cpi", "flags")}
+                fields = ("stamp_ns", "dx", "dy", "status", "cpi", "flags", "quality")
+                empty = {k: () for k in fields}
                 dev = self.devices[i]
                 polls.append(messages.sensor_polls(dev, since, since, 0, empty, cpi_now))
                 continue
