@@ -144,7 +144,6 @@ class Channel:
         self.last_error = ""
         self.gap = LiftGapEstimator()  # in counts
         self.gap_m = LiftGapEstimator()  # in metres: right across a CPI change
-        self.exact_scale = 0.0  # metres per count of a fixed-resolution chip (0: from the CPI)
         self.sim_stats = None  # the emulator's ground truth, sim backend only
         self.sim_base = (0, 0, 0, 0)
         self.sim_ratio = 1.0  # driver counts per emulator count (1: the chip's own counter)
@@ -369,14 +368,14 @@ class Channel:
     def set_cpi_cache(self, x: int, y: int) -> None:
         """The CPI now in force on the chip: later counts are scaled by it.
 
-        An optical-flow chip's CPI is a rounded effective value: its metres use the
-        driver's exact ``metres_per_count`` (the ring's CPI stays the rounded one).
+        An optical-flow chip's CPI is its effective value rounded to an integer: its metres
+        use that CPI too, as every client converting the polls by the messages' CPI does,
+        so totals and polls agree (the rounding, at most 0.5 %, goes into the calibration's
+        scale with the height error).
         """
         self.cpi_x, self.cpi_y = x, y
         self.scale_x = INCH_M / x if x else 0.0
         self.scale_y = INCH_M / y if y else 0.0
-        if self.exact_scale:
-            self.scale_x = self.scale_y = self.exact_scale
         self.gap_m.unit = self.scale_y
         self.ints[ss.I_CPI_X] = x
         self.ints[ss.I_CPI_Y] = y
@@ -477,8 +476,6 @@ class Poller:
             else:
                 ch.cpi_wanted = ch.cpi_wanted or self.cfg.cpi
             driver.initialise(ch.cpi_wanted, self.firmware.get(ch.chip))  # type: ignore[attr-defined]
-            exact = getattr(driver, "metres_per_count", 0.0)
-            ch.exact_scale = exact if ch.info.cpi.fixed and isinstance(exact, float) else 0.0
             ch.set_cpi_cache(*driver.get_cpi())  # type: ignore[attr-defined]
             driver.read_motion()  # type: ignore[attr-defined]  # start-up counts are dropped
         except (Pln2033Error, ValueError, OSError) as exc:

@@ -180,12 +180,14 @@ def test_settings_reply_names_the_chip_its_dump_and_range(chip):
     assert all(isinstance(v, int) for v in reply["registers"].values())
 
 
-def test_fixed_chip_ignores_cpi_and_uses_the_exact_scale():
+def test_fixed_chip_ignores_cpi_and_scales_by_its_rounded_cpi_like_every_client():
     need("pmw3901")
     rig = Rig(["pmw3901"], cpi=3200, options={"height_m": 0.08})
     ch = rig.poller.channels[0]
     assert ch.cpi_y == ch.driver.cpi  # the rounded effective CPI, not 3200
-    assert ch.scale_y == ch.driver.metres_per_count  # the float, for metres
+    # the messages carry the integer CPI and clients convert the polls by it: the totals too
+    assert ch.scale_y == pytest.approx(0.0254 / ch.cpi_y, rel=1e-15)
+    assert ch.scale_y == pytest.approx(ch.driver.metres_per_count, rel=0.005)
     assert any("fixed" in n for n in rig.poller.notes)
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 import time
@@ -186,6 +187,21 @@ def test_headless_cli_runs_against_the_sim_and_writes_a_screenshot(tmp_path):
     assert "the robot (exact) travelled" in out.stdout
     log = Path(out.stdout.split("node log: ", 1)[1].split()[0])  # a private folder, printed
     assert log.stat().st_size > 0 and (log.parent.stat().st_mode & 0o777) == 0o700
+
+
+def test_headless_cli_with_optical_flow_and_pixart_chips_uses_every_single_poll():
+    """A PMW3901 (fixed, rounded CPI) beside a PMW3360: the polls agree with the totals, so
+    the pose integrates them and steps over no gap (it once dropped every one)."""
+    env = dict(os.environ, QT_QPA_PLATFORM="offscreen")
+    out = subprocess.run(
+        [sys.executable, "-m", "mm_pc.monitor.app", "--sim", "--sim-chips", "pmw3901,pmw3360",
+         "--headless", "--duration", "5", "--rate", "30"],
+        capture_output=True, text=True, timeout=120, env=env,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stdout + out.stderr
+    m = re.search(r"integrated (\d+) single polls; (\d+) gap", out.stdout)
+    assert m, out.stdout
+    assert int(m.group(1)) > 1000 and int(m.group(2)) == 0, out.stdout
 
 
 def test_headless_cli_with_agent_runs_the_bbb_chain(tmp_path):
