@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # Python package folders each ROS package installs (mm_pc/setup.py, mm_beagle/setup.py).
 INSTALLS = {"mm_pc": ("mm_pc", "pln2033"), "mm_beagle": ("mm_beagle",)}
 ROSDEP_PYTHON = {"numpy": "python3-numpy", "yaml": "python3-yaml", "psutil": "python3-psutil"}
-PIP_ONLY = {"PySide6", "pyqtgraph", "mcap", "spidev", "zenoh"}  # no rosdep key: ./compile
+PIP_ONLY = {"PySide6", "pyqtgraph", "mcap", "spidev", "smbus2", "zenoh"}  # no rosdep key: ./compile
 OURS = {"mm_pc", "pln2033", "mm_beagle"}
 
 

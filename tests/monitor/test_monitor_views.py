@@ -717,7 +717,9 @@ def test_resolution_with_the_real_node(qtbot, beagle, monkeypatch):
         row.edit.setText("4000")
         qtbot.mouseClick(row.set_button, Qt.LeftButton)
         qtbot.waitUntil(lambda: row.error.text() != "", timeout=5000)
-        assert row.error.text() == "CPI 4000 is out of range (allowed: 100..3200 in steps of 100)"
+        assert row.error.text() == (
+            "CPI 4000 is out of range (Philips PLN2033 allows 100..3200 in steps of 100)"
+        )
         assert "b00020" in row.error.styleSheet()
         assert row.read_back.text() == "read back: 800 CPI"
         assert read_settings(qtbot, beagle, dev).cpi == 800
