@@ -3,7 +3,8 @@
 Listens to the node's sensor_data topic (so it never takes counts away from
 service clients) and /diagnostics, and redraws a small table twice a second:
 per sensor the poll rate, speed, distance travelled, CPI, polls that saw the
-lift bit ("lifted") and the distance estimated for the lift gaps, and state.
+lift bit ("lifted") and the distance estimated for the lift gaps, state, the
+chip and its newest surface-quality figure ("-" where the chip has none).
 """
 
 from __future__ import annotations
@@ -28,6 +29,8 @@ class SensorView:
     cpi: int = 0
     lifts: int = 0
     lift_est: float = 0.0
+    chip: str = ""
+    quality: int = -1
 
     def update(self, msg) -> None:
         self.samples += msg.samples
@@ -37,6 +40,8 @@ class SensorView:
         self.cpi = msg.cpi
         self.lifts = msg.lift_events_total
         self.lift_est = math.hypot(msg.x_lift_est_total_disp, msg.y_lift_est_total_disp)
+        self.chip = msg.chip or "pln2033"  # an older node sends none
+        self.quality = msg.quality if msg.chip else -1
 
     def take_rate(self) -> float:
         """Polls per second since the previous call."""
@@ -47,7 +52,7 @@ class SensorView:
 
 HEADER = (
     f"{'sensor':<16}{'state':>7}{'polls/s':>9}{'vx mm/s':>9}{'vy mm/s':>9}"
-    f"{'x m':>9}{'y m':>9}{'CPI':>6}{'lifted':>7}{'lift est m':>11}"
+    f"{'x m':>9}{'y m':>9}{'CPI':>6}{'lifted':>7}{'lift est m':>11}{'chip':>9}{'quality':>8}"
 )
 
 
@@ -55,6 +60,7 @@ def format_row(device: str, view: SensorView, state: str, rate: float) -> str:
     return (
         f"{device:<16}{state:>7}{rate:>9.0f}{view.x_speed * 1e3:>9.1f}{view.y_speed * 1e3:>9.1f}"
         f"{view.x_total:>9.3f}{view.y_total:>9.3f}{view.cpi:>6}{view.lifts:>7}{view.lift_est:>11.4f}"
+        f"{view.chip or '?':>9}{view.quality if view.quality >= 0 else '-':>8}"
     )
 
 

@@ -39,8 +39,13 @@ def test_watch_row_shows_mm_per_s_and_metres():
         "800",
         "3",
         "0.0000",
+        "?",
+        "-",
     ]
     assert len(row) == len(HEADER)  # the columns line up under the header
+    view.chip, view.quality = "pmw3360", 48
+    row = format_row("/dev/spidev1.0", view, "up", 999.6)
+    assert row.split()[-2:] == ["pmw3360", "48"] and len(row) == len(HEADER)
 
 
 @pytest.mark.ros
