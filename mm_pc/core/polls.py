@@ -431,18 +431,37 @@ class PollTracker:
 
     # -- pairing and lift filling -------------------------------------------------------
 
-    def _pair(self) -> PollSteps:
-        pend = self._pending
-        if any(len(p.stamp) == 0 for p in pend):
-            return PollSteps.empty(self.n)
-        # ticks: stamps of real polls (not command reads) present for every sensor
+    def _same_ticks(self, pend: list[_Pending]):
+        """The common case, cheaply: every sensor holds polls of the same poller ticks (the
+        poller stamps all sensors of one tick alike) and none read for a command. Returns
+        (ticks, counts, lifted, folded, used) as :meth:`_match_ticks` would, or None."""
+        first = pend[0].stamp
+        k = len(first)
+        for p in pend:
+            if len(p.stamp) != k or (p.flags & FLAG_COMMAND_READ).any():
+                return None
+            if p is not pend[0] and not np.array_equal(p.stamp, first):
+                return None
+        if k > 1 and not (first[1:] > first[:-1]).all():
+            return None  # repeated stamps: the general path sums them
+        counts = np.empty((k, self.n, 2), np.int64)
+        lifted = np.empty((k, self.n), bool)
+        for i, p in enumerate(pend):
+            counts[:, i, 0] = p.dx
+            counts[:, i, 1] = p.dy
+            lifted[:, i] = unseen(p.flags)
+        return first, counts, lifted, np.zeros(k, bool), [k] * self.n
+
+    def _match_ticks(self, pend: list[_Pending]):
+        """Polls paired by stamp: ticks present for every sensor (real polls, not command
+        reads); each poll summed into the tick at or after it. (None, ...) when no tick."""
         ticks = None
         for p in pend:
             s = p.stamp[(p.flags & FLAG_COMMAND_READ) == 0]
             ticks = s if ticks is None else np.intersect1d(ticks, s, assume_unique=False)
         ticks = np.unique(ticks)
         if not len(ticks):
-            return PollSteps.empty(self.n)
+            return None, None, None, None, None
         k = len(ticks)
         counts = np.zeros((k, self.n, 2), np.int64)
         lifted = np.zeros((k, self.n), bool)
@@ -462,6 +481,20 @@ class PollTracker:
             extra &= p.stamp[:m] > self._last_stamp
             folded[idx[extra]] = True
             used.append(m)
+        return ticks, counts, lifted, folded, used
+
+    def _pair(self) -> PollSteps:
+        pend = self._pending
+        if any(len(p.stamp) == 0 for p in pend):
+            return PollSteps.empty(self.n)
+        same = self._same_ticks(pend)
+        if same is not None:
+            ticks, counts, lifted, folded, used = same
+        else:
+            ticks, counts, lifted, folded, used = self._match_ticks(pend)
+            if ticks is None:
+                return PollSteps.empty(self.n)
+        k = len(ticks)
         cut = self._ready(lifted)
         if cut == 0:
             return PollSteps.empty(self.n)

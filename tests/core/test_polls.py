@@ -316,3 +316,42 @@ def test_the_per_poll_figures_of_the_docs():
     assert r["per_poll_error_m_exact_m"] < 1e-9 < 5e-4 < r["per_request_error_m_exact_m"]
     assert r["per_poll_error_m_1600cpi"] < r["per_request_error_m_1600cpi"]
     assert r["length_m"] == pytest.approx(10.1, abs=0.05)
+
+
+def test_the_same_ticks_fast_path_pairs_exactly_as_the_general_matching():
+    """Sensors polled on the same ticks (the poller's common case) take a cheap path; it
+    must give what the general stamp matching gives, and step aside for anything else."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    from mm_pc.core.polls import FLAG_COMMAND_READ, _Pending
+
+    @settings(max_examples=200, deadline=None)
+    @given(st.integers(1, 12), st.integers(0, 2**31), st.data())
+    def check(k, seed, data):
+        rng = np.random.default_rng(seed)
+        stamps = np.cumsum(rng.integers(1, 3_000_000, k)).astype(np.int64) + 10**12
+        flags_choice = st.sampled_from([0, 1, 2, 32, 33])
+        tr = PollTracker(2)
+        tr._last_stamp = 0  # as after a baseline
+        pend = []
+        for _ in range(2):
+            flags = np.array(data.draw(st.lists(flags_choice, min_size=k, max_size=k)), np.int64)
+            dx, dy = (rng.integers(-300, 300, k).astype(np.int64) for _ in range(2))
+            pend.append(_Pending(stamps.copy(), dx, dy, flags, 1600))
+        fast = tr._same_ticks(pend)
+        slow = tr._match_ticks(pend)
+        assert fast is not None
+        for a, b in zip(fast, slow, strict=True):
+            np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+    check()
+    # a command read, different stamps or a repeated stamp: the general path
+    tr = PollTracker(2)
+    s = np.array([1, 2, 3], np.int64)
+    z = np.zeros(3, np.int64)
+    assert tr._same_ticks([_Pending(s, z, z, z), _Pending(s + 1, z, z, z)]) is None
+    cmd = np.array([0, FLAG_COMMAND_READ, 0], np.int64)
+    assert tr._same_ticks([_Pending(s, z, z, cmd), _Pending(s, z, z, z)]) is None
+    rep = np.array([1, 1, 2], np.int64)
+    assert tr._same_ticks([_Pending(rep, z, z, z), _Pending(rep, z, z, z)]) is None
