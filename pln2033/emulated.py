@@ -18,6 +18,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
+from .errors import SpiError
 from .motion import MotionSource, Stationary
 from .sensor import INCH_M
 
@@ -259,6 +260,14 @@ class CountingCore:
         mode = self.fault or (self._fault_mode(now) if self.fault_windows else None)
         if mode is not None and mode != "corrupt":
             self.stats.faulted_transfers += 1
+        return mode
+
+    def spi_fault(self, now: float) -> str | None:
+        """:meth:`fault_now` for an SPI transfer: a "raise" fault raises the kernel's SpiError;
+        otherwise the mode ("no_response": the caller answers all ones; "corrupt"; None)."""
+        mode = self.fault_now(now)
+        if mode == "raise":
+            raise SpiError("SPI transfer failed: Remote I/O error (emulated fault)")
         return mode
 
     def corrupt(self, out: list[int]) -> None:

@@ -21,7 +21,6 @@ import time
 from collections.abc import Callable, Sequence
 
 from .emulated import FAULT_MODES, CountingCore, EmulatorStats
-from .errors import SpiError
 from .motion import MotionSource
 from .regmap import RegisterMap
 
@@ -116,9 +115,7 @@ class EmulatedPLN2033(CountingCore):
 
     def xfer2(self, data: list[int]) -> list[int]:
         now = self.clock()
-        mode = self.fault_now(now)
-        if mode == "raise":
-            raise SpiError("SPI transfer failed: Remote I/O error (emulated fault)")
+        mode = self.spi_fault(now)
         if mode == "no_response":
             return [0xFF] * len(data)
         self.advance(now)

@@ -40,7 +40,6 @@ from collections.abc import Sequence
 from typing import Any
 
 from ..emulated import CountingCore
-from ..errors import SpiError
 from ..motion import MotionSource
 from . import regs as R  # noqa: N812 (the register facts, short)
 
@@ -319,9 +318,7 @@ class EmulatedPMW33xx(CountingCore):
 
     def xfer_segments(self, segments: Sequence[tuple[list[int], int]]) -> list[list[int]]:
         now = self.clock()
-        mode = self.fault_now(now)
-        if mode == "raise":
-            raise SpiError("SPI transfer failed: Remote I/O error (emulated fault)")
+        mode = self.spi_fault(now)
         if mode == "no_response":
             return [[0xFF] * len(seg) for seg, _d in segments]
         self.advance(now)

@@ -32,7 +32,6 @@ from __future__ import annotations
 from typing import Any
 
 from ..emulated import CountingCore
-from ..errors import SpiError
 from ..motion import MotionSource
 from . import regs
 from .flow_scale import BITCRAZE_PMW3901, OPTICAL_FLOW_ROS_PAA5100, FlowOptics
@@ -182,9 +181,7 @@ class EmulatedPMW3901(CountingCore):
 
     def xfer2(self, data: list[int]) -> list[int]:
         now = self.clock()
-        mode = self.fault_now(now)
-        if mode == "raise":
-            raise SpiError("SPI transfer failed: Remote I/O error (emulated fault)")
+        mode = self.spi_fault(now)
         if mode == "no_response":
             return [0xFF] * len(data)
         self.advance(now)
