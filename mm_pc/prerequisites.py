@@ -94,9 +94,22 @@ def _program() -> str:
     return spec.name
 
 
+def _interrupted(exc: BaseException | None) -> bool:
+    """``exc`` is a Ctrl-C, or was caused by one: a KeyboardInterrupt that lands while a
+    class body is built (a dataclass during an import) reaches the hook wrapped in a
+    RuntimeError."""
+    seen = 0
+    while exc is not None and seen < 20:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        exc = exc.__cause__ or exc.__context__
+        seen += 1
+    return False
+
+
 def _hook(previous):
     def hook(exc_type, exc, tb):
-        if issubclass(exc_type, KeyboardInterrupt):
+        if issubclass(exc_type, KeyboardInterrupt) or _interrupted(exc):
             # Ctrl-C before a program installed its own handler (a node still importing
             # rclpy): a stop like any other, no traceback; 0 as the nodes' Ctrl-C gives.
             sys.stderr.write(f"{_program()}: stopped by Ctrl-C\n")

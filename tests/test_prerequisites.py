@@ -96,3 +96,20 @@ def test_monitor_without_the_monitor_extra_names_it(tmp_path):
 def test_messages_for_what_is_neither_ros_nor_an_extra():
     assert prerequisites.message("x", "numpy") is None
     assert "'beagle' extra" in prerequisites.message("mm-beagle", "spidev")
+
+
+def test_ctrl_c_wrapped_by_a_class_body_is_still_a_clean_stop(tmp_path):
+    """SIGINT while a dataclass is being built (a node still importing) reaches the hook as
+    a RuntimeError caused by the KeyboardInterrupt: a stop, exit 0, no traceback."""
+    code = (
+        "import mm_pc\n"
+        "try:\n"
+        "    raise KeyboardInterrupt\n"
+        "except KeyboardInterrupt as e:\n"
+        "    raise RuntimeError(\"Error calling __set_name__ on 'Field'\") from e\n"
+    )
+    out = _run(["-c", code], tmp_path, [])
+    assert out.returncode == 0, out.stderr
+    assert "stopped by Ctrl-C" in out.stderr and "Traceback" not in out.stderr
+    other = _run(["-c", "import mm_pc\nraise RuntimeError('boom')"], tmp_path, [])
+    assert other.returncode == 1 and "RuntimeError: boom" in other.stderr  # not a Ctrl-C
