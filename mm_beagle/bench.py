@@ -349,6 +349,11 @@ def main(argv: list[str] | None = None) -> int:
         help="single polls inside the get_sensor_data reply (default), or one get_samples "
         "per sensor and reply (the fallback for older nodes; for before/after comparisons)",
     )
+    gui.add_argument(
+        "--executor", choices=("events", "waitset"), default="events",
+        help="the monitor's rclpy executor: the C++ events executor (default) or the Python "
+        "wait-set one (for before/after comparisons)",
+    )
     gui.add_argument("--json", action="store_true", help="print JSON only (the default)")
     agent = sub.add_parser("agent", help="the board agent: CPU per poll, RSS, link, drops")
     agent.add_argument("--seconds", type=float, default=3.0, help="per measurement")
@@ -378,6 +383,7 @@ def main(argv: list[str] | None = None) -> int:
             result = bench_gui(
                 hours=args.hours, rate_hz=args.rate, frames=args.frames,
                 live_seconds=args.live_seconds, polls=args.polls,
+                executor=args.executor,
             )
         except ValueError as e:
             parser.error(str(e))

@@ -161,6 +161,7 @@ def bench_gui(
     max_catch_up: int = 300,
     live_seconds: float = 10.0,
     polls: str = "reply",
+    executor: str = "events",
 ) -> dict:
     """Run the GUI benchmark (see the module doc); a JSON-ready dict.
 
@@ -172,9 +173,10 @@ def bench_gui(
     first frame); ``live_seconds``: length of each live CPU measurement
     (:data:`LIVE_RATES_HZ`, with the node; 0 = none); ``polls``: how the bridge gets
     the single polls, ``reply`` (inside the get_sensor_data reply, one round trip) or
-    ``get_samples`` (one more call per sensor, the fallback for an older node).
+    ``get_samples`` (one more call per sensor, the fallback for an older node);
+    ``executor``: the bridge's rclpy executor (:data:`~mm_pc.monitor.ros_bridge.EXECUTORS`).
     """
-    from mm_pc.monitor.ros_bridge import validate_rate
+    from mm_pc.monitor.ros_bridge import EXECUTORS, validate_rate
 
     if not (isinstance(hours, (int, float)) and 0 < hours <= 24):
         raise ValueError(f"hours must be in (0, 24], got {hours!r}")
@@ -187,6 +189,8 @@ def bench_gui(
         raise ValueError(f"live_seconds must be in [0, 600], got {live_seconds!r}")
     if polls not in ("reply", "get_samples"):
         raise ValueError(f"polls must be 'reply' or 'get_samples', got {polls!r}")
+    if executor not in EXECUTORS:
+        raise ValueError(f"executor must be one of {', '.join(EXECUTORS)}, got {executor!r}")
     os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
     from PySide6.QtWidgets import QApplication
 
@@ -200,7 +204,7 @@ def bench_gui(
             env = use_isolated_ros_env()
             params = {"backend": "sim", "sim_trajectory": trajectory}
             stack.enter_context(beagle_process(params, env, str(tmp / "beagle.log")))
-        window, bridge = _build_window(tmp, rate_hz, node)
+        window, bridge = _build_window(tmp, rate_hz, node, executor)
         if bridge is not None:
             bridge.polls_in_reply = polls == "reply"
         stack.callback(window.close)
@@ -215,12 +219,13 @@ def bench_gui(
             }
             result["live_tab"] = window.tabs.tabText(0)
             result["live_polls"] = polls
+            result["live_executor"] = bridge.executor
             result["live_poll_fetches"] = bridge.poll_fetches  # get_samples calls, whole run
             result["goal_live_cpu_percent"] = GOAL_LIVE_CPU_PERCENT
     return result
 
 
-def _build_window(tmp: Path, rate_hz: float, node: bool):
+def _build_window(tmp: Path, rate_hz: float, node: bool, executor: str):
     from mm_pc.monitor.context import MonitorConfig, MonitorContext
     from mm_pc.monitor.main_window import MainWindow
     from mm_pc.monitor.model.session import MonitorSession
@@ -229,7 +234,7 @@ def _build_window(tmp: Path, rate_hz: float, node: bool):
     if node:
         from mm_pc.monitor.ros_bridge import RosBridge
 
-        bridge = RosBridge("/mm_beagle", rate_hz, node_name="mm_bench_gui")
+        bridge = RosBridge("/mm_beagle", rate_hz, node_name="mm_bench_gui", executor=executor)
         bridge.set_polling(False)  # until the history is in
     config = MonitorConfig(rate_hz=rate_hz, calibration_file=tmp / "calibration.yaml")
     window = MainWindow(MonitorContext(MonitorSession(), bridge, config))

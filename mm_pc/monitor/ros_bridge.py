@@ -34,13 +34,15 @@ again by itself.
 
 from __future__ import annotations
 
+import gc
 import queue
+import signal
 import statistics
 import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from contextlib import suppress
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -48,11 +50,31 @@ from PySide6.QtCore import QObject, Signal
 
 from mm_pc.monitor.model.readings import Reading, Reply
 
-__all__ = ["MAX_RATE_HZ", "MIN_RATE_HZ", "BridgeStats", "RosBridge", "validate_rate"]
+__all__ = ["EXECUTORS", "MAX_RATE_HZ", "MIN_RATE_HZ", "BridgeStats", "RosBridge", "validate_rate"]
 
 MIN_RATE_HZ = 1.0
 MAX_RATE_HZ = 500.0
 WAITING, CONNECTED, LOST = "waiting", "connected", "lost"
+#: rclpy executors the bridge can spin: the C++ EventsExecutor (rclpy.experimental, half
+#: the CPU per reply, docs/benchmarks.md) or the Python SingleThreadedExecutor
+EVENTS, WAITSET = "events", "waitset"
+EXECUTORS = (EVENTS, WAITSET)
+
+
+@contextmanager
+def _python_signal_handlers_kept():
+    """Put back Python's SIGINT/SIGTERM handlers after the block (main thread only): the
+    events executor installs its own C++ handlers when made and SIG_DFL when it goes."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    kept = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, handler in kept.items():
+            if handler is not None:
+                signal.signal(s, handler)
 
 
 def validate_rate(value) -> float:
@@ -113,6 +135,7 @@ class RosBridge(QObject):
         timeout_s: float = 2.0,
         parent: QObject | None = None,
         fetch_polls: bool = True,
+        executor: str = EVENTS,
     ) -> None:
         super().__init__(parent)
         self.beagle = "/" + beagle.strip("/") if beagle.strip("/") else "/mm_beagle"
@@ -122,7 +145,12 @@ class RosBridge(QObject):
         #: settings, CPI and samples calls may take longer (the node talks to the chip)
         self.call_timeout_s = 2.5 * self.timeout_s
         self._actions: queue.SimpleQueue[Callable[[], None]] = queue.SimpleQueue()
+        if executor not in EXECUTORS:
+            raise ValueError(f"executor must be one of {', '.join(EXECUTORS)}, got {executor!r}")
+        #: rclpy's C++ events executor (default) or its Python wait-set executor
+        self.executor = executor
         self._thread: threading.Thread | None = None
+        self._stopping = threading.Event()
         self._polling = True
         self._state = WAITING
         self._in_flight: tuple[object, float] | None = None
@@ -159,7 +187,6 @@ class RosBridge(QObject):
         import rclpy
         from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.context import Context
-        from rclpy.executors import SingleThreadedExecutor
 
         from mm_beagle.services import service_types
 
@@ -175,32 +202,65 @@ class RosBridge(QObject):
             n: self.node.create_client(t, f"{self.beagle}/{n}") for n, t in self._types.items()
         }
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
-        self._wake = self.node.create_guard_condition(self._run_actions)
         self._timer = self.node.create_timer(1.0 / self._rate, self._tick)
         self.node.create_timer(0.1, self._watchdog)
         self.node.create_timer(0.5, self._publish_stats)
-        self._executor = SingleThreadedExecutor(context=self._ctx)
+        self._executor = self._make_executor()
         self._executor.add_node(self.node)
+        self._stopping.clear()
         self._thread = threading.Thread(target=self._spin, name="mm_monitor_ros", daemon=True)
         self._thread.start()
+
+    def _make_executor(self):
+        """The executor ``self.executor`` names; ``events`` falls back to ``waitset`` where
+        rclpy has no EventsExecutor (then ``self.executor`` says ``waitset``)."""
+        if self.executor == EVENTS:
+            try:
+                from rclpy.experimental import EventsExecutor
+            except ImportError:
+                self.executor = WAITSET
+            else:
+                # it claims SIGINT/SIGTERM for itself (asio): keep the application's handlers
+                with _python_signal_handlers_kept():
+                    return EventsExecutor(context=self._ctx)
+        from rclpy.executors import SingleThreadedExecutor
+
+        # the GUI's actions wake this executor through a guard condition (the events
+        # executor has none: actions reach it as tasks, see _post)
+        self._wake = self.node.create_guard_condition(self._run_actions)
+        return SingleThreadedExecutor(context=self._ctx)
 
     def _spin(self) -> None:
         from rclpy.executors import ExternalShutdownException
 
+        self._run_actions()  # those posted before start()
         with suppress(ExternalShutdownException, RuntimeError):
-            self._executor.spin()
+            if self.executor == WAITSET:
+                self._executor.spin()
+                return
+            # spin_once in a loop: the events executor's spin() does not run timers here
+            # (rclpy 7.1.5), and the loop ends by itself once stop() sets the flag
+            while not self._stopping.is_set() and self._ctx.ok():
+                self._executor.spin_once(0.1)
 
     def stop(self) -> None:
         """Stop the executor thread and shut the private context down (idempotent)."""
         if self._thread is None:
             return
-        self._executor.shutdown(timeout_sec=1.0)
+        self._stopping.set()
+        if self.executor == WAITSET:
+            self._executor.shutdown(timeout_sec=1.0)
         self._thread.join(3.0)
         self._thread = None
-        with suppress(Exception):
-            self.node.destroy_node()
-        with suppress(Exception):
-            self._ctx.try_shutdown()
+        with _python_signal_handlers_kept():
+            with suppress(Exception):
+                self._executor.shutdown(timeout_sec=1.0)
+            with suppress(Exception):
+                self.node.destroy_node()
+            with suppress(Exception):
+                self._ctx.try_shutdown()
+            self._executor = None
+            gc.collect()  # the events executor gives SIGINT back to SIG_DFL when it goes
 
     @property
     def running(self) -> bool:
@@ -210,8 +270,12 @@ class RosBridge(QObject):
 
     def _post(self, action: Callable[[], None]) -> None:
         self._actions.put(action)
-        if self._thread is not None:
+        if self._thread is None:
+            return  # the thread runs them when it starts
+        if self.executor == WAITSET:
             self._wake.trigger()
+        else:  # thread-safe: the events executor posts the task to its own loop
+            self._executor.create_task(self._run_actions)
 
     def _run_actions(self) -> None:
         while True:
@@ -219,7 +283,10 @@ class RosBridge(QObject):
                 action = self._actions.get_nowait()
             except queue.Empty:
                 return
-            action()
+            try:
+                action()
+            except Exception as e:  # a task would keep it to itself: say it
+                self.node.get_logger().error(f"monitor action failed: {e!r}")
 
     @property
     def rate_hz(self) -> float:
