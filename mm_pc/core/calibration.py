@@ -156,9 +156,11 @@ class SensorCalibration:
         scaled per axis, then rotated by ``+angle_offset``, both components
         from the unrotated input.
         """
+        a, b, c, d = self._m
+        if type(dx) is float and type(dy) is float:  # the per-reply path: no arrays
+            return a * dx + b * dy, c * dx + d * dy
         x = np.asarray(dx, dtype=float)
         y = np.asarray(dy, dtype=float)
-        a, b, c, d = self._m
         xr = a * x + b * y
         yr = c * x + d * y
         if xr.ndim == 0:
@@ -269,6 +271,10 @@ def calibrate_straight_run(
     return SensorCalibration(offset, distance, scale)
 
 
+#: the calibration of a sensor without one (immutable, so one object serves all)
+_IDENTITY = SensorCalibration.identity()
+
+
 class Calibration:
     """One :class:`SensorCalibration` per sensor id (the SPI device path).
 
@@ -351,7 +357,7 @@ class Calibration:
 
     def get(self, sensor_id: str) -> SensorCalibration:
         """The sensor's calibration, identity if it has none."""
-        return self._sensors.get(sensor_id) or SensorCalibration.identity()
+        return self._sensors.get(sensor_id) or _IDENTITY
 
     def apply(self, sensor_id: str, dx, dy):
         """Correct raw displacement(s) of ``sensor_id``; see :meth:`SensorCalibration.apply`."""

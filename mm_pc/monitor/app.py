@@ -66,6 +66,11 @@ def _parser() -> argparse.ArgumentParser:
         help="record from the start: PATH.mcap = one MCAP file, any other PATH = a new "
         "rosbag2 folder with metadata.yaml (replies, single polls, live topics)",
     )  # fmt: skip
+    p.add_argument(
+        "--executor", choices=("events", "waitset"), default="events",
+        help="rclpy executor of the monitor's ROS thread: events (rclpy's C++ one, the "
+        "default: about half the CPU per reply) or waitset (the Python one, to fall back on)",
+    )  # fmt: skip
     p.add_argument("--tab", default=None,
                    help="tab to show first (Map, Graphs, Data, ...; default: the last one)")
     return p
@@ -321,7 +326,7 @@ def _run(args, headless: bool) -> int:
         if args.replay is None:
             from mm_pc.monitor.ros_bridge import RosBridge
 
-            bridge = RosBridge(args.beagle, args.rate)
+            bridge = RosBridge(args.beagle, args.rate, executor=args.executor)
         session = MonitorSession(method=args.method)
         ctx = MonitorContext(session, bridge, config)
         window = MainWindow(ctx, open_settings())

@@ -34,15 +34,13 @@ again by itself.
 
 from __future__ import annotations
 
-import gc
 import queue
-import signal
 import statistics
 import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from contextlib import contextmanager, suppress
+from contextlib import suppress
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -59,22 +57,6 @@ WAITING, CONNECTED, LOST = "waiting", "connected", "lost"
 #: the CPU per reply, docs/benchmarks.md) or the Python SingleThreadedExecutor
 EVENTS, WAITSET = "events", "waitset"
 EXECUTORS = (EVENTS, WAITSET)
-
-
-@contextmanager
-def _python_signal_handlers_kept():
-    """Put back Python's SIGINT/SIGTERM handlers after the block (main thread only): the
-    events executor installs its own C++ handlers when made and SIG_DFL when it goes."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    kept = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield
-    finally:
-        for s, handler in kept.items():
-            if handler is not None:
-                signal.signal(s, handler)
 
 
 def validate_rate(value) -> float:
@@ -220,9 +202,7 @@ class RosBridge(QObject):
             except ImportError:
                 self.executor = WAITSET
             else:
-                # it claims SIGINT/SIGTERM for itself (asio): keep the application's handlers
-                with _python_signal_handlers_kept():
-                    return EventsExecutor(context=self._ctx)
+                return EventsExecutor(context=self._ctx)
         from rclpy.executors import SingleThreadedExecutor
 
         # the GUI's actions wake this executor through a guard condition (the events
@@ -252,15 +232,12 @@ class RosBridge(QObject):
             self._executor.shutdown(timeout_sec=1.0)
         self._thread.join(3.0)
         self._thread = None
-        with _python_signal_handlers_kept():
-            with suppress(Exception):
-                self._executor.shutdown(timeout_sec=1.0)
-            with suppress(Exception):
-                self.node.destroy_node()
-            with suppress(Exception):
-                self._ctx.try_shutdown()
-            self._executor = None
-            gc.collect()  # the events executor gives SIGINT back to SIG_DFL when it goes
+        with suppress(Exception):
+            self._executor.shutdown(timeout_sec=1.0)
+        with suppress(Exception):
+            self.node.destroy_node()
+        with suppress(Exception):
+            self._ctx.try_shutdown()
 
     @property
     def running(self) -> bool:

@@ -48,6 +48,7 @@ def test_bench_gui_reports_every_figure(qapp):
     assert set(r["live"]) == {"100", "500"} and r["goal_live_cpu_percent"] == 50.0
     # the polls came inside the data replies: not one get_samples call
     assert r["live_polls"] == "reply" and r["live_poll_fetches"] == 0
+    assert r["live_executor"] == "events"
     for hz, live in r["live"].items():
         assert 0 < live["achieved_hz"] <= float(hz) * 1.2, (hz, live)
         assert live["replies"] > 0 and 0 < live["cpu_percent_one_core"] < 200.0 + 1, live
@@ -59,6 +60,7 @@ def test_bench_gui_refuses_bad_arguments(capsys):
     for bad in (
         {"hours": 0}, {"hours": -1.0}, {"rate_hz": 0}, {"frames": 0}, {"max_catch_up": -1},
         {"live_seconds": -1.0}, {"live_seconds": "x"}, {"polls": "both"},
+        {"executor": "asyncio"},
     ):
         with pytest.raises(ValueError, match="must be"):
             bench_gui(**bad)
@@ -68,3 +70,6 @@ def test_bench_gui_refuses_bad_arguments(capsys):
     with pytest.raises(SystemExit):
         bench_main(["gui", "--live-seconds", "-2"])
     assert "live_seconds must be in [0, 600]" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as e:
+        bench_main(["gui", "--executor", "multi"])
+    assert e.value.code == 2 and "invalid choice: 'multi'" in capsys.readouterr().err

@@ -238,7 +238,8 @@ def test_no_display_falls_back_to_headless_with_a_message(tmp_path):
     ("args", "message"),
     [(["--rate", "0"], "1..500"), (["--rate", "junk"], "invalid float value"),
      (["--duration", "-1"], "--duration must be >= 0"),
-     (["--agent"], "--agent goes with --sim")],
+     (["--agent"], "--agent goes with --sim"),
+     (["--executor", "multi"], "invalid choice: 'multi'")],
 )  # fmt: skip
 def test_bad_command_line_exits_2_with_a_message(args, message):
     out = subprocess.run(

@@ -99,16 +99,17 @@ def _map_keep(poses: np.ndarray) -> np.ndarray:
     """Indices of the per-poll poses (N x 3: x, y, yaw) the map keeps: where the travelled
     distance passes a multiple of MAP_SPACING_M or the turned angle one of MAP_SPACING_RAD,
     and always the last (the reply's pose)."""
-    if len(poses) == 0:
-        return np.zeros(0, dtype=int)
-    x, y = poses[:, 0], poses[:, 1]
-    step = np.hypot(np.diff(x, prepend=x[0]), np.diff(y, prepend=y[0]))
-    turn = np.abs(np.diff(poses[:, 2], prepend=poses[0, 2]))
-    dist_bin = np.floor(np.cumsum(step) / MAP_SPACING_M)
-    turn_bin = np.floor(np.cumsum(turn) / MAP_SPACING_RAD)
-    new = np.ones(len(poses), dtype=bool)
-    new[1:] = (dist_bin[1:] != dist_bin[:-1]) | (turn_bin[1:] != turn_bin[:-1])
+    n = len(poses)
+    if n < 2:
+        return np.arange(n)  # [] or the one (last) pose
+    # slices, not np.diff(prepend=...): a reply holds a few poses, numpy's call overhead rules
+    x, y, yaw = poses[:, 0], poses[:, 1], poses[:, 2]
+    dist_bin = np.floor(np.cumsum(np.hypot(x[1:] - x[:-1], y[1:] - y[:-1])) / MAP_SPACING_M)
+    turn_bin = np.floor(np.cumsum(np.abs(yaw[1:] - yaw[:-1])) / MAP_SPACING_RAD)
+    new = np.empty(n, dtype=bool)
     new[0] = False  # the first pose of a reply continues the previous reply's last row
+    new[1] = dist_bin[0] != 0.0 or turn_bin[0] != 0.0  # the bins of pose 0 are 0
+    new[2:] = (dist_bin[1:] != dist_bin[:-1]) | (turn_bin[1:] != turn_bin[:-1])
     new[-1] = True
     return np.flatnonzero(new)
 
@@ -583,10 +584,13 @@ class MonitorSession:
         else:
             ts, poses = np.array([t]), np.array([[pose.x, pose.y, pose.yaw]])
         c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-        cols = [ts, poses[:, 0], poses[:, 1], poses[:, 2]]
-        for m in self._mounts:
-            cols += [poses[:, 0] + c * m.x - s * m.y, poses[:, 1] + s * m.x + c * m.y]
-        self.map_history.extend(np.column_stack(cols))
+        rows = np.empty((len(ts), 4 + 2 * len(self._mounts)))
+        rows[:, 0] = ts
+        rows[:, 1:4] = poses
+        for k, m in enumerate(self._mounts):
+            rows[:, 4 + 2 * k] = poses[:, 0] + c * m.x - s * m.y
+            rows[:, 5 + 2 * k] = poses[:, 1] + s * m.x + c * m.y
+        self.map_history.extend(rows)
 
     def _pose_from_polls(self, reply: Reply, now: list[Reading], t: float) -> Pose2D:
         """Integrate the single polls the reply's totals cover; a gap step where they are
