@@ -65,8 +65,11 @@ GRID_STEPS_M = (0.1, 1.0, 10.0, 100.0)
 GRID_COLOURS = ("#e4e4e4", "#c4c4c4", "#9a9a9a", "#707070")
 GRID_MIN_PX = 8.0  # a grid level whose lines would be closer than this is hidden
 
-#: Follow mode re-centres once the robot is this many pixels off the centre.
-FOLLOW_SLACK_PX = 3.0
+#: Follow mode re-centres once the robot is more than this fraction of the visible
+#: width (or height) off the centre. A pan repaints the axes and moves the raster (a
+#: sixth of a core at 30 frames/s when it pans every frame, docs/benchmarks.md), so
+#: the view stays put while the robot crosses its middle and then jumps to it.
+FOLLOW_ZONE = 0.15
 #: Most history rows one refresh takes in (an hour arriving at once is taken in over
 #: several frames instead of freezing the window for one long one).
 MAX_ROWS_PER_REFRESH = 10_000
@@ -416,12 +419,12 @@ class MapView(QWidget):
             del self._refresh_ms[:10_000]
 
     def _follow(self) -> None:
-        """Centre the robot; a drift below ``FOLLOW_SLACK_PX`` is left alone (a pan
-        repaints the whole map, which far out is most of the frame budget)."""
+        """Centre the robot once it leaves the middle of the view (``FOLLOW_ZONE``)."""
         rx, ry = self._robot_xy()
-        cx, cy = self.view_centre()
-        pixel = self.visible_width() / max(self.vb.width(), 1.0)
-        if self._follow_pending or math.hypot(rx - cx, ry - cy) > FOLLOW_SLACK_PX * pixel:
+        (x0, x1), (y0, y1) = self.vb.viewRange()
+        cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+        off = abs(rx - cx) > FOLLOW_ZONE * (x1 - x0) or abs(ry - cy) > FOLLOW_ZONE * (y1 - y0)
+        if self._follow_pending or off:
             self._show((rx, ry), self.visible_width())
         self._follow_pending = False
 
