@@ -219,8 +219,9 @@ class RosBridge(QObject):
                 self._executor.spin()
                 return
             # spin_once in a loop: the events executor's spin() does not run timers here
-            # (rclpy 7.1.5), and the loop ends by itself once stop() sets the flag
-            while not self._stopping.is_set() and self._ctx.ok():
+            # (rclpy 7.1.5), and the loop ends once stop() sets the flag (or the context
+            # is shut down: spin_once raises)
+            while not self._stopping.is_set():
                 self._executor.spin_once(0.1)
 
     def stop(self) -> None:
