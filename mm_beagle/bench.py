@@ -16,6 +16,12 @@ mm-bench gui [--hours H] [--rate HZ] [--frames N] --json
     HZ, polling a real mm-beagle sim node at HZ: frame time p50/p95 (all
     tabs and per tab), memory, dropped requests. See mm_pc.bench.gui.
 
+mm-bench executors [--rate HZ] [--seconds S] [--rounds N] --json
+    A bare get_sensor_data client (asks, counts, nothing else) under rclpy's
+    events executor and its wait-set executor, alternating, against a real
+    mm-beagle sim node: CPU per reply of each and their ratio.
+    See mm_pc.bench.executors.
+
 mm-bench agent [--seconds S] [--drops N] [--drop-seconds D] --json
     The board agent (mm-beagle-agent): CPU per poll with a stub bus (x86, and
     under qemu-arm in the armhf root where it can be had), CPU % at 1 kHz, RSS,
@@ -355,6 +361,11 @@ def main(argv: list[str] | None = None) -> int:
         "wait-set one (for before/after comparisons)",
     )
     gui.add_argument("--json", action="store_true", help="print JSON only (the default)")
+    execs = sub.add_parser("executors", help="CPU per reply of a bare client, per executor")
+    execs.add_argument("--rate", type=float, default=500.0, help="request rate (Hz)")
+    execs.add_argument("--seconds", type=float, default=8.0, help="per measurement")
+    execs.add_argument("--rounds", type=int, default=2, help="measurements per executor")
+    execs.add_argument("--json", action="store_true", help="print JSON only (the default)")
     agent = sub.add_parser("agent", help="the board agent: CPU per poll, RSS, link, drops")
     agent.add_argument("--seconds", type=float, default=3.0, help="per measurement")
     agent.add_argument("--drops", type=int, default=5, help="forced link drops")
@@ -385,6 +396,13 @@ def main(argv: list[str] | None = None) -> int:
                 live_seconds=args.live_seconds, polls=args.polls,
                 executor=args.executor,
             )
+        except ValueError as e:
+            parser.error(str(e))
+    elif args.what == "executors":
+        from mm_pc.bench.executors import bench_executors
+
+        try:
+            result = bench_executors(args.rate, args.seconds, args.rounds)
         except ValueError as e:
             parser.error(str(e))
     elif args.what == "maps":

@@ -14,6 +14,7 @@ from collections import deque
 from PySide6.QtCore import QEvent, QObject, QSettings, Qt, QTimer
 from PySide6.QtGui import QAction, QGuiApplication, QKeyEvent, QKeySequence
 from PySide6.QtWidgets import (
+    QApplication,
     QComboBox,
     QDockWidget,
     QFormLayout,
@@ -141,12 +142,18 @@ class _ExportShortcut(QObject):
     """Lets the window's Ctrl+E through while a text field has the focus.
 
     A QLineEdit claims Ctrl+E (move to the end of the line, on X11) through a
-    ShortcutOverride event, so the menu's shortcut would never fire there.
+    ShortcutOverride event, so the menu's shortcut would never fire there. The filter
+    goes on each of the window's text fields as it takes the focus: one on the whole
+    application would run Python for every event (a frame's paints, each reply).
     """
 
     def __init__(self, window: MainWindow) -> None:
         super().__init__(window)
         self._main = window
+
+    def on_focus(self, _old, new) -> None:
+        if isinstance(new, QLineEdit) and new.window() is self._main:
+            new.installEventFilter(self)  # again for the same field: still one filter
 
     def eventFilter(self, obj, event) -> bool:  # noqa: N802 - Qt API
         if (
@@ -184,9 +191,9 @@ class MainWindow(QMainWindow):
         self._build_status_bar()
         self._default_state = self.saveState()
         self._export_filter = _ExportShortcut(self)
-        app = QGuiApplication.instance()
+        app = QApplication.instance()
         if app is not None:
-            app.installEventFilter(self._export_filter)
+            app.focusChanged.connect(self._export_filter.on_focus)
         ctx.status_message.connect(lambda m: self.statusBar().showMessage(m, 5000))
         if ctx.bridge is not None:
             ctx.bridge.data_received.connect(ctx.on_reply)
