@@ -171,7 +171,10 @@ class MapView(QWidget):
         bar.addWidget(self.width_label)
         self.follow_check = QCheckBox("Follow robot")
         self.follow_check.setChecked(True)
-        self.follow_check.setToolTip("keep the robot in the centre; dragging the map ends it")
+        self.follow_check.setToolTip(
+            "keep the robot in the middle of the view (it re-centres once the robot is "
+            f"{FOLLOW_ZONE:.0%} of the view off the centre); dragging the map ends it"
+        )
         self.follow_check.toggled.connect(self._on_follow)
         bar.addWidget(self.follow_check)
         self.fit_button = QPushButton("Fit path")
