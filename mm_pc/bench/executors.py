@@ -9,7 +9,6 @@ holds on a shared machine. The figures: docs/benchmarks.md, the gui section.
 
 from __future__ import annotations
 
-import math
 import os
 import threading
 import time
@@ -23,6 +22,7 @@ def _measure(executor_name: str, rate_hz: float, seconds: float) -> dict:
     from rclpy.context import Context
 
     from mm_beagle.services import service_types
+    from mm_pc.bench.gui import cpu_figures
 
     ctx = Context()
     rclpy.init(context=ctx)
@@ -74,13 +74,8 @@ def _measure(executor_name: str, rate_hz: float, seconds: float) -> dict:
         executor.shutdown(timeout_sec=1.0)
         node.destroy_node()
         ctx.try_shutdown()
-    wall, replies = t1 - t0, r1 - r0
-    cpu = (c1.user + c1.system) - (c0.user + c0.system)
-    return {
-        "achieved_hz": round(replies / wall, 1),
-        "cpu_percent_one_core": round(100.0 * cpu / wall, 1),
-        "cpu_ms_per_reply": round(1e3 * cpu / replies, 3) if replies else math.nan,
-    }
+    cpu_s = (c1.user + c1.system) - (c0.user + c0.system)
+    return cpu_figures(cpu_s, t1 - t0, r1 - r0)
 
 
 def bench_executors(rate_hz: float = 500.0, seconds: float = 8.0, rounds: int = 2) -> dict:

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["bench_gui"]
+__all__ = ["bench_gui", "cpu_figures"]
 
 FRAME_HZ = 30.0
 GOAL_P95_MS = 16.0
@@ -51,14 +51,21 @@ def _live_cpu(window, bridge, app, rate_hz: float, seconds: float) -> dict:
     c1, r1, s1, t1 = proc.cpu_times(), bridge.replies, bridge.skipped_ticks, time.perf_counter()
     window.frame_timer.stop()
     wall, replies = t1 - t0, r1 - r0
-    cpu_s = (c1.user + c1.system) - (c0.user + c0.system)
     return {
-        "achieved_hz": round(replies / wall, 1),
-        "cpu_percent_one_core": round(100.0 * cpu_s / wall, 1),
-        "cpu_ms_per_reply": round(1e3 * cpu_s / replies, 3) if replies else math.nan,
+        **cpu_figures((c1.user + c1.system) - (c0.user + c0.system), wall, replies),
         "replies": replies,
         "skipped_ticks": s1 - s0,
         "seconds": round(wall, 2),
+    }
+
+
+def cpu_figures(cpu_s: float, wall_s: float, replies: int) -> dict:
+    """``achieved_hz``, ``cpu_percent_one_core`` (100 = one core) and ``cpu_ms_per_reply``
+    of ``replies`` that took ``cpu_s`` of CPU time in ``wall_s`` seconds."""
+    return {
+        "achieved_hz": round(replies / wall_s, 1),
+        "cpu_percent_one_core": round(100.0 * cpu_s / wall_s, 1),
+        "cpu_ms_per_reply": round(1e3 * cpu_s / replies, 3) if replies else math.nan,
     }
 
 
