@@ -228,13 +228,10 @@ class RosBridge(QObject):
         """Stop the executor thread and shut the private context down (idempotent)."""
         if self._thread is None:
             return
-        self._stopping.set()
-        if self.executor == WAITSET:
-            self._executor.shutdown(timeout_sec=1.0)
+        self._stopping.set()  # ends the events executor's loop ...
+        self._executor.shutdown(timeout_sec=1.0)  # ... and the wait-set one's spin()
         self._thread.join(3.0)
         self._thread = None
-        with suppress(Exception):
-            self._executor.shutdown(timeout_sec=1.0)
         with suppress(Exception):
             self.node.destroy_node()
         with suppress(Exception):
