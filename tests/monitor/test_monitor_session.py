@@ -413,3 +413,38 @@ def test_a_failed_poll_fetch_is_a_marked_gap_from_the_totals():
     assert s.stats.polls == 2000
     truth = integrate_pose(ring.v, ring.w, 0.001)[-1]
     assert np.hypot(*(s.pose.as_array()[:2] - truth[:2])) < 0.01  # the totals kept it close
+
+
+def _map_keep_by_definition(poses: np.ndarray) -> list[int]:
+    """The rule of ``_map_keep`` written out pose by pose: keep pose j (j >= 1) when the
+    distance or the turn travelled since pose 0 enters a new multiple of the spacing;
+    never pose 0 of a reply (unless it is the only one); always the last."""
+    from mm_pc.monitor.model.session import MAP_SPACING_M, MAP_SPACING_RAD
+
+    keep, dist, turn, bins = [], 0.0, 0.0, (0.0, 0.0)
+    for j in range(1, len(poses)):
+        dist += float(np.hypot(poses[j, 0] - poses[j - 1, 0], poses[j, 1] - poses[j - 1, 1]))
+        turn += abs(poses[j, 2] - poses[j - 1, 2])
+        now = (math.floor(dist / MAP_SPACING_M), math.floor(turn / MAP_SPACING_RAD))
+        if now != bins or j == len(poses) - 1:
+            keep.append(j)
+        bins = now
+    return keep if len(poses) > 1 else list(range(len(poses)))
+
+
+def test_map_keep_keeps_the_poses_its_rule_names():
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+    from hypothesis.extra.numpy import arrays
+
+    from mm_pc.monitor.model.session import _map_keep
+
+    steps = st.floats(-0.004, 0.004, allow_nan=False, allow_subnormal=False)
+
+    @settings(max_examples=300, deadline=None)
+    @given(arrays(float, st.tuples(st.integers(0, 12), st.just(3)), elements=steps))
+    def check(deltas):
+        poses = np.cumsum(deltas, axis=0)
+        assert list(_map_keep(poses)) == _map_keep_by_definition(poses)
+
+    check()

@@ -424,8 +424,8 @@ class MapView(QWidget):
     def _follow(self) -> None:
         """Centre the robot once it leaves the middle of the view (``FOLLOW_ZONE``)."""
         rx, ry = self._robot_xy()
+        cx, cy = self.view_centre()
         (x0, x1), (y0, y1) = self.vb.viewRange()
-        cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
         off = abs(rx - cx) > FOLLOW_ZONE * (x1 - x0) or abs(ry - cy) > FOLLOW_ZONE * (y1 - y0)
         if self._follow_pending or off:
             self._show((rx, ry), self.visible_width())
