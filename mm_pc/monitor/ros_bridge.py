@@ -30,6 +30,14 @@ Connection states: ``waiting`` (the node was never seen), ``connected``
 (replies arrive), ``lost`` (it was seen, and now the service is gone or
 requests time out). The bridge keeps asking, so a restarted node is found
 again by itself.
+
+Delivery: the executor thread puts each :class:`Reply` in an inbox and wakes the
+GUI thread only when the inbox was empty; the GUI thread takes the whole inbox
+at most :data:`DELIVERY_INTERVAL_S` after the previous take and emits
+``data_received`` once per reply, in order. At 500 Hz that is ~60 wake-ups of
+the GUI thread a second instead of 500 (each one a cross-thread event and a
+hand-over of the interpreter lock); at 60 Hz and below every reply is handed on
+as it comes (docs/monitor.md, "Threads").
 """
 
 from __future__ import annotations
@@ -44,7 +52,7 @@ from contextlib import suppress
 from dataclasses import dataclass
 from typing import ClassVar
 
-from PySide6.QtCore import QObject, Signal
+from PySide6.QtCore import QObject, QTimer, Signal
 
 from mm_pc.monitor.model.readings import Reading, Reply
 
@@ -57,6 +65,9 @@ WAITING, CONNECTED, LOST = "waiting", "connected", "lost"
 #: the CPU per reply, docs/benchmarks.md) or the Python SingleThreadedExecutor
 EVENTS, WAITSET = "events", "waitset"
 EXECUTORS = (EVENTS, WAITSET)
+#: the GUI thread takes the replies waiting for it at most this often (s): one frame
+#: of a 60 Hz screen, so a batch never holds a reply back longer than a frame
+DELIVERY_INTERVAL_S = 1 / 60
 
 
 def validate_rate(value) -> float:
@@ -108,6 +119,8 @@ class RosBridge(QObject):
     connection_changed = Signal(str)  # waiting | connected | lost
     polling_changed = Signal(bool)  # periodic requests on (True) or paused
     stats_updated = Signal(object)  # BridgeStats, twice a second
+    #: the inbox was empty and now holds a reply (emitted on the executor thread)
+    _inbox_filled = Signal()
 
     def __init__(
         self,
@@ -161,6 +174,14 @@ class RosBridge(QObject):
         self._recording_subs: list = []
         #: live topics that could not be subscribed: topic -> why
         self.recording_skipped: dict[str, str] = {}
+        #: replies for the GUI thread (filled on the executor thread, taken by _deliver)
+        self._inbox: list[Reply] = []
+        self._inbox_lock = threading.Lock()
+        self._delivered_at = -1.0  # time.monotonic() of the last take
+        self._delivery = QTimer(self)
+        self._delivery.setSingleShot(True)
+        self._delivery.timeout.connect(self._deliver)
+        self._inbox_filled.connect(self._schedule_delivery)
 
     # -- life cycle (GUI thread) ---------------------------------------------------------
 
@@ -232,6 +253,9 @@ class RosBridge(QObject):
         self._executor.shutdown(timeout_sec=1.0)  # ... and the wait-set one's spin()
         self._thread.join(3.0)
         self._thread = None
+        self._delivery.stop()
+        with self._inbox_lock:
+            self._inbox.clear()  # nobody listens for them any more
         with suppress(Exception):
             self.node.destroy_node()
         with suppress(Exception):
@@ -432,7 +456,7 @@ class RosBridge(QObject):
         if self.fetch_polls:
             self._fetch_polls(reply, {p.id: p for p in getattr(res, "polls", ())})
         else:
-            self.data_received.emit(reply)
+            self._hand_on(reply)
             self._pay_owed()
 
     # -- the single polls of a reply (executor thread) --------------------------------------
@@ -503,10 +527,35 @@ class RosBridge(QObject):
         self._emit_with_polls(fetch[0], fetch[1])
 
     def _emit_with_polls(self, reply: Reply, polls: dict[str, object]) -> None:
-        self.data_received.emit(
+        self._hand_on(
             Reply(reply.readings, received_s=reply.received_s, rtt_s=reply.rtt_s, polls=polls)
         )
         self._pay_owed()
+
+    # -- delivery to the GUI thread -------------------------------------------------------
+
+    def _hand_on(self, reply: Reply) -> None:
+        """Queue ``reply`` for the GUI thread; wake it only if nothing was waiting yet."""
+        with self._inbox_lock:
+            was_empty = not self._inbox
+            self._inbox.append(reply)
+        if was_empty:
+            self._inbox_filled.emit()
+
+    def _schedule_delivery(self) -> None:
+        """GUI thread: take the inbox now, or one delivery interval after the last take."""
+        if self._delivery.isActive():
+            return
+        wait = self._delivered_at + DELIVERY_INTERVAL_S - time.monotonic()
+        self._delivery.start(max(0, round(wait * 1000)))
+
+    def _deliver(self) -> None:
+        """GUI thread: emit ``data_received`` for every reply waiting, oldest first."""
+        with self._inbox_lock:
+            batch, self._inbox = self._inbox, []
+        self._delivered_at = time.monotonic()
+        for reply in batch:
+            self.data_received.emit(reply)
 
     _SIGNALS: ClassVar[dict[str, tuple[str, str]]] = {
         "get_sensor_settings": ("settings_received", "settings_failed"),

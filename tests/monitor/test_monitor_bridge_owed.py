@@ -41,11 +41,19 @@ class _Client:
         return f
 
 
+def deliver_at_once(bridge: RosBridge) -> None:
+    """These tests drive the executor side by hand: hand each reply on at once instead of
+    through the GUI thread's delivery timer (test_monitor_bridge_delivery tests that)."""
+    bridge._inbox_filled.disconnect(bridge._schedule_delivery)
+    bridge._inbox_filled.connect(bridge._deliver)
+
+
 def _bridge() -> tuple[RosBridge, _Client]:
     bridge = RosBridge(rate_hz=500.0, fetch_polls=False)
     client = _Client()
     bridge._clients = {"get_sensor_data": client}
     bridge._types = {"get_sensor_data": SimpleNamespace(Request=lambda id: id)}
+    deliver_at_once(bridge)
     return bridge, client
 
 

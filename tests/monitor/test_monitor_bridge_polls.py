@@ -55,11 +55,19 @@ class _Client:
         return f
 
 
+def deliver_at_once(bridge: RosBridge) -> None:
+    """These tests drive the executor side by hand: hand each reply on at once instead of
+    through the GUI thread's delivery timer (test_monitor_bridge_delivery tests that)."""
+    bridge._inbox_filled.disconnect(bridge._schedule_delivery)
+    bridge._inbox_filled.connect(bridge._deliver)
+
+
 def _bridge() -> tuple[RosBridge, _Client, _Client]:
     bridge = RosBridge(rate_hz=100.0)
     data, samples = _Client(), _Client()
     bridge._clients = {"get_sensor_data": data, "get_samples": samples}
     bridge._types = {"get_sensor_data": GetSensorData, "get_samples": GetSamples}
+    deliver_at_once(bridge)
     return bridge, data, samples
 
 
