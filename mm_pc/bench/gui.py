@@ -45,6 +45,7 @@ def _live_cpu(window, bridge, app, rate_hz: float, seconds: float) -> dict:
     window.frame_timer.start()
     loop.exec()
     proc = psutil.Process()
+    used0 = window.ctx.session.stats.used
     c0, r0, s0, t0 = proc.cpu_times(), bridge.replies, bridge.skipped_ticks, time.perf_counter()
     QTimer.singleShot(int(seconds * 1000), loop.quit)
     loop.exec()
@@ -54,6 +55,9 @@ def _live_cpu(window, bridge, app, rate_hz: float, seconds: float) -> dict:
     return {
         **cpu_figures((c1.user + c1.system) - (c0.user + c0.system), wall, replies),
         "replies": replies,
+        # replies the session turned into rows: a slot that raised would make the CPU
+        # figures look good while nothing was processed
+        "rows": window.ctx.session.stats.used - used0,
         "skipped_ticks": s1 - s0,
         "seconds": round(wall, 2),
     }

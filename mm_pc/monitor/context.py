@@ -1,13 +1,14 @@
 """What every view of the monitor shares: the session, the bridge and a few signals.
 
 Views get one :class:`MonitorContext` and never talk to each other directly.
-Replies (live from the bridge, or from a replay) enter through
-:meth:`MonitorContext.on_reply`, which runs the session's processing, hands
+Replies (live from the bridge in batches, or one by one from a replay) enter
+through :meth:`MonitorContext.on_replies`, which runs the session's processing, hands
 the raw reply to a recorder if one is attached, and announces it.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -44,7 +45,7 @@ class MonitorContext(QObject):
     tests); views must check ``bridge is not None`` before asking the node.
     """
 
-    reply_processed = Signal(object)  # Reply, after the session took it
+    reply_processed = Signal(object)  # the newest Reply, after the session took a batch
     devices_known = Signal(tuple)  # sensor ids, once the first reply named them
     session_reset = Signal()  # paths, graphs and pose cleared
     calibration_changed = Signal()  # a new calibration is in force
@@ -68,13 +69,22 @@ class MonitorContext(QObject):
 
     def on_reply(self, reply: Reply) -> None:
         """Process one reply (GUI thread) and tell the views."""
+        self.on_replies((reply,))
+
+    def on_replies(self, replies: Sequence[Reply]) -> None:
+        """Process replies delivered together, oldest first (GUI thread: the bridge's
+        ``data_received``); the views are told once, with the newest."""
+        if not replies:
+            return
         known = bool(self.session.devices)
-        self.session.process(reply)
-        if self.recorder is not None:
+        self.session.process_batch(replies)
+        for reply in replies:
+            if self.recorder is None:
+                break  # it detached itself (a write failed)
             self.recorder.write_reply(reply)
         if not known and self.session.devices:
             self.devices_known.emit(self.session.devices)
-        self.reply_processed.emit(reply)
+        self.reply_processed.emit(replies[-1])
 
     def reset(self) -> None:
         """Reset path and values (pose to the origin); counting carries on."""

@@ -8,6 +8,7 @@ link state, round-trip time and achieved sample rate from the bridge.
 
 from __future__ import annotations
 
+import math
 import time
 from collections import deque
 
@@ -40,6 +41,8 @@ from mm_pc.monitor.widgets.style import ERROR_STYLE
 __all__ = ["ACHIEVED_OK", "DEFAULT_SIZE", "FRAME_HZ", "MainWindow", "RateEditor"]
 
 FRAME_HZ = 30.0
+#: the status bar's sample count is renewed at most this often (s)
+ROWS_LABEL_PERIOD_S = 0.5
 #: the Control dock's width (px); with the Direction dock and the tabs the window fits 1024 px
 CONTROL_DOCK_WIDTH = 255
 #: the window's size on a first start (clamped to the screen)
@@ -196,7 +199,7 @@ class MainWindow(QMainWindow):
             app.focusChanged.connect(self._export_filter.on_focus)
         ctx.status_message.connect(lambda m: self.statusBar().showMessage(m, 5000))
         if ctx.bridge is not None:
-            ctx.bridge.data_received.connect(ctx.on_reply)
+            ctx.bridge.data_received.connect(ctx.on_replies)
             ctx.bridge.connection_changed.connect(self._on_state)
             ctx.bridge.stats_updated.connect(self._on_stats)
             ctx.bridge.data_failed.connect(self._on_data_failed)
@@ -399,6 +402,7 @@ class MainWindow(QMainWindow):
         self.rtt_label = QLabel("RTT –")
         self.rate_label = QLabel("– Hz")
         self.rows_label = QLabel("")
+        self._rows_shown_at = -math.inf  # time.perf_counter() of its last text
         self.rtt_label.setToolTip("round-trip time of a data request, median of the last ones")
         self.rate_label.setToolTip("replies per second achieved (the last 2 s)")
         self.chips_label = QLabel("")
@@ -417,7 +421,9 @@ class MainWindow(QMainWindow):
             current.refresh()
         self.direction_panel.refresh()
         hist = self.ctx.session.history
-        if hist is not None:
+        if hist is not None and t0 >= self._rows_shown_at + ROWS_LABEL_PERIOD_S:
+            # a new text re-lays the status bar out and repaints all of it: not every frame
+            self._rows_shown_at = t0
             self.rows_label.setText(f"{len(hist)} samples")
         self._show_chips()
         self.frame_ms.append((time.perf_counter() - t0) * 1e3)

@@ -235,7 +235,7 @@ def _detach_bridge(ctx) -> tuple[bool, bool]:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         try:
-            connected = bool(bridge.data_received.disconnect(ctx.on_reply))
+            connected = bool(bridge.data_received.disconnect(ctx.on_replies))
         except (RuntimeError, TypeError):
             connected = False
     return polling, connected
@@ -246,7 +246,7 @@ def _reattach_bridge(ctx, polling: bool, connected: bool) -> None:
     if bridge is None:
         return
     if connected:
-        bridge.data_received.connect(ctx.on_reply)
+        bridge.data_received.connect(ctx.on_replies)
     if polling:
         bridge.set_polling(True)
 

@@ -33,8 +33,8 @@ again by itself.
 
 Delivery: the executor thread puts each :class:`Reply` in an inbox and wakes the
 GUI thread only when the inbox was empty; the GUI thread takes the whole inbox
-at most :data:`DELIVERY_INTERVAL_S` after the previous take and emits
-``data_received`` once per reply, in order. At 500 Hz that is ~60 wake-ups of
+at most :data:`DELIVERY_INTERVAL_S` after the previous take and emits it as
+one ``data_received`` (a list of replies, oldest first). At 500 Hz that is ~60 wake-ups of
 the GUI thread a second instead of 500 (each one a cross-thread event and a
 hand-over of the interpreter lock); at 60 Hz and below every reply is handed on
 as it comes (docs/monitor.md, "Threads").
@@ -108,7 +108,7 @@ class RosBridge(QObject):
     requests. ``timeout_s``: a request older than this is abandoned.
     """
 
-    data_received = Signal(object)  # Reply
+    data_received = Signal(object)  # list[Reply] delivered together, oldest first
     data_failed = Signal(str)  # what went wrong (success=false, or no reply)
     settings_received = Signal(str, object)  # id, mm_interfaces/SensorSettings
     settings_failed = Signal(str, str)  # id, message
@@ -550,12 +550,12 @@ class RosBridge(QObject):
         self._delivery.start(max(0, round(wait * 1000)))
 
     def _deliver(self) -> None:
-        """GUI thread: emit ``data_received`` for every reply waiting, oldest first."""
+        """GUI thread: emit the replies waiting as one ``data_received``, oldest first."""
         with self._inbox_lock:
             batch, self._inbox = self._inbox, []
         self._delivered_at = time.monotonic()
-        for reply in batch:
-            self.data_received.emit(reply)
+        if batch:
+            self.data_received.emit(batch)
 
     _SIGNALS: ClassVar[dict[str, tuple[str, str]]] = {
         "get_sensor_settings": ("settings_received", "settings_failed"),

@@ -52,6 +52,8 @@ def test_bench_gui_reports_every_figure(qapp):
     for hz, live in r["live"].items():
         assert 0 < live["achieved_hz"] <= float(hz) * 1.2, (hz, live)
         assert live["replies"] > 0 and 0 < live["cpu_percent_one_core"] < 200.0 + 1, live
+        # every reply became a row (a slot that raised would leave them unprocessed)
+        assert live["replies"] - 2 <= live["rows"] <= live["replies"] + 2, live
         per_reply_ms = 10.0 * live["cpu_percent_one_core"] / live["achieved_hz"]
         assert math.isclose(live["cpu_ms_per_reply"], per_reply_ms, rel_tol=0.05), live
 

@@ -60,7 +60,7 @@ def _bridge() -> tuple[RosBridge, _Client]:
 def test_a_skipped_tick_is_asked_for_when_the_reply_is_done(qapp):
     bridge, client = _bridge()
     got = []
-    bridge.data_received.connect(got.append)
+    bridge.data_received.connect(got.extend)
     bridge._tick()
     bridge._tick()  # the first request is still out: skipped and owed
     assert len(client.sent) == 1 and bridge.skipped_ticks == 1

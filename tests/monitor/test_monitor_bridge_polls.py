@@ -90,7 +90,7 @@ def _polls(device: str, since: int, until: int) -> SensorPolls:
 def test_polls_are_asked_for_in_the_data_request_and_used(qapp):
     bridge, data, samples = _bridge()
     got = []
-    bridge.data_received.connect(got.append)
+    bridge.data_received.connect(got.extend)
     bridge._tick()
     req, fut = data.sent[-1]
     assert list(req.polls_ids) == []  # no cursor yet: nothing to ask
@@ -109,7 +109,7 @@ def test_polls_are_asked_for_in_the_data_request_and_used(qapp):
 def test_an_older_node_without_polls_gets_one_get_samples_per_sensor(qapp):
     bridge, data, samples = _bridge()
     got = []
-    bridge.data_received.connect(got.append)
+    bridge.data_received.connect(got.extend)
     bridge._tick()
     data.sent[-1][1].finish(_data({S0: 100, S1: 100}, old_node=True))
     bridge._tick()
@@ -133,7 +133,7 @@ def test_a_sensor_missing_from_the_reply_polls_is_fetched_alone(qapp):
     (not what was asked) is not used either."""
     bridge, data, samples = _bridge()
     got = []
-    bridge.data_received.connect(got.append)
+    bridge.data_received.connect(got.extend)
     bridge._tick()
     data.sent[-1][1].finish(_data({S0: 100, S1: 100}))
     bridge._tick()
@@ -149,7 +149,7 @@ def test_a_sensor_missing_from_the_reply_polls_is_fetched_alone(qapp):
 def test_cursors_a_restarted_node_refuses_are_dropped_without_a_failure(qapp):
     bridge, data, _samples = _bridge()
     got, failed = [], []
-    bridge.data_received.connect(got.append)
+    bridge.data_received.connect(got.extend)
     bridge.data_failed.connect(failed.append)
     bridge._tick()
     data.sent[-1][1].finish(_data({S0: 5000, S1: 5000}))
@@ -196,7 +196,7 @@ def test_every_poll_once_against_a_real_node(qtbot, in_reply):
     bridge = RosBridge("/mm_beagle", 100.0, node_name=f"mm_monitor_polls_{int(in_reply)}")
     bridge.polls_in_reply = in_reply
     got = []
-    bridge.data_received.connect(got.append)
+    bridge.data_received.connect(got.extend)
     params = {"backend": "sim", "sim_trajectory": "figure_eight"}
     with beagle_process(params, env=dict(os.environ)):
         bridge.start()

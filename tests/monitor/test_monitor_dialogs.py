@@ -681,10 +681,10 @@ def test_debug_view_listens_to_replies_only_while_a_manual_request_waits(qtbot, 
     view.request_sample()
     view.request_sample()  # pressed twice before the reply: still one listener
     assert bridge.receivers(data) == bridge.receivers(failed) == 1
-    bridge.data_received.emit(replies[0])
+    bridge.data_received.emit([replies[0]])
     assert view.table.rowCount() == 1
     assert bridge.receivers(data) == bridge.receivers(failed) == 0
-    bridge.data_received.emit(replies[1])  # a periodic reply: not a row
+    bridge.data_received.emit([replies[1]])  # a periodic reply: not a row
     assert view.table.rowCount() == 1
     view.request_sample()
     bridge.data_failed.emit("no reply within 2 s")
@@ -697,7 +697,7 @@ def test_debug_view_lists_manual_replies_and_single_polls(qtbot, ctx, screenshot
     pytest.importorskip("mm_interfaces")
     bridge = RosBridge()  # not started
     ctx.bridge = bridge
-    bridge.data_received.connect(ctx.on_reply)  # as the main window does
+    bridge.data_received.connect(ctx.on_replies)  # as the main window does
     asked = []
     bridge.request_samples = lambda dev, since_seq=0, max_samples=0: asked.append(
         (dev, since_seq, max_samples)
@@ -706,7 +706,7 @@ def test_debug_view_lists_manual_replies_and_single_polls(qtbot, ctx, screenshot
     qtbot.addWidget(view)
     view.resize(1100, 750)
     replies = list(sim_replies("figure_eight", 20, seconds=3))
-    bridge.data_received.emit(replies[0])  # periodic: not a row
+    bridge.data_received.emit([replies[0]])  # periodic: not a row
     assert view.fetch_buttons.keys() == {D0, D1}
     qtbot.mouseClick(view.pause_button, Qt.LeftButton)
     assert bridge.polling is False and view.pause_button.text() == "Resume polling"
@@ -715,7 +715,7 @@ def test_debug_view_lists_manual_replies_and_single_polls(qtbot, ctx, screenshot
         if len(manual) < 12 and r is not replies[-1]:
             qtbot.mouseClick(view.request_button, Qt.LeftButton)
             manual.append(r)
-        bridge.data_received.emit(r)
+        bridge.data_received.emit([r])
     assert view.table.rowCount() == len(manual) == 12
     assert len(ctx.session.history) == len(replies) - 1  # every reply processed
     r = manual[3].by_id()
@@ -763,8 +763,8 @@ def test_manual_request_against_the_node_loses_no_counts(qtbot, beagle_node, tmp
     bridge = RosBridge(rate_hz=50.0)
     ctx = MonitorContext(MonitorSession(), bridge, MonitorConfig(calibration_file=tmp_path / "c"))
     replies: list[Reply] = []
-    bridge.data_received.connect(replies.append)
-    bridge.data_received.connect(ctx.on_reply)
+    bridge.data_received.connect(replies.extend)
+    bridge.data_received.connect(ctx.on_replies)
     view = DebugView(ctx)
     health = HealthView(ctx)
     qtbot.addWidget(view)

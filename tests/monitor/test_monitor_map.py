@@ -820,6 +820,22 @@ def test_gain_peak_is_a_speed_percentile_over_one_second():
     assert gain_peak(t, v, np.zeros_like(t)) == pytest.approx(0.1 * 0.01)
 
 
+def test_the_gain_percentile_is_numpys_percentile():
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+    from hypothesis.extra.numpy import arrays
+
+    from mm_pc.monitor.widgets.direction_widget import _percentile
+
+    @settings(max_examples=300, deadline=None)
+    @given(arrays(float, st.integers(1, 40), elements=st.floats(-1e3, 1e3)),
+           st.floats(0.0, 100.0))  # fmt: skip
+    def check(a, q):
+        assert _percentile(a, q) == pytest.approx(float(np.percentile(a, q)), abs=1e-9)
+
+    check()
+
+
 def test_direction_refresh_skips_unchanged_history(panel, ctx, monkeypatch, feed):
     feed(ctx, rate_hz=50, seconds=2)
     panel.refresh()

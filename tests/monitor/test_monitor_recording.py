@@ -536,12 +536,12 @@ def test_live_bridge_is_paused_and_disconnected_while_replaying(qtbot, tmp_path,
     window = make_window(qtbot, tmp_path, bridge)
     live = list(sim_replies("straight", 50.0, 1.0, start_ns=1_800_000_000_000_000_000))
     for r in live[:20]:
-        bridge.data_received.emit(r)  # as the bridge thread would
+        bridge.data_received.emit([r])  # as the bridge thread would
     assert window.ctx.session.stats.replies == 20
     replayer = start_replay(window, path, 10.0)
     assert not bridge.polling
     n = window.ctx.session.stats.replies
-    bridge.data_received.emit(live[20])  # a reply still in flight: ignored
+    bridge.data_received.emit([live[20]])  # a reply still in flight: ignored
     assert window.ctx.session.stats.replies == n
     replayer.pause()
     pos = replayer.position
@@ -552,13 +552,13 @@ def test_live_bridge_is_paused_and_disconnected_while_replaying(qtbot, tmp_path,
         pass
     assert not bridge.polling  # ended: the replayed path stays, live data waits
     rows = len(window.ctx.session.history)
-    bridge.data_received.emit(live[21])
+    bridge.data_received.emit([live[21]])
     assert len(window.ctx.session.history) == rows  # never added to the replayed path
     window.leave_replay()  # Back to live: a new path
     assert bridge.polling
     assert len(window.ctx.session.history) == 0
-    bridge.data_received.emit(live[21])  # a new baseline at t = 0, no jump
-    bridge.data_received.emit(live[22])
+    bridge.data_received.emit([live[21]])  # a new baseline at t = 0, no jump
+    bridge.data_received.emit([live[22]])
     assert len(window.ctx.session.history) == 1
     assert window.ctx.session.history.column("t")[0] == pytest.approx(0.02)
     assert window.ctx.session.pose.x == pytest.approx(0.004, abs=2e-5)

@@ -166,12 +166,12 @@ def test_times_run_from_0_of_the_recording_and_never_jump(qtbot, tmp_path, run4)
     window = make_window(qtbot, tmp_path, bridge)
     live = list(sim_replies("straight", 50.0, 2.0, start_ns=LIVE_NS))
     for r in live[:30]:
-        bridge.data_received.emit(r)
+        bridge.data_received.emit([r])
     replayer = start_replay(window, run4, "max")
-    bridge.data_received.emit(live[30])  # in flight while replaying: not shown
+    bridge.data_received.emit([live[30]])  # in flight while replaying: not shown
     qtbot.waitUntil(lambda: replayer.done, timeout=10_000)
     for r in live[31:40]:
-        bridge.data_received.emit(r)  # ended, not yet back to live: still not shown
+        bridge.data_received.emit([r])  # ended, not yet back to live: still not shown
     t = window.ctx.session.history.column("t")
     assert len(t) == 200 and t[0] == pytest.approx(0.02) and t[-1] == pytest.approx(4.0)
     assert np.all(np.diff(t) > 0)
@@ -187,7 +187,7 @@ def test_times_run_from_0_of_the_recording_and_never_jump(qtbot, tmp_path, run4)
     assert table.csv_prefix == "run4"
     leave_replay(window)
     for r in live[40:60]:
-        bridge.data_received.emit(r)
+        bridge.data_received.emit([r])
     t = window.ctx.session.history.column("t")
     assert len(t) == 19 and t[0] == pytest.approx(0.02) and np.all(np.diff(t) > 0)
     assert "live" in data.time_base.text() and table.csv_prefix == ""
@@ -206,7 +206,7 @@ def test_a_replay_of_other_sensors_shows_in_the_data_list_and_live_gets_its_own_
     window = make_window(qtbot, tmp_path, bridge)
     live = list(sim_replies("straight", 50.0, 1.0, start_ns=LIVE_NS))
     for r in live[:10]:
-        bridge.data_received.emit(r)
+        bridge.data_received.emit([r])
     replayer = start_replay(window, path, "max")
     qtbot.waitUntil(lambda: replayer.done, timeout=10_000)
     data = window.views["Data"]
@@ -216,7 +216,7 @@ def test_a_replay_of_other_sensors_shows_in_the_data_list_and_live_gets_its_own_
     assert model.session is window.ctx.session and model.rowCount() == 50
     leave_replay(window)
     for r in live[10:15]:
-        bridge.data_received.emit(r)
+        bridge.data_received.emit([r])
     assert window.ctx.session.devices == ("/dev/spidev1.0", "/dev/spidev1.1")
     assert len(window.ctx.session.history) == 4
 
@@ -235,7 +235,7 @@ def test_a_bad_file_is_reported_in_a_dialog_and_the_log_before_anything_changes(
     bridge = unused_bridge("mm_monitor_replay_bad")
     window = make_window(qtbot, tmp_path, bridge)
     for r in sim_replies("straight", 50.0, 0.5, start_ns=LIVE_NS):
-        bridge.data_received.emit(r)
+        bridge.data_received.emit([r])
     session, rows = window.ctx.session, len(window.ctx.session.history)
     with caplog.at_level(logging.WARNING, logger="mm_pc.monitor.replay"):
         load_in_background(window, bad, 1.0)  # what File > Replay does after the file dialog
@@ -283,7 +283,7 @@ def test_a_second_replay_keeps_the_live_state_of_before_the_first(qtbot, tmp_pat
     bridge = unused_bridge("mm_monitor_replay_twice")
     window = make_window(qtbot, tmp_path, bridge)
     for r in sim_replies("straight", 50.0, 0.5, start_ns=LIVE_NS):
-        bridge.data_received.emit(r)
+        bridge.data_received.emit([r])
     first = start_replay(window, run4, 1.0)
     assert not bridge.polling
     other = tmp_path / "other.mcap"
@@ -301,7 +301,7 @@ def test_a_second_replay_keeps_the_live_state_of_before_the_first(qtbot, tmp_pat
     assert bridge.polling  # as before the first replay
     assert len(window.ctx.session.history) == 0  # a new path
     for r in list(sim_replies("straight", 50.0, 1.0, start_ns=LIVE_NS))[30:33]:
-        bridge.data_received.emit(r)  # live feeds again: a baseline and two steps
+        bridge.data_received.emit([r])  # live feeds again: a baseline and two steps
     assert len(window.ctx.session.history) == 2
     assert window.ctx.session.pose.x == pytest.approx(0.008, abs=1e-4)
 

@@ -448,3 +448,98 @@ def test_map_keep_keeps_the_poses_its_rule_names():
         assert list(_map_keep(poses)) == _map_keep_by_definition(poses)
 
     check()
+
+
+# -- replies delivered together (process_batch) ---------------------------------------------
+
+
+def _batched(replies, n):
+    return [replies[i : i + n] for i in range(0, len(replies), n)]
+
+
+def _sessions_one_by_one_and_batched(replies, n=8):
+    one, many = MonitorSession(devices=DEVS), MonitorSession(devices=DEVS)
+    made = sum(one.process(r) for r in replies)
+    assert sum(many.process_batch(b) for b in _batched(replies, n)) == made
+    return one, many
+
+
+def test_a_batch_gives_the_rows_and_pose_of_its_replies_one_by_one():
+    """500 Hz replies in batches of 8 (a 60 Hz frame's worth): the same rows, values and
+    per-poll pose as one reply at a time; fewer map rows (one forced per batch)."""
+    from fakes import FakeRing
+
+    from mm_pc.monitor.model.session import ROBOT_FIELDS, SENSOR_FIELDS
+    from mm_pc.sim.robot import request_boundaries
+
+    v, w = trajectory("s_curves")
+    ring = FakeRing(v[:6000], w[:6000])
+    ends = [int(e) for e in request_boundaries(ring.n_polls, 500.0)]
+    one, many = _sessions_one_by_one_and_batched(_poll_replies(ring, [0, *ends]))
+    assert np.allclose(one.pose.as_array(), many.pose.as_array(), rtol=0, atol=1e-12)
+    assert len(one.history) == len(many.history) == len(ends)
+    cols = [*ROBOT_FIELDS, *(f"s{k}_{f}" for k in range(2) for f in SENSOR_FIELDS)]
+    for c in cols:
+        a, b = one.history.column(c), many.history.column(c)
+        assert np.allclose(a, b, rtol=0, atol=1e-12, equal_nan=True), c
+    for s in (one, many):
+        assert s.stats.polls == ring.n_polls and s.stats.gaps == 0 and s.stats.used == len(ends)
+    assert len(many.map_history) < len(one.map_history)
+    assert (many.map_history.column("x")[-1], many.map_history.column("y")[-1]) == (
+        many.pose.x, many.pose.y)  # fmt: skip
+
+
+def test_a_lift_released_later_in_the_batch_is_in_the_earlier_rows_pose():
+    """A lift holds steps back until it has closed; in a batch a row's pose is the per-poll
+    pose at its stamp, so a row may already show steps one by one would show a reply later.
+    The end pose and every row's per-reply values are the same."""
+    from fakes import FakeRing
+
+    from mm_pc.sim.robot import request_boundaries
+
+    v, w = trajectory("s_curves")
+    lifted = np.zeros(4000, bool)
+    lifted[1500:1540] = True
+    ring = FakeRing(v[:4000], w[:4000], lifted=lifted)
+    ends = [int(e) for e in request_boundaries(ring.n_polls, 500.0)]
+    one, many = _sessions_one_by_one_and_batched(_poll_replies(ring, [0, *ends]))
+    assert np.allclose(one.pose.as_array(), many.pose.as_array(), rtol=0, atol=1e-12)
+    for c in ("t", "dt", "s0_raw_dx", "s1_raw_dy", "s0_lifts"):
+        assert np.array_equal(one.history.column(c), many.history.column(c)), c
+    x1, xb = one.history.column("x"), many.history.column("x")
+    differ = np.flatnonzero(~np.isclose(x1, xb, rtol=0, atol=1e-12))
+    assert len(differ) > 0  # the held-back steps
+    t = one.history.column("t")
+    assert t[differ].min() > 1.5 and t[differ].max() < 1.7  # only around the lift
+
+
+def test_a_failed_fetch_in_a_batch_makes_one_gap_and_the_next_batch_uses_its_polls():
+    from fakes import FakeRing
+
+    from mm_pc.sim.robot import request_boundaries
+
+    v, w = trajectory("s_curves")
+    ring = FakeRing(v[:3000], w[:3000])
+    ends = [int(e) for e in request_boundaries(ring.n_polls, 500.0)]
+    bad = ends[len(ends) // 2]
+    replies = _poll_replies(ring, [0, *ends], skip=(bad,))
+    s = MonitorSession(devices=DEVS)
+    for b in _batched(replies, 8):
+        s.process_batch(b)
+    assert s.stats.gaps == 1 and len(s.gaps) == 1 and "no polls" in s.gaps[0].reason
+    assert len(s.history) == len(ends)
+    # the gap spans the batch holding the failed fetch (at most 8 replies = 16 ms of polls)
+    assert ring.n_polls - 8 * 2 <= s.stats.polls < ring.n_polls
+    truth = integrate_pose(ring.v, ring.w, 0.001)[-1]
+    assert np.hypot(*(s.pose.as_array()[:2] - truth[:2])) < 1e-3
+
+
+def test_a_restart_inside_a_batch_is_a_baseline_between_its_rows():
+    one, many = MonitorSession(), MonitorSession()
+    first = [reply(k, {A: (0, 0.01 * k), B: (0, 0.01 * k)}) for k in range(0, 50, 10)]
+    second = [reply(k, {A: (0, 0.01 * k), B: (0, 0.01 * k)}, node=1) for k in range(0, 50, 10)]
+    for r in first + second:
+        one.process(r)
+    assert many.process_batch(first + second) == len(one.history) == 8
+    assert many.stats.restarts == one.stats.restarts == 1
+    assert np.array_equal(one.history.column("y"), many.history.column("y"))

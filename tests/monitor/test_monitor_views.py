@@ -686,7 +686,7 @@ def test_registers_refresh_from_the_real_node(qtbot, beagle, screenshot):
 @pytest.mark.ros
 def test_resolution_with_the_real_node(qtbot, beagle, monkeypatch):
     ctx = MonitorContext(MonitorSession(), bridge=beagle)
-    beagle.data_received.connect(ctx.on_reply)
+    beagle.data_received.connect(ctx.on_replies)
     try:
         panel = ResolutionPanel(ctx)
         qtbot.addWidget(panel)
@@ -728,4 +728,4 @@ def test_resolution_with_the_real_node(qtbot, beagle, monkeypatch):
         qtbot.mouseClick(row.set_button, Qt.LeftButton)
         qtbot.waitUntil(lambda: row.read_back.text() == "read back: 1600 CPI", timeout=5000)
     finally:
-        beagle.data_received.disconnect(ctx.on_reply)
+        beagle.data_received.disconnect(ctx.on_replies)

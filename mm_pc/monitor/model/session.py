@@ -28,6 +28,12 @@ Every reply of mm_beagle (live, or replayed from a recording) goes through
 5. One row in the :class:`~.history.History` per reply, read by the views
    (the per-reply values: Graphs and Data show what each request served).
 
+:meth:`MonitorSession.process_batch` takes the replies the bridge delivers
+together (up to a screen frame's worth): each reply is checked and gets its
+row as above, but the single polls of all of them go through the poll
+tracker and the pose integration once, and a row's pose is the per-poll pose
+at its reply's stamp (docs/monitor.md, "Threads").
+
 Units and frames: metres, seconds, radians. Sensor displacements are in the
 sensor frame of the seed (X right, Y forward); poses are odom -> base_link
 (REP 103/105). Sensor world positions are the mount points carried by the pose.
@@ -39,6 +45,7 @@ import math
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -112,6 +119,17 @@ def _map_keep(poses: np.ndarray) -> np.ndarray:
     new[2:] = (dist_bin[1:] != dist_bin[:-1]) | (turn_bin[1:] != turn_bin[:-1])
     new[-1] = True
     return np.flatnonzero(new)
+
+
+class _Deferred(NamedTuple):
+    """A reply checked and turned into deltas, waiting for its pose (``t``, ``dt``: s)."""
+
+    reply: Reply
+    now: list[Reading]
+    raw: list[tuple[float, float]]
+    processed: list[tuple[float, float]]
+    t: float
+    dt: float
 
 
 def sensor_columns(k: int) -> dict[str, str]:
@@ -217,6 +235,9 @@ class MonitorSession:
         self._poll_filters: dict[str, SensorMedianFilter] = {}
         #: polls fetched with replies that made no step, joined to the next one's
         self._stash: dict[str, list] = {}
+        #: replies of a batch whose rows wait for the batch's per-poll poses
+        self._deferred: list[_Deferred] = []
+        self._batching = False
         if devices is not None:
             self._set_devices(tuple(devices))
 
@@ -475,6 +496,22 @@ class MonitorSession:
             return r.x_total + r.x_lift_total, r.y_total + r.y_lift_total
         return r.x_total, r.y_total
 
+    def process_batch(self, replies: Sequence[Reply]) -> int:
+        """Take replies delivered together, oldest first; the number of rows made.
+
+        The same as :meth:`process` one by one, except that the single polls of
+        the whole batch are integrated in one go: a row's pose is the newest
+        per-poll pose at or before its reply's stamp (a lift held back at one
+        reply and released by a later one of the batch is in the earlier row
+        already), and polls that do not fit make the batch's interval one gap step.
+        """
+        self._batching = True
+        try:
+            return sum(self.process(r) for r in replies)
+        finally:
+            self._batching = False
+            self._flush()
+
     def process(self, reply: Reply) -> bool:
         """Take one reply; True when it produced a history row.
 
@@ -503,6 +540,7 @@ class MonitorSession:
             r.seq < p.seq or r.instance_id != p.instance_id for r, p in zip(now, prev, strict=True)
         ):  # a new identity is a restart even when the new node's seq is past the old one's
             restarted = all(p is not None for p in prev)
+            self._flush()  # the rows before the restart get the poses before it
             self._baseline(now, restarted)
             return False
         dt = (now[0].stamp_ns - prev[0].stamp_ns) / 1e9
@@ -541,14 +579,44 @@ class MonitorSession:
             processed.append(self.calibration.apply(r.id, fx, fy))
         if self.calibrating:
             self._record_calibration(raw)
+        self.stats.used += 1
         if reply.polls is not None:
-            pose = self._pose_from_polls(reply, now, t)
-        elif self.calibrating:
+            self._stash_polls(reply)
+            self._deferred.append(_Deferred(reply, now, raw, processed, t, dt))
+            if not self._batching:
+                self._flush()
+            return
+        self._flush()  # rows in the order of their replies
+        if self.calibrating:
             pose = self.odometry.pose
         else:
             self.stats.per_reply += 1
             pose = self.odometry.update(Sample.of(dt, *processed))
-        self.stats.used += 1
+        self._row(_Deferred(reply, now, raw, processed, t, dt), pose)
+        self._append_map(t, pose)
+
+    def _flush(self) -> None:
+        """The rows of the deferred replies: their polls integrated in one go, each row
+        with the pose at its reply's stamp; the map's rows from the per-poll poses."""
+        if not self._deferred:
+            return
+        group, self._deferred = self._deferred, []
+        last = group[-1]
+        before = self.odometry.pose
+        pose = self._pose_from_polls(last.now, last.t)
+        if self._poll_poses is not None and len(group) > 1:
+            ts, poses = self._poll_poses
+            at = np.searchsorted(ts, [d.t for d in group], side="right") - 1
+            for d, j in zip(group, at.tolist(), strict=True):
+                self._row(d, before if j < 0 else Pose2D(*map(float, poses[j])))
+        else:
+            for d in group:
+                self._row(d, pose)
+        self._append_map(last.t, pose)
+
+    def _row(self, d: _Deferred, pose: Pose2D) -> None:
+        """The history row and the log lines of one reply with ``pose`` as its pose."""
+        reply, now, raw, processed, t, dt = d
         residual = self.odometry.residual
         row = [
             t,
@@ -572,7 +640,6 @@ class MonitorSession:
                 )
             )
         self.history.append(row)
-        self._append_map(t, pose)
 
     def _append_map(self, t: float, pose: Pose2D) -> None:
         """The map's rows for this reply: its per-poll poses (decimated) or the reply's pose."""
@@ -592,12 +659,12 @@ class MonitorSession:
             rows[:, 5 + 2 * k] = poses[:, 1] + s * m.x + c * m.y
         self.map_history.extend(rows)
 
-    def _pose_from_polls(self, reply: Reply, now: list[Reading], t: float) -> Pose2D:
-        """Integrate the single polls the reply's totals cover; a gap step where they are
-        missing. The pose after the newest step made (an open lift holds steps back)."""
+    def _pose_from_polls(self, now: list[Reading], t: float) -> Pose2D:
+        """Integrate the single polls stashed up to the totals ``now`` (at ``t``, s); a gap
+        step where they are missing. The pose after the newest step made (an open lift
+        holds steps back)."""
         batches: list[PollBatch | None] = []
         bad = ""
-        self._stash_polls(reply)
         for dev in self.devices:
             parts = self._stash.pop(dev, [])
             try:

@@ -2,11 +2,12 @@
 
 * "Pause polling" stops the bridge's periodic data requests
   (``RosBridge.set_polling``); "Request sample" sends one request
-  (``RosBridge.request_once``). Its reply goes through ``ctx.on_reply`` like
+  (``RosBridge.request_once``). Its reply goes through ``ctx.on_replies`` like
   every reply (the main window connects ``bridge.data_received`` to it), so
   no counts are lost and the map moves; this view only *also* listens to
   ``bridge.data_received`` to recognise the reply to the manual request: the
-  next reply after pressing the button (exact while polling is paused).
+  newest reply of the next delivery after pressing the button (exact while
+  polling is paused).
 * The table lists those manual replies: time, and per sensor the counts of
   the interval (``x_counts``/``y_counts``, sensor frame: X right, Y forward),
   the same in mm (at the CPI in force), polls covered and the interval.
@@ -224,11 +225,12 @@ class DebugView(QWidget):
                 with suppress(RuntimeError, TypeError):
                     signal.disconnect(slot)
 
-    def _on_data(self, reply: Reply) -> None:
+    def _on_data(self, replies: list[Reply]) -> None:
+        """The first delivery after the manual request: its newest reply is the answer."""
         if not self._awaiting:
             return
         self._listen(False)
-        self.add_manual_reply(reply)
+        self.add_manual_reply(replies[-1])
 
     def _on_data_failed(self, message: str) -> None:
         if self._awaiting:

@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 from PySide6.QtCore import QPointF, QRectF, Qt
-from PySide6.QtGui import QColor, QFont, QFontMetricsF, QPainter, QPen, QPolygonF
+from PySide6.QtGui import QColor, QFont, QFontMetricsF, QPainter, QPen, QPixmap, QPolygonF
 from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
 
 from mm_pc.monitor.context import MonitorContext
@@ -66,7 +66,17 @@ def gain_peak(t: np.ndarray, vx: np.ndarray, vy: np.ndarray,
     steps = steps[np.isfinite(steps) & (steps > 0)]
     if not len(speed) or not len(steps):
         return 0.0
-    return float(np.percentile(speed, percentile) * np.median(steps))
+    return _percentile(speed, percentile) * _percentile(steps, 50.0)
+
+
+def _percentile(a: np.ndarray, q: float) -> float:
+    """``np.percentile(a, q)`` (linear) by two partitions: this runs every frame, and
+    np.percentile's own overhead is several times the work for a second of rows."""
+    k = (len(a) - 1) * q / 100.0
+    lo = int(k)
+    hi = min(lo + 1, len(a) - 1)
+    part = np.partition(a, (lo, hi))
+    return float(part[lo] + (part[hi] - part[lo]) * (k - lo))
 
 
 class DirectionWidget(QWidget):
@@ -85,6 +95,9 @@ class DirectionWidget(QWidget):
         self.dx = self.dy = 0.0  # m, sensor frame
         self.speed = 0.0  # m/s
         self.setMinimumSize(140, 140)
+        # paintEvent fills the whole rect: Qt need not paint the panel and window under it
+        self.setAttribute(Qt.WidgetAttribute.WA_OpaquePaintEvent)
+        self._dial_cache: tuple[tuple, QPixmap] | None = None  # (size/font key, pixmap)
         self.setToolTip(
             f"sensor {index + 1} ({device}): newest processed displacement, sensor frame "
             "(X right, Y forward = up), amplified by the gain shown"
@@ -109,45 +122,73 @@ class DirectionWidget(QWidget):
 
     def paintEvent(self, _event) -> None:  # noqa: N802 - Qt API
         p = QPainter(self)
+        p.drawPixmap(0, 0, self._dial())
         p.setRenderHint(QPainter.RenderHint.Antialiasing)
-        p.fillRect(self.rect(), Qt.GlobalColor.white)
         w, h = self.width(), self.height()
         cx, cy, r = w / 2, h / 2 + 4, self.radius_px()
-        faint = QPen(QColor("#d0d0d0"), 1)
-        p.setPen(faint)
-        p.drawEllipse(QPointF(cx, cy), r, r)
-        p.drawLine(QPointF(cx - r, cy), QPointF(cx + r, cy))
-        p.drawLine(QPointF(cx, cy - r), QPointF(cx, cy + r))
-        small = QFont(self.font())
-        small.setPointSizeF(max(6.0, small.pointSizeF() * 0.85))
-        p.setFont(small)
-        p.setPen(QColor("#909090"))
-        p.drawText(QPointF(cx + r + 3, cy + 4), "X")
-        p.drawText(QPointF(cx - 4, cy - r - 3), "Y")
-
         vx, vy = self.vector_px()
         length = math.hypot(vx, vy)
         if length > r > 0:  # a long reply's arrow stops at the circle (the gain fits speed)
             vx, vy = vx * r / length, vy * r / length
         self._draw_arrow(p, cx, cy, vx, vy)
 
+        bold, small = self._fonts()
         p.setPen(QColor("#202020"))
-        bold = QFont(self.font())
-        bold.setBold(True)
         p.setFont(bold)
         line = QFontMetricsF(bold).height()
-        title = QRectF(4, 2, w - 8, line)
-        p.drawText(title, Qt.AlignmentFlag.AlignLeft, f"sensor {self.index + 1}")
-        p.drawText(title, Qt.AlignmentFlag.AlignRight, f"{self.speed * 1e3:.1f} mm/s")
+        p.drawText(QRectF(4, 2, w - 8, line), Qt.AlignmentFlag.AlignRight,
+                   f"{self.speed * 1e3:.1f} mm/s")
         p.setFont(small)
         p.setPen(QColor("#606060"))
         small_line = QFontMetricsF(small).height()
-        p.drawText(QRectF(4, 2 + line, w - 8, small_line), Qt.AlignmentFlag.AlignLeft,
-                   self.device)
         mode = "auto" if self.gain_setting is None else "fixed"
         p.drawText(QRectF(4, h - small_line - 2, w - 8, small_line), Qt.AlignmentFlag.AlignRight,
                    f"gain ×{self.gain / 1e3:g} px/mm ({mode})")
         p.end()
+
+    def _fonts(self) -> tuple[QFont, QFont]:
+        """(bold, small): the title's font and the labels' font."""
+        bold = QFont(self.font())
+        bold.setBold(True)
+        small = QFont(self.font())
+        small.setPointSizeF(max(6.0, small.pointSizeF() * 0.85))
+        return bold, small
+
+    def _dial(self) -> QPixmap:
+        """What does not change between samples (background, circle, axes, their labels,
+        the sensor's name), drawn once per size: a repaint at 30 Hz only copies it."""
+        ratio = self.devicePixelRatioF()
+        key = (self.width(), self.height(), ratio, self.font().key())
+        if self._dial_cache is not None and self._dial_cache[0] == key:
+            return self._dial_cache[1]
+        pix = QPixmap(round(self.width() * ratio), round(self.height() * ratio))
+        pix.setDevicePixelRatio(ratio)
+        pix.fill(Qt.GlobalColor.white)
+        p = QPainter(pix)
+        p.setRenderHint(QPainter.RenderHint.Antialiasing)
+        w, h = self.width(), self.height()
+        cx, cy, r = w / 2, h / 2 + 4, self.radius_px()
+        p.setPen(QPen(QColor("#d0d0d0"), 1))
+        p.drawEllipse(QPointF(cx, cy), r, r)
+        p.drawLine(QPointF(cx - r, cy), QPointF(cx + r, cy))
+        p.drawLine(QPointF(cx, cy - r), QPointF(cx, cy + r))
+        bold, small = self._fonts()
+        p.setFont(small)
+        p.setPen(QColor("#909090"))
+        p.drawText(QPointF(cx + r + 3, cy + 4), "X")
+        p.drawText(QPointF(cx - 4, cy - r - 3), "Y")
+        p.setPen(QColor("#202020"))
+        p.setFont(bold)
+        line = QFontMetricsF(bold).height()
+        p.drawText(QRectF(4, 2, w - 8, line), Qt.AlignmentFlag.AlignLeft,
+                   f"sensor {self.index + 1}")
+        p.setFont(small)
+        p.setPen(QColor("#606060"))
+        p.drawText(QRectF(4, 2 + line, w - 8, QFontMetricsF(small).height()),
+                   Qt.AlignmentFlag.AlignLeft, self.device)
+        p.end()
+        self._dial_cache = (key, pix)
+        return pix
 
     def _draw_arrow(self, p: QPainter, cx: float, cy: float, vx: float, vy: float) -> None:
         length = math.hypot(vx, vy)
