@@ -145,7 +145,9 @@ class RosBridge(QObject):
         #: rclpy's C++ events executor (default) or its Python wait-set executor
         self.executor = executor
         self._thread: threading.Thread | None = None
-        self._stopping = threading.Event()
+        #: set by stop() to end the events executor's loop (a plain flag: it is read once
+        #: per event, and Event.is_set is a Python call each time)
+        self._stopping = False
         self._polling = True
         self._state = WAITING
         self._in_flight: tuple[object, float] | None = None
@@ -210,7 +212,7 @@ class RosBridge(QObject):
         self.node.create_timer(0.5, self._publish_stats)
         self._executor = self._make_executor()
         self._executor.add_node(self.node)
-        self._stopping.clear()
+        self._stopping = False
         self._thread = threading.Thread(target=self._spin, name="mm_monitor_ros", daemon=True)
         self._thread.start()
 
@@ -242,14 +244,14 @@ class RosBridge(QObject):
             # spin_once in a loop: the events executor's spin() does not run timers here
             # (rclpy 7.1.5), and the loop ends once stop() sets the flag (or the context
             # is shut down: spin_once raises)
-            while not self._stopping.is_set():
+            while not self._stopping:
                 self._executor.spin_once(0.1)
 
     def stop(self) -> None:
         """Stop the executor thread and shut the private context down (idempotent)."""
         if self._thread is None:
             return
-        self._stopping.set()  # ends the events executor's loop ...
+        self._stopping = True  # ends the events executor's loop ...
         self._executor.shutdown(timeout_sec=1.0)  # ... and the wait-set one's spin()
         self._thread.join(3.0)
         self._thread = None
