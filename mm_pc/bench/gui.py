@@ -12,6 +12,7 @@ import math
 import os
 import sys
 import tempfile
+import threading
 import time
 from contextlib import ExitStack
 from pathlib import Path
@@ -47,13 +48,23 @@ def _live_cpu(window, bridge, app, rate_hz: float, seconds: float) -> dict:
     proc = psutil.Process()
     used0 = window.ctx.session.stats.used
     c0, r0, s0, t0 = proc.cpu_times(), bridge.replies, bridge.skipped_ticks, time.perf_counter()
+    th0 = _thread_cpu(proc)
     QTimer.singleShot(int(seconds * 1000), loop.quit)
     loop.exec()
     c1, r1, s1, t1 = proc.cpu_times(), bridge.replies, bridge.skipped_ticks, time.perf_counter()
+    th1 = _thread_cpu(proc)
     window.frame_timer.stop()
     wall, replies = t1 - t0, r1 - r0
+    gui_tid, ros_tid = threading.main_thread().native_id, bridge.thread_native_id
+    per_thread = {tid: th1[tid] - th0.get(tid, 0.0) for tid in th1}
+    gui, ros = per_thread.pop(gui_tid, 0.0), per_thread.pop(ros_tid, 0.0)
     return {
         **cpu_figures((c1.user + c1.system) - (c0.user + c0.system), wall, replies),
+        # the same CPU by thread (100 = one core): Qt and the session, the rclpy executor,
+        # and the rest (DDS, Qt's helpers)
+        "cpu_percent_gui_thread": round(100.0 * gui / wall, 1),
+        "cpu_percent_ros_thread": round(100.0 * ros / wall, 1),
+        "cpu_percent_other_threads": round(100.0 * sum(per_thread.values()) / wall, 1),
         "replies": replies,
         # replies the session turned into rows: a slot that raised would make the CPU
         # figures look good while nothing was processed
@@ -61,6 +72,11 @@ def _live_cpu(window, bridge, app, rate_hz: float, seconds: float) -> dict:
         "skipped_ticks": s1 - s0,
         "seconds": round(wall, 2),
     }
+
+
+def _thread_cpu(proc) -> dict[int, float]:
+    """CPU seconds (user + system) of each of ``proc``'s threads, by native thread id."""
+    return {t.id: t.user_time + t.system_time for t in proc.threads()}
 
 
 def cpu_figures(cpu_s: float, wall_s: float, replies: int) -> dict:

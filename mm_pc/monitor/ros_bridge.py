@@ -267,6 +267,11 @@ class RosBridge(QObject):
     def running(self) -> bool:
         return self._thread is not None
 
+    @property
+    def thread_native_id(self) -> int | None:
+        """The OS id of the executor thread (None when not running): for CPU per thread."""
+        return self._thread.native_id if self._thread is not None else None
+
     # -- requests from the GUI (any thread) ---------------------------------------------
 
     def _post(self, action: Callable[[], None]) -> None:

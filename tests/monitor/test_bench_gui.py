@@ -52,8 +52,14 @@ def test_bench_gui_reports_every_figure(qapp):
     for hz, live in r["live"].items():
         assert 0 < live["achieved_hz"] <= float(hz) * 1.2, (hz, live)
         assert live["replies"] > 0 and 0 < live["cpu_percent_one_core"] < 200.0 + 1, live
+        threads = [live[f"cpu_percent_{t}"] for t in ("gui_thread", "ros_thread", "other_threads")]
+        assert threads[0] > 0 and threads[1] > 0 and min(threads) >= 0, live
+        # the threads' shares add up to the process's (both from the kernel's counters)
+        assert sum(threads) == pytest.approx(live["cpu_percent_one_core"], abs=3.0), live
         # every reply became a row (a slot that raised would leave them unprocessed)
-        assert live["replies"] - 2 <= live["rows"] <= live["replies"] + 2, live
+        # (less the batch still waiting for the GUI thread at the end, ~8 at 500 Hz, and a
+        # reply now and then that found no new poll: no row)
+        assert 0.98 * live["replies"] - 10 <= live["rows"] <= live["replies"] + 10, live
         per_reply_ms = 10.0 * live["cpu_percent_one_core"] / live["achieved_hz"]
         assert math.isclose(live["cpu_ms_per_reply"], per_reply_ms, rel_tol=0.05), live
 
