@@ -152,29 +152,30 @@ def session_cost(rates=(15.0, 100.0, 500.0), seconds: float = 30.0) -> dict:
     devices = ("/dev/spidev1.0", "/dev/spidev1.1")
     counts = _counts(v[:n], w[:n], DEFAULT_MOUNTS, CPI)
     out = {}
-    for hz in rates:
-        replies = _replies(counts, sim.request_boundaries(n, hz), CPI, devices)
-        plain = [Reply(r.readings) for r in replies]
-        for label, feed in (("per_poll", replies), ("per_reply", plain)):
-            best = math.inf
-            for _ in range(3):
-                s = MonitorSession(devices=devices)
-                t0 = time.perf_counter()
-                for r in feed:
-                    s.process(r)
-                best = min(best, (time.perf_counter() - t0) / len(feed))
-            out[f"{label}_us_per_reply_{hz:g}hz"] = round(best * 1e6, 1)
-    if 500.0 in rates:  # as the bridge delivers 500 Hz: ~8 replies per 1/60 s
-        replies = _replies(counts, sim.request_boundaries(n, 500.0), CPI, devices)
-        batches = [replies[i : i + BATCH_500HZ] for i in range(0, len(replies), BATCH_500HZ)]
+
+    def best_us(feed, run) -> float:
+        """Best of 3 of ``run(session)`` over a new session, per reply of ``feed`` (µs)."""
         best = math.inf
         for _ in range(3):
             s = MonitorSession(devices=devices)
             t0 = time.perf_counter()
-            for b in batches:
-                s.process_batch(b)
-            best = min(best, (time.perf_counter() - t0) / len(replies))
-        out["per_poll_batched_us_per_reply_500hz"] = round(best * 1e6, 1)
+            run(s)
+            best = min(best, (time.perf_counter() - t0) / len(feed))
+        return round(best * 1e6, 1)
+
+    for hz in rates:
+        replies = _replies(counts, sim.request_boundaries(n, hz), CPI, devices)
+        plain = [Reply(r.readings) for r in replies]
+        for label, feed in (("per_poll", replies), ("per_reply", plain)):
+            out[f"{label}_us_per_reply_{hz:g}hz"] = best_us(
+                feed, lambda s, feed=feed: [s.process(r) for r in feed]
+            )
+    if 500.0 in rates:  # as the bridge delivers 500 Hz: ~8 replies per 1/60 s
+        replies = _replies(counts, sim.request_boundaries(n, 500.0), CPI, devices)
+        batches = [replies[i : i + BATCH_500HZ] for i in range(0, len(replies), BATCH_500HZ)]
+        out["per_poll_batched_us_per_reply_500hz"] = best_us(
+            replies, lambda s: [s.process_batch(b) for b in batches]
+        )
     return out
 
 

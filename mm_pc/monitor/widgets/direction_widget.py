@@ -79,6 +79,13 @@ def _percentile(a: np.ndarray, q: float) -> float:
     return float(part[lo] + (part[hi] - part[lo]) * (k - lo))
 
 
+def _text(p: QPainter, font: QFont, colour: str, rect: QRectF, align, text: str) -> None:
+    """One line of ``text`` in ``rect`` (px) with ``font`` and ``colour``."""
+    p.setFont(font)
+    p.setPen(QColor(colour))
+    p.drawText(rect, align, text)
+
+
 class DirectionWidget(QWidget):
     """Arrow of one sensor's newest displacement (sensor frame, X right, Y up).
 
@@ -133,17 +140,13 @@ class DirectionWidget(QWidget):
         self._draw_arrow(p, cx, cy, vx, vy)
 
         bold, small = self._fonts()
-        p.setPen(QColor("#202020"))
-        p.setFont(bold)
-        line = QFontMetricsF(bold).height()
-        p.drawText(QRectF(4, 2, w - 8, line), Qt.AlignmentFlag.AlignRight,
-                   f"{self.speed * 1e3:.1f} mm/s")
-        p.setFont(small)
-        p.setPen(QColor("#606060"))
+        right = Qt.AlignmentFlag.AlignRight
+        _text(p, bold, "#202020", QRectF(4, 2, w - 8, QFontMetricsF(bold).height()), right,
+              f"{self.speed * 1e3:.1f} mm/s")
         small_line = QFontMetricsF(small).height()
         mode = "auto" if self.gain_setting is None else "fixed"
-        p.drawText(QRectF(4, h - small_line - 2, w - 8, small_line), Qt.AlignmentFlag.AlignRight,
-                   f"gain ×{self.gain / 1e3:g} px/mm ({mode})")
+        _text(p, small, "#606060", QRectF(4, h - small_line - 2, w - 8, small_line), right,
+              f"gain ×{self.gain / 1e3:g} px/mm ({mode})")
         p.end()
 
     def _fonts(self) -> tuple[QFont, QFont]:
@@ -177,15 +180,11 @@ class DirectionWidget(QWidget):
         p.setPen(QColor("#909090"))
         p.drawText(QPointF(cx + r + 3, cy + 4), "X")
         p.drawText(QPointF(cx - 4, cy - r - 3), "Y")
-        p.setPen(QColor("#202020"))
-        p.setFont(bold)
+        left = Qt.AlignmentFlag.AlignLeft
         line = QFontMetricsF(bold).height()
-        p.drawText(QRectF(4, 2, w - 8, line), Qt.AlignmentFlag.AlignLeft,
-                   f"sensor {self.index + 1}")
-        p.setFont(small)
-        p.setPen(QColor("#606060"))
-        p.drawText(QRectF(4, 2 + line, w - 8, QFontMetricsF(small).height()),
-                   Qt.AlignmentFlag.AlignLeft, self.device)
+        _text(p, bold, "#202020", QRectF(4, 2, w - 8, line), left, f"sensor {self.index + 1}")
+        _text(p, small, "#606060", QRectF(4, 2 + line, w - 8, QFontMetricsF(small).height()),
+              left, self.device)
         p.end()
         self._dial_cache = (key, pix)
         return pix
