@@ -53,10 +53,13 @@ def start_node(client, tmp_path, **extra):
 
 
 def wait_up(client, log):
+    """Until a reply serves both sensors: right after a (re)start of the poller a sensor
+    may still be down, and the reply then serves the other alone ("down: ...")."""
     assert client.wait(30), f"services did not come up; log:\n{log.read_text()}"
     deadline = time.monotonic() + 15
     while time.monotonic() < deadline:
-        if client.call("get_sensor_data", id="").success:
+        res = client.call("get_sensor_data", id="")
+        if res.success and {d.id for d in res.data} == {S0, S1}:
             return
         time.sleep(0.2)
     raise AssertionError(log.read_text())
