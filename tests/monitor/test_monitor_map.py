@@ -820,6 +820,22 @@ def test_gain_peak_is_a_speed_percentile_over_one_second():
     assert gain_peak(t, v, np.zeros_like(t)) == pytest.approx(0.1 * 0.01)
 
 
+def test_the_dial_face_is_drawn_once_per_size(panel, ctx, feed):
+    feed(ctx, rate_hz=50, seconds=2)
+    panel.refresh()
+    dial = panel.widgets[0]
+    dial.grab()
+    face = dial._dial_cache
+    assert face is not None and face[0][:2] == (dial.width(), dial.height())
+    dial.set_sample(0.001, -0.002, 0.05, 0.002)
+    dial.grab()
+    assert dial._dial_cache is face  # a new sample draws on the same face
+    dial.resize(dial.width() + 30, dial.height())
+    dial.grab()
+    assert dial._dial_cache is not face and dial._dial_cache[0][:2] == (
+        dial.width(), dial.height())  # fmt: skip
+
+
 def test_the_gain_percentile_is_numpys_percentile():
     from hypothesis import given, settings
     from hypothesis import strategies as st

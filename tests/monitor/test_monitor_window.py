@@ -249,3 +249,49 @@ def test_calibration_save_dialog_starts_in_the_remembered_folder(make_window, mo
     assert wizard.save_page.path_edit.text() == str(chosen)
     assert last_folder(FOLDER_KIND) == str(chosen.parent)
     wizard.reject()
+
+
+def test_frames_repaint_neither_the_status_bar_nor_the_dock_under_the_dials(
+    make_window, qapp, feed, qtbot
+):
+    """New data every frame: the dials repaint, but the status bar (its sample count changes
+    twice a second, not every frame) and the panel under the opaque dials do not."""
+    import itertools
+
+    from PySide6.QtCore import QObject
+
+    from mm_pc.monitor.main_window import ROWS_LABEL_PERIOD_S
+    from mm_pc.monitor.model.sim_feed import sim_replies
+
+    w = make_window()
+    replies = sim_replies("figure_eight", 50.0, 30.0)
+    feed(w.ctx, itertools.islice(replies, 100))
+    settle(qapp, w)
+    panel = w.direction_panel
+    dials = panel.widgets
+
+    class Paints(QObject):
+        def __init__(self) -> None:
+            super().__init__()
+            self.count: dict[object, int] = {}
+
+        def eventFilter(self, obj, event) -> bool:  # noqa: N802 - Qt API
+            if event.type() == QEvent.Type.Paint:
+                self.count[obj] = self.count.get(obj, 0) + 1
+            return False
+
+    paints = Paints()
+    for widget in (w.statusBar(), panel, *dials):
+        widget.installEventFilter(paints)
+    frames = 12
+    for _ in range(frames):  # back to back: well within one ROWS_LABEL_PERIOD_S
+        feed(w.ctx, itertools.islice(replies, 5))
+        w.frame()
+        qapp.processEvents()
+    assert all(paints.count.get(d, 0) >= frames - 1 for d in dials), paints.count
+    assert paints.count.get(w.statusBar(), 0) <= 2, paints.count
+    assert paints.count.get(panel, 0) <= 1, paints.count
+    # the count catches up once the period has passed
+    qtbot.wait(int(ROWS_LABEL_PERIOD_S * 1000) + 100)
+    w.frame()
+    assert w.rows_label.text() == f"{len(w.ctx.session.history)} samples"
