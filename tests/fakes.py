@@ -2,6 +2,35 @@
 
 from __future__ import annotations
 
+import os
+import time
+
+#: every test timeout is multiplied by this (``MM_TEST_TIMEOUT_FACTOR=3`` on a slow or busy machine)
+TIMEOUT_FACTOR = max(1.0, float(os.environ.get("MM_TEST_TIMEOUT_FACTOR", "1") or 1))
+
+
+def scaled(seconds: float) -> float:
+    """``seconds`` times :data:`TIMEOUT_FACTOR`: the deadline of a wait on a slow machine."""
+    return seconds * TIMEOUT_FACTOR
+
+
+def wait_until(predicate, timeout: float = 10.0, what: str = "the condition", interval: float = 0.02):
+    """Call ``predicate`` until it returns something truthy and return that.
+
+    ``timeout`` (s) is scaled by :data:`TIMEOUT_FACTOR`; on expiry an AssertionError
+    names ``what`` and how long it waited, so a slow machine's failure says what did not
+    happen rather than a bare ``assert False``. ``interval`` (s) is the pause between calls.
+    """
+    limit = scaled(timeout)
+    deadline = time.monotonic() + limit
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {limit:.1f} s waiting for {what}")
+        time.sleep(interval)
+
 
 class FakeClock:
     """A manual clock: tests set ``t`` (seconds); the emulator calls it."""
