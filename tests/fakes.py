@@ -14,7 +14,8 @@ def scaled(seconds: float) -> float:
     return seconds * TIMEOUT_FACTOR
 
 
-def wait_until(predicate, timeout: float = 10.0, what: str = "the condition", interval: float = 0.02):
+def wait_until(predicate, timeout: float = 10.0, what: str = "the condition",
+               interval: float = 0.02):
     """Call ``predicate`` until it returns something truthy and return that.
 
     ``timeout`` (s) is scaled by :data:`TIMEOUT_FACTOR`; on expiry an AssertionError
