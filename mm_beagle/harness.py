@@ -324,6 +324,9 @@ class BeagleClient:
         raise TimeoutError("no /diagnostics from mm_beagle")
 
     def close(self) -> None:
-        self.executor.shutdown(timeout_sec=1.0)
-        self._thread.join(2.0)
-        self.node.destroy_node()
+        """Stop the spin thread, then destroy the node (never while the thread still
+        waits on the node's handles: that raised in the thread on a busy machine)."""
+        self.executor.shutdown(timeout_sec=10.0)
+        self._thread.join(10.0)
+        if not self._thread.is_alive():
+            self.node.destroy_node()

@@ -252,12 +252,14 @@ class RosBridge(QObject):
         if self._thread is None:
             return
         self._stopping = True  # ends the events executor's loop ...
-        self._executor.shutdown(timeout_sec=1.0)  # ... and the wait-set one's spin()
-        self._thread.join(3.0)
-        self._thread = None
+        self._executor.shutdown(timeout_sec=5.0)  # ... and the wait-set one's spin()
+        self._thread.join(5.0)
+        alive, self._thread = self._thread.is_alive(), None
         self._delivery.stop()
         with self._inbox_lock:
             self._inbox.clear()  # nobody listens for them any more
+        if alive:
+            return  # a thread still waiting on the node's handles would raise if they went
         with suppress(Exception):
             self.node.destroy_node()
         with suppress(Exception):

@@ -519,9 +519,10 @@ class Listener:
         return self.node.create_subscription(msg_type, topic, cb, depth)
 
     def close(self) -> None:
-        self.executor.shutdown(timeout_sec=2.0)
-        self.thread.join(3.0)
-        self.node.destroy_node()
+        self.executor.shutdown(timeout_sec=10.0)
+        self.thread.join(10.0)
+        if not self.thread.is_alive():  # destroying a node its thread still waits on raises there
+            self.node.destroy_node()
 
 
 def stop(proc: subprocess.Popen) -> str:

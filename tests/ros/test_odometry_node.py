@@ -10,6 +10,7 @@ import threading
 import time
 
 import pytest
+from fakes import wait_until
 
 pytest.importorskip("rclpy")
 from nav_msgs.msg import Odometry, Path
@@ -55,20 +56,13 @@ def test_straight_run_ends_where_the_robot_stopped(method, tmp_path, ros_command
             client.node.create_subscription(Odometry, f"{ns}/mm_odometry/odom", on_odom, 10)
             client.node.create_subscription(Path, f"{ns}/mm_odometry/path", paths.append, 10)
             try:
-                deadline = time.monotonic() + 25
-                final = None
-                while time.monotonic() < deadline:
-                    time.sleep(0.2)
+                def stopped_at_the_end():
                     with lock:
                         last = got[-1] if got else None
-                    if (
-                        last is not None
-                        and last.pose.pose.position.x > 0.39
-                        and last.twist.twist.linear.x == 0
-                    ):
-                        final = last
-                        break
-                assert final is not None, f"no final pose; last: {got[-1] if got else None}"
+                    at_end = last is not None and last.pose.pose.position.x > 0.39
+                    return last if at_end and last.twist.twist.linear.x == 0 else None
+
+                final = wait_until(stopped_at_the_end, 40, "the final pose (x > 0.39, standing)")
                 pos = final.pose.pose.position
                 assert pos.x == pytest.approx(0.4, abs=0.002)
                 assert pos.y == pytest.approx(0.0, abs=0.002)
@@ -143,15 +137,12 @@ def test_beagle_onboard_odometry_integrates_every_poll(method, tmp_path):
         got: list[Odometry] = []
         client.node.create_subscription(Odometry, "/mm_beagle/odom", got.append, 10)
         try:
-            deadline = time.monotonic() + 20
-            final = None
-            while time.monotonic() < deadline and final is None:
-                time.sleep(0.2)
+            def stopped_at_the_end():
                 last = got[-1] if got else None
                 stopped = last is not None and last.twist.twist.linear.x == 0
-                if stopped and last.pose.pose.position.x > 0.39:
-                    final = last
-            assert final is not None, (tmp_path / "beagle.log").read_text()[-2000:]
+                return last if stopped and last.pose.pose.position.x > 0.39 else None
+
+            final = wait_until(stopped_at_the_end, 40, "the final pose on /mm_beagle/odom")
             assert final.pose.pose.position.x == pytest.approx(0.4, abs=0.002)
             assert final.pose.pose.position.y == pytest.approx(0.0, abs=0.002)
         finally:
@@ -283,30 +274,35 @@ def test_file_trajectory_at_15_hz_ends_on_the_files_ground_truth(tmp_path, ros_c
 
             client.node.create_subscription(DiagnosticArray, "/diagnostics", diags.append, 10)
             try:
-                deadline = time.monotonic() + 45
-                final = None
-                while time.monotonic() < deadline:
-                    time.sleep(0.3)
+                def standing_after_the_tour():
                     with lock:
                         recent = got[-20:]
                     moved = recent and abs(recent[-1].pose.pose.position.x) > 0.1
-                    if moved and len(recent) == 20 and all(
+                    still = len(recent) == 20 and all(
                         m.twist.twist.linear.x == 0 and m.twist.twist.angular.z == 0
                         for m in recent
-                    ):
-                        final = recent[-1]
-                        break
-                assert final is not None, f"never stood still at the end; {len(got)} messages"
+                    )
+                    return recent[-1] if moved and still else None
+
+                final = wait_until(standing_after_the_tour, 60, "standing still after the tour",
+                                   interval=0.3)
                 p = final.pose.pose
                 yaw = 2 * math.atan2(p.orientation.z, p.orientation.w)
                 err = math.hypot(p.position.x - truth[0], p.position.y - truth[1])
                 assert err < 5e-4, (p.position, truth)
                 assert abs(math.remainder(yaw - truth[2], 2 * math.pi)) < 2e-3
                 # /diagnostics: every poll integrated, no gap
-                mine = [s for a in diags for s in a.status if s.name.endswith("mm_odometry: pose")]
-                assert mine, "no /diagnostics from mm-odometry"
-                values = {kv.key: kv.value for kv in mine[-1].values}
-                assert values["gaps"] == "0" and int(values["polls_integrated"]) > 2 * 14_000
+                # (published once a second: the newest may predate the tour's last polls)
+                def newest_pose_status():
+                    mine = [s for a in list(diags) for s in a.status
+                            if s.name.endswith("mm_odometry: pose")]  # fmt: skip
+                    values = {kv.key: kv.value for kv in mine[-1].values} if mine else {}
+                    done = int(values.get("polls_integrated", 0)) > 2 * 14_000
+                    return values if done else None
+
+                values = wait_until(newest_pose_status, 20,
+                                    "/diagnostics counting the tour's 2 x 14000 polls")
+                assert values["gaps"] == "0"
                 assert np.isfinite(err)
             finally:
                 client.close()
@@ -339,31 +335,25 @@ def test_polls_lost_to_a_ring_overrun_are_a_gap_on_diagnostics(tmp_path, ros_com
             client.node.create_subscription(Odometry, f"{ns}/mm_odometry/odom", got.append, 10)
             client.node.create_subscription(DiagnosticArray, "/diagnostics", diags.append, 10)
             try:
-                deadline = time.monotonic() + 20
-                while time.monotonic() < deadline and not (got and got[-1].pose.pose.position.x
-                                                           > 0.1):
-                    time.sleep(0.1)
-                assert got, "no odometry"
+                wait_until(lambda: got and got[-1].pose.pose.position.x > 0.1, 40,
+                           "odometry past x = 0.1 m")
                 odo.send_signal(signal.SIGSTOP)
                 time.sleep(3.0)
                 odo.send_signal(signal.SIGCONT)
-                deadline = time.monotonic() + 20
-                warn = None
-                while time.monotonic() < deadline and warn is None:
-                    time.sleep(0.2)
+                def pose_warning():
                     for a in list(diags):
                         for st in a.status:
                             pose = st.name.endswith("mm_odometry: pose")
                             if pose and st.level == DiagnosticStatus.WARN:
-                                warn = st
-                assert warn is not None, "no WARN on /diagnostics after the overrun"
+                                return st
+                    return None
+
+                warn = wait_until(pose_warning, 30, "a WARN on /diagnostics after the overrun")
                 assert "gap(s) in the single polls" in warn.message
                 values = {kv.key: kv.value for kv in warn.values}
                 assert int(values["gaps"]) >= 1
                 # the run (1 m straight) still ends at x = 1 m: the totals covered the gap
-                deadline = time.monotonic() + 20
-                while time.monotonic() < deadline and got[-1].pose.pose.position.x < 0.999:
-                    time.sleep(0.2)
+                wait_until(lambda: got[-1].pose.pose.position.x >= 0.999, 30, "the end at x = 1 m")
                 assert got[-1].pose.pose.position.x == pytest.approx(1.0, abs=0.002)
             finally:
                 client.close()
