@@ -20,11 +20,16 @@ from mm_beagle.harness import use_isolated_ros_env
 # even if the shell has a ROS_DOMAIN_ID: tests must not meet the user's live nodes
 use_isolated_ros_env(keep_user_domain=False)
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+# Every temporary file of the run (pytest's tmp_path, the nodes' logs; the processes the
+# tests start inherit TMPDIR) goes into one private folder, removed at the end: a test
+# run leaves /tmp as it found it.
+_RUN_TMP = tempfile.mkdtemp(prefix="mm-test-run-")
+os.environ["TMPDIR"] = _RUN_TMP
+tempfile.tempdir = None  # gettempdir() reads TMPDIR again
+atexit.register(shutil.rmtree, _RUN_TMP, ignore_errors=True)
 # the monitor's settings and default calibration live under XDG_CONFIG_HOME: a private
 # folder per run, so tests neither read the user's nor leave any behind
-_CONFIG_HOME = tempfile.mkdtemp(prefix="mm-test-config-")
-os.environ["XDG_CONFIG_HOME"] = _CONFIG_HOME
-atexit.register(shutil.rmtree, _CONFIG_HOME, ignore_errors=True)
+os.environ["XDG_CONFIG_HOME"] = tempfile.mkdtemp(prefix="mm-test-config-")
 
 # Hypothesis: the same examples on every run by default ("repeatable"), so CI on a
 # shared, noisy machine is never red by chance and never by a timing deadline;
@@ -32,3 +37,34 @@ atexit.register(shutil.rmtree, _CONFIG_HOME, ignore_errors=True)
 settings.register_profile("repeatable", derandomize=True, deadline=None)
 settings.register_profile("explore", deadline=None, max_examples=500)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "repeatable"))
+
+
+#: ``--quick``: the folders and files whose tests start no ROS process and open no Qt
+#: window (the inner loop: under two minutes on 2 cores; docs/testing.md)
+QUICK = ("core/", "pln2033/", "sim/", "test_layers.py", "test_ros_package_xml.py",
+         "test_prerequisites.py")
+
+
+def pytest_addoption(parser):
+    parser.addoption("--quick", action="store_true",
+                     help="only the tests that start no ROS process and no Qt window")
+
+
+def pytest_collection_modifyitems(config, items):
+    """``--quick`` keeps the tests of :data:`QUICK`; every test's pytest-timeout limit is
+    scaled by MM_TEST_TIMEOUT_FACTOR like the waits (fakes.scaled)."""
+    import pytest
+    from fakes import TIMEOUT_FACTOR
+
+    if config.getoption("--quick"):
+        root = os.path.dirname(__file__) + os.sep
+        keep = [i for i in items if str(i.path).removeprefix(root).startswith(QUICK)]
+        config.hook.pytest_deselected(items=[i for i in items if i not in keep])
+        items[:] = keep
+    if TIMEOUT_FACTOR > 1:
+        default = float(config.getini("timeout") or 0)
+        for item in items:
+            marker = item.get_closest_marker("timeout")
+            limit = marker.args[0] if marker and marker.args else default
+            if limit:
+                item.add_marker(pytest.mark.timeout(limit * TIMEOUT_FACTOR))
