@@ -1,4 +1,5 @@
-"""A program started without ROS 2 (or without an extra) says how to get it: exit 2, no traceback.
+"""A program started without ROS 2, an extra or a system library says how to get it: exit 2,
+no traceback.
 
 ``pip install .`` gives the mm-* commands but not rclpy: ROS 2 is not on PyPI under its
 own names (the ros-jazzy-* wheels ./compile uses exist for x86_64 only), and the message
@@ -8,12 +9,24 @@ the error comes before any ``main`` could catch it; this hook, installed when ``
 ``mm_beagle`` is imported, turns exactly that uncaught error (a missing module of ROS or
 of an extra) into a message and exit status 2. Anything else goes to the previous hook,
 and code that imports such a module inside ``try`` still gets its ImportError.
+
+The same for a system library: PySide6's Qt loads libEGL, libglib, libxkbcommon... from the
+system, and on a bare Debian importing PySide6 fails with ``ImportError: libEGL.so.1: cannot
+open shared object file``. The hook names the Debian package from the project's one package
+list, ``tools/system-packages.txt`` (which ./compile installs), together with every other
+package whose library ``ldd`` finds missing among the Qt files the monitor loads, so one
+``sudo apt-get install`` line fixes it at once.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import os
+import re
+import subprocess
 import sys
+from functools import cache
+from pathlib import Path
 
 # Top-level names that come with ROS 2 (or with ./compile's interface builds).
 ROS_MODULES = frozenset(
@@ -43,6 +56,139 @@ EXTRA_MODULES = {
 
 EXIT_MISSING = 2
 EXIT_INTERRUPTED = 0
+
+#: the project's list of Debian/Ubuntu packages (in a clone; a wheel install has none)
+SYSTEM_PACKAGES = Path(__file__).resolve().parents[1] / "tools" / "system-packages.txt"
+NEEDS = ("setup", "headless", "window")
+
+#: PySide6's files the monitor loads (globs under the PySide6 package), by need: ldd on
+#: them lists every system library Qt needs (tools/system-packages.txt says how they were
+#: found). Absent ones are skipped (PySide6 versions differ).
+QT_FILES = {
+    "headless": (
+        "Qt/lib/libQt6Core.so.6", "Qt/lib/libQt6Gui.so.6", "Qt/lib/libQt6Widgets.so.6",
+        "Qt/lib/libQt6OpenGL.so.6", "Qt/lib/libQt6OpenGLWidgets.so.6", "Qt/lib/libQt6Svg.so.6",
+        "Qt/lib/libQt6Test.so.6", "Qt/lib/libQt6DBus.so.6",
+        "Qt/plugins/platforms/libqoffscreen.so", "Qt/plugins/platforms/libqminimal.so",
+        "Qt/plugins/imageformats/libqsvg.so", "Qt/plugins/iconengines/libqsvgicon.so",
+    ),
+    "window": (
+        "Qt/lib/libQt6XcbQpa.so.6", "Qt/lib/libQt6WaylandClient.so.6",
+        "Qt/plugins/platforms/libqxcb.so", "Qt/plugins/platforms/libqwayland*.so",
+        "Qt/plugins/xcbglintegrations/*.so",
+        "Qt/plugins/wayland-graphics-integration-client/libqt-plugin-wayland-egl.so",
+        "Qt/plugins/wayland-shell-integration/*.so", "Qt/plugins/wayland-decoration-client/*.so",
+        "Qt/plugins/platforminputcontexts/libcompose*.so",
+        "Qt/plugins/platforminputcontexts/libibus*.so",
+    ),
+}  # fmt: skip
+
+_ROS_LIBRARY = re.compile(
+    r"lib(rcl|rmw|rcutils|rcpputils|rosidl|fastrtps|fastcdr|tracetools)|.*__rosidl_"
+)
+_NO_LIBRARY = re.compile(r"([\w.+-]+\.so(?:\.[\w]+)*): cannot open shared object file")
+
+
+def system_packages(path: Path | None = None) -> list[tuple[str, str, tuple[str, ...]]]:
+    """``(package, need, sonames)`` per line of the package list; ``package`` may be
+    ``name|alternative``. A malformed line raises ValueError naming it."""
+    path = SYSTEM_PACKAGES if path is None else path
+    out = []
+    for n, line in enumerate(path.read_text().splitlines(), 1):
+        words = line.partition("#")[0].split()
+        if not words:
+            continue
+        if len(words) < 2 or words[1] not in NEEDS:
+            raise ValueError(f"{path.name} line {n}: expected 'PACKAGE NEED [SONAMES]' with "
+                             f"NEED one of {', '.join(NEEDS)}: {line.strip()!r}")  # fmt: skip
+        out.append((words[0], words[1], tuple(words[2:])))
+    return out
+
+
+@cache
+def library_packages() -> dict[str, str]:
+    """soname -> the Debian package that ships it (the first name of an alternative), from
+    the package list; empty where the list is absent (a wheel install) or unreadable."""
+    try:
+        entries = system_packages()
+    except (OSError, ValueError):
+        return {}
+    return {so: pkg.partition("|")[0] for pkg, _need, sonames in entries for so in sonames}
+
+
+def missing_library(exc: BaseException) -> str | None:
+    """The soname an ImportError/OSError says the dynamic loader could not find, else None."""
+    match = _NO_LIBRARY.search(str(exc))
+    return match.group(1) if match else None
+
+
+def _pyside_dir() -> Path | None:
+    try:
+        spec = importlib.util.find_spec("PySide6")
+    except (ImportError, ValueError):
+        return None
+    if spec is None or not spec.submodule_search_locations:
+        return None
+    return Path(next(iter(spec.submodule_search_locations)))
+
+
+def unresolved(files: list[Path], ldd_output: str | None = None) -> list[str]:
+    """The sonames ``ldd`` reports as 'not found' for ``files`` (``ldd_output`` for tests)."""
+    if ldd_output is None:
+        if not files:
+            return []
+        try:
+            ldd_output = subprocess.run(
+                ["ldd", *map(str, files)], capture_output=True, text=True, timeout=60
+            ).stdout
+        except (OSError, subprocess.SubprocessError):
+            return []  # no ldd: nothing more to say
+    return sorted({ln.split()[0] for ln in ldd_output.splitlines() if "not found" in ln})
+
+
+def qt_missing_libraries(needs: tuple[str, ...] = ("headless", "window")) -> list[str]:
+    """Every system library that PySide6's files for ``needs`` cannot load (ldd)."""
+    root = _pyside_dir()
+    if root is None:
+        return []
+    files = sorted({f for need in needs for pattern in QT_FILES[need] for f in root.glob(pattern)})
+    return unresolved(files)
+
+
+def install_line(sonames: list[str]) -> tuple[str, list[str]]:
+    """``sudo apt-get install ...`` for the packages of ``sonames`` ('' if none is known), and
+    the sonames whose package the list does not know."""
+    packages = library_packages()
+    known = sorted({packages[so] for so in sonames if so in packages})
+    unknown = [so for so in sonames if so not in packages]
+    return ("sudo apt-get install " + " ".join(known) if known else ""), unknown
+
+
+def library_message(program: str, soname: str, others: list[str] | None = None) -> str:
+    """What to tell a user whose ``program`` could not load the system library ``soname``;
+    ``others``: more libraries found missing (ldd on the Qt files), named in the same line."""
+    if soname not in library_packages() and _ROS_LIBRARY.match(soname):
+        return (
+            f"{program}: cannot start: the ROS 2 library {soname} is not on the library path.\n"
+            "  Start it from a shell that ran 'source install/setup.bash' (./compile setup\n"
+            "  writes it), or with a system ROS 'source /opt/ros/jazzy/setup.bash' first."
+        )
+    if others is None:  # a Qt library: name every other one Qt misses in the same line
+        others = qt_missing_libraries() if soname in library_packages() else []
+    missing = [soname, *sorted(set(others) - {soname})]
+    line, unknown = install_line(missing)
+    text = f"{program}: cannot start: the system library {soname} is missing"
+    if len(missing) > 1:
+        text += f" (and {len(missing) - 1} more the monitor's Qt needs: {', '.join(missing[1:])})"
+    text += ".\n"
+    if line:
+        text += f"  Install {'it' if len(missing) == 1 else 'them'} with:  {line}\n"
+    if unknown:
+        text += f"  Find the package of {', '.join(unknown)} with:  apt-file search {unknown[0]}\n"
+    return text + (
+        "  (./compile installs every package of tools/system-packages.txt before it builds,\n"
+        "  unless MM_SKIP_SYSTEM_PACKAGES is set.)"
+    )
 
 
 def is_ros_module(name: str | None) -> bool:
@@ -116,14 +262,17 @@ def _hook(previous):
             sys.stderr.flush()
             sys.stdout.flush()
             os._exit(EXIT_INTERRUPTED)
+        text = None
         if issubclass(exc_type, ModuleNotFoundError) and exc.name:
             text = message(_program(), exc.name.partition(".")[0])
-            if text is not None:
-                sys.stderr.write(text + "\n")
-                sys.stderr.flush()
-                sys.stdout.flush()
-                # The interpreter would exit 1 after any hook; nothing has started yet.
-                os._exit(EXIT_MISSING)
+        elif issubclass(exc_type, ImportError) and (soname := missing_library(exc)):
+            text = library_message(_program(), soname)
+        if text is not None:
+            sys.stderr.write(text + "\n")
+            sys.stderr.flush()
+            sys.stdout.flush()
+            # The interpreter would exit 1 after any hook; nothing has started yet.
+            os._exit(EXIT_MISSING)
         previous(exc_type, exc, tb)
 
     hook.mm_prerequisites = True

@@ -113,3 +113,56 @@ def test_ctrl_c_wrapped_by_a_class_body_is_still_a_clean_stop(tmp_path):
     assert "stopped by Ctrl-C" in out.stderr and "Traceback" not in out.stderr
     other = _run(["-c", "import mm_pc\nraise RuntimeError('boom')"], tmp_path, [])
     assert other.returncode == 1 and "RuntimeError: boom" in other.stderr  # not a Ctrl-C
+
+
+# --- a system library missing at import time (tools/system-packages.txt) -------------------
+
+
+def test_the_package_list_maps_the_qt_libraries_to_their_debian_packages():
+    packages = prerequisites.library_packages()
+    assert packages["libEGL.so.1"] == "libegl1"
+    assert packages["libglib-2.0.so.0"] == "libglib2.0-0"  # not Ubuntu 24.04's ...t64
+    assert packages["libxcb-cursor.so.0"] == "libxcb-cursor0"
+    needs = {need for _pkg, need, _so in prerequisites.system_packages()}
+    assert needs == {"setup", "headless", "window"}
+
+
+def test_a_malformed_package_list_names_the_line(tmp_path):
+    bad = tmp_path / "system-packages.txt"
+    bad.write_text("# comment\npython3 setup\nlibegl1 libEGL.so.1\n")
+    with pytest.raises(ValueError, match="line 3: expected 'PACKAGE NEED"):
+        prerequisites.system_packages(bad)
+
+
+def test_the_soname_is_read_from_the_loaders_message():
+    err = ImportError("libEGL.so.1: cannot open shared object file: No such file or directory")
+    assert prerequisites.missing_library(err) == "libEGL.so.1"
+    assert prerequisites.missing_library(ImportError("No module named 'x'")) is None
+    text = prerequisites.library_message("mm-monitor", "libEGL.so.1", ["libxcb-icccm.so.4"])
+    assert "the system library libEGL.so.1 is missing (and 1 more" in text
+    assert "sudo apt-get install libegl1 libxcb-icccm4\n" in text
+    unknown = prerequisites.library_message("mm-monitor", "libweird.so.3", [])
+    assert "apt-file search libweird.so.3" in unknown and "apt-get" not in unknown.split("\n")[1]
+    assert "source install/setup.bash" in prerequisites.library_message("mm-beagle", "librcl.so")
+
+
+def test_ldd_not_found_lines_are_the_missing_libraries():
+    ldd = "x.so:\n\tlibEGL.so.1 => not found\n\tlibc.so.6 => /lib/libc.so.6 (0x7f)\n"
+    assert prerequisites.unresolved([], ldd) == ["libEGL.so.1"]
+
+
+@pytest.mark.parametrize("module", ["mm_pc.monitor.app", "mm_beagle.bench"])
+def test_monitor_whose_qt_cannot_load_a_library_names_the_package(tmp_path, module):
+    """PySide6 importing on a bare Debian: the loader's ImportError becomes the apt-get line."""
+    fake = tmp_path / "PySide6"
+    fake.mkdir()
+    (fake / "__init__.py").write_text(
+        "raise ImportError('libEGL.so.1: cannot open shared object file: No such file or "
+        "directory')\n"
+    )
+    args = ["--headless", "--duration", "1"] if module.endswith("app") else ["gui", "--frames", "1"]
+    out = _run(["-m", module, *args], tmp_path, [])
+    assert out.returncode == 2, out.stderr
+    assert "Traceback" not in out.stderr
+    assert "the system library libEGL.so.1 is missing" in out.stderr
+    assert "sudo apt-get install libegl1" in out.stderr

@@ -5,54 +5,27 @@ Debian desktop without some of them Qt only says that it "could not load the
 Qt platform plugin xcb" (naming at most libxcb-cursor0, which alone does not
 help) and aborts with no window. ``ldd`` on the plugin lists exactly what is
 missing; :data:`DEBIAN_PACKAGES` names the package that ships each library
-(found with ``dpkg -S`` on Debian 12). Run ``python -m mm_pc.monitor.qt_platform``
-for a report; ``./compile setup`` and ``mm-monitor`` run the same check.
+(found with ``dpkg -S`` on Debian 12, kept in ``tools/system-packages.txt``). Run
+``python -m mm_pc.monitor.qt_platform`` for a report (``--all``: every Qt file the monitor
+loads, headless and windowed, whatever the display); ``./compile setup`` and ``mm-monitor``
+run the same check, and the message names a command that works without a window.
 """
 
 from __future__ import annotations
 
 import importlib.util
 import os
-import subprocess
 import sys
 from pathlib import Path
 
+from mm_pc.prerequisites import library_packages, qt_missing_libraries, unresolved
+
 __all__ = ["DEBIAN_PACKAGES", "missing_libraries", "problem", "uses_xcb", "xcb_plugin"]
 
-#: soname -> Debian 12 package, for every library ldd resolves for PySide6 6.x's libqxcb.so
-#: that a minimal (non-desktop) Debian may lack.
-DEBIAN_PACKAGES = {
-    "libEGL.so.1": "libegl1",
-    "libGL.so.1": "libgl1",
-    "libGLX.so.0": "libglx0",
-    "libGLdispatch.so.0": "libglvnd0",
-    "libX11-xcb.so.1": "libx11-xcb1",
-    "libX11.so.6": "libx11-6",
-    "libXau.so.6": "libxau6",
-    "libXdmcp.so.6": "libxdmcp6",
-    "libdbus-1.so.3": "libdbus-1-3",
-    "libfontconfig.so.1": "libfontconfig1",
-    "libfreetype.so.6": "libfreetype6",
-    "libglib-2.0.so.0": "libglib2.0-0",
-    "libgthread-2.0.so.0": "libglib2.0-0",
-    "libpng16.so.16": "libpng16-16",
-    "libxcb-cursor.so.0": "libxcb-cursor0",
-    "libxcb-icccm.so.4": "libxcb-icccm4",
-    "libxcb-image.so.0": "libxcb-image0",
-    "libxcb-keysyms.so.1": "libxcb-keysyms1",
-    "libxcb-randr.so.0": "libxcb-randr0",
-    "libxcb-render-util.so.0": "libxcb-render-util0",
-    "libxcb-render.so.0": "libxcb-render0",
-    "libxcb-shape.so.0": "libxcb-shape0",
-    "libxcb-shm.so.0": "libxcb-shm0",
-    "libxcb-sync.so.1": "libxcb-sync1",
-    "libxcb-util.so.1": "libxcb-util1",
-    "libxcb-xfixes.so.0": "libxcb-xfixes0",
-    "libxcb-xkb.so.1": "libxcb-xkb1",
-    "libxcb.so.1": "libxcb1",
-    "libxkbcommon-x11.so.0": "libxkbcommon-x11-0",
-    "libxkbcommon.so.0": "libxkbcommon0",
-}
+#: soname -> Debian 12 package, from the project's one package list
+#: (tools/system-packages.txt: every library ldd resolves for PySide6's Qt and its plugins that
+#: a minimal, non-desktop Debian may lack)
+DEBIAN_PACKAGES = library_packages()
 
 
 def xcb_plugin() -> Path | None:
@@ -79,16 +52,21 @@ def uses_xcb(env: dict[str, str] | None = None) -> bool:
 
 def missing_libraries(plugin: Path, ldd_output: str | None = None) -> list[str]:
     """The sonames ``ldd plugin`` reports as 'not found' (``ldd_output`` for tests)."""
-    if ldd_output is None:
-        try:
-            ldd_output = subprocess.run(
-                ["ldd", str(plugin)], capture_output=True, text=True, timeout=30
-            ).stdout
-        except (OSError, subprocess.SubprocessError):
-            return []  # no ldd: nothing to say; Qt reports what it misses itself
-    return sorted(
-        {line.split()[0] for line in ldd_output.splitlines() if "not found" in line}
-    )
+    return unresolved([plugin], ldd_output)  # no ldd: nothing (Qt says what it misses)
+
+
+def headless_commands(cwd: Path | None = None) -> str:
+    """Commands this user has that run the monitor without a window: the demo through
+    ./compile (in a clone; relative when run from its folder), and this environment's
+    mm-monitor by its full path (the venv's bin is not on PATH after a plain ./compile)."""
+    root = Path(__file__).resolve().parents[2]
+    out = []
+    if (root / "compile").is_file():
+        here = (cwd or Path.cwd()).resolve() == root
+        out.append(f"{'./compile' if here else root / 'compile'} demo --headless")
+    script = Path(sys.executable).parent / "mm-monitor"
+    out.append(f"{script if script.exists() else 'mm-monitor'} --headless")
+    return ", or ".join(out)
 
 
 def problem(missing: list[str]) -> str:
@@ -104,7 +82,7 @@ def problem(missing: list[str]) -> str:
         text += " Install them with:  sudo apt-get install " + " ".join(packages)
     if unknown:
         text += " (find the package of " + ", ".join(unknown) + " with apt-file search)"
-    return text + ". Without a window: mm-monitor --headless."
+    return text + f". Meanwhile, without a window: {headless_commands()}."
 
 
 def check() -> str:
@@ -118,8 +96,20 @@ def check() -> str:
     return problem(missing) if missing else ""
 
 
-def main() -> int:
-    """Print the check's verdict; exit 1 when libraries are missing."""
+def main(argv: list[str] | None = None) -> int:
+    """Print the check's verdict; exit 1 when libraries are missing. ``--all``: every Qt
+    file the monitor loads, headless and windowed (X11 and Wayland), whatever the display."""
+    argv = sys.argv[1:] if argv is None else argv
+    if argv not in ([], ["--all"]):
+        print("usage: python -m mm_pc.monitor.qt_platform [--all]", file=sys.stderr)
+        return 2
+    if argv == ["--all"]:
+        missing = qt_missing_libraries()
+        if missing:
+            print(problem(missing).replace("X11 platform plugin", "monitor (headless or windowed)"))
+            return 1
+        print("Qt has every system library the monitor loads, headless and in a window")
+        return 0
     plugin = xcb_plugin()
     if plugin is None:
         print("PySide6 has no xcb plugin here (or PySide6 is not installed)")
