@@ -304,13 +304,17 @@ def _run(args, headless: bool) -> int:
     config = MonitorConfig(beagle=args.beagle, rate_hz=args.rate, method=args.method)
     if args.calibration is not None:
         config.calibration_file = args.calibration
+    node_exit: list[str] = []
     with ExitStack() as stack:
         node = None
         if args.sim:
             import tempfile
 
             env = use_isolated_ros_env()
-            log = Path(tempfile.mkdtemp(prefix="mm-monitor-")) / "sim_beagle.log"  # mode 700
+            folder = Path(tempfile.mkdtemp(prefix="mm-monitor-"))  # mode 700
+            log = folder / "sim_beagle.log"
+            # registered first, so it runs after the node has stopped (also on Ctrl-C)
+            stack.push(_remove_unless_failed(folder, node_exit))
             chain = "mm-beagle-agent + mm-beagle backend:=remote" if args.agent else "mm-beagle"
             print(
                 f"mm-monitor: starting {chain} on emulated sensors ({args.sim}, "
@@ -373,7 +377,6 @@ def _run(args, headless: bool) -> int:
         started = time.monotonic()
         if args.duration:
             QTimer.singleShot(int(args.duration * 1000), app.quit)
-        node_exit: list[str] = []
         if node is not None:
             tick.timeout.connect(lambda: _check_node(node, log, node_exit, app))
         app.exec()
@@ -396,6 +399,23 @@ def _run(args, headless: bool) -> int:
             print(summary(window, seconds), flush=True)
         window.close()
     return code
+
+
+def _remove_unless_failed(folder: Path, node_exit: list[str]):
+    """An ExitStack exit callback: delete the --sim node's log folder when the run ends,
+    unless the node died or the monitor failed (then the messages name the log in it)."""
+
+    def exit_(exc_type, _exc, _tb) -> bool:
+        failed = bool(node_exit) or (
+            exc_type is not None and not issubclass(exc_type, KeyboardInterrupt)
+        )
+        if not failed:
+            import shutil
+
+            shutil.rmtree(folder, ignore_errors=True)
+        return False
+
+    return exit_
 
 
 def _quit_after(replayer, app) -> None:
