@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import sys
 import tempfile
 
@@ -30,7 +31,18 @@ def main(argv: list[str] | None = None) -> int:
     if args.duration < 0:
         parser.error("--duration must be >= 0")
     env = use_isolated_ros_env()
-    log = os.path.join(tempfile.mkdtemp(prefix="mm-demo-"), "mm_beagle.log")  # private: mode 700
+    folder = tempfile.mkdtemp(prefix="mm-demo-")  # private: mode 700
+    code = 1
+    try:
+        code = _run(args, env, os.path.join(folder, "mm_beagle.log"))
+    finally:
+        if code == 0:  # a failure's message names the log: then it stays
+            shutil.rmtree(folder, ignore_errors=True)
+    return code
+
+
+def _run(args, env: dict, log: str) -> int:
+    """The node on emulated sensors and the live view; 0 when data arrived."""
     print(
         f"Starting mm-beagle on emulated sensors (trajectory {args.trajectory}, "
         f"ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}); node log: {log}",
