@@ -15,6 +15,7 @@ import threading
 import time
 
 import pytest
+from fakes import scaled, wait_until
 
 zenoh = pytest.importorskip("zenoh")
 
@@ -131,7 +132,9 @@ def session_to(endpoint: str, credentials: str = ""):
     return zenoh.open(link.zenoh_config(connect=[endpoint], credentials=credentials))
 
 
-def ask(session, key: str, payload: bytes, timeout: float = 3.0) -> bytes | None:
+def ask(session, key: str, payload: bytes, timeout: float | None = None) -> bytes | None:
+    """The first good reply to a get on ``key`` (None after ``timeout`` s, default 10 scaled)."""
+    timeout = scaled(10) if timeout is None else timeout
     for reply in session.get(key, payload=payload, timeout=timeout):
         if reply.ok is not None:
             return reply.ok.payload.to_bytes()
@@ -156,10 +159,8 @@ def agent(tmp_path_factory):
     opts = {"backend": "sim", "listen": [endpoint], "patch_dir": str(patches)}
     with agent_process(opts, str(log)) as proc:
         s = session_to(endpoint)
-        deadline = time.monotonic() + 20
-        while time.monotonic() < deadline:
-            if ask(s, link.keys("mm_beagle")["cmd"], b'{"cmd": "info"}', 0.5):
-                break
+        wait_until(lambda: ask(s, link.keys("mm_beagle")["cmd"], b'{"cmd": "info"}', 0.5), 60,
+                   "the agent's answer to 'info'", interval=0.1)
         yield proc, s
         s.close()
 
@@ -198,19 +199,22 @@ def test_bad_commands_are_refused_with_a_message_and_change_nothing(agent, msg, 
     assert cpis(s) == before == [1600, 1600]
 
 
-def history(session, payload: bytes, timeout: float = 3.0) -> bytes | None:
-    """Put a history request, return the first answer on the history key."""
+def history(session, payload: bytes, timeout: float = 30.0) -> bytes:
+    """Put a history request (again every 0.2 s), return the first answer on the history key."""
     got: list[bytes] = []
     keys = link.keys("mm_beagle")
     sub = session.declare_subscriber(keys["history"], lambda s: got.append(s.payload.to_bytes()))
-    deadline = time.monotonic() + timeout
-    try:
-        while not got and time.monotonic() < deadline:
+
+    def answered() -> bool:
+        if not got:
             session.put(keys["history_req"], payload)
-            time.sleep(0.2)
+        return bool(got)
+
+    try:
+        wait_until(answered, timeout, "an answer on the history key", interval=0.2)
     finally:
         sub.undeclare()
-    return got[0] if got else None
+    return got[0]
 
 
 @pytest.mark.parametrize(
@@ -259,11 +263,9 @@ def test_a_peer_without_the_credentials_is_refused_and_changes_nothing(tmp_path,
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     with agent_process({"backend": "sim", "listen": [endpoint], "credentials": creds}):
         good = session_to(endpoint, creds)
-        deadline = time.monotonic() + 20
-        while time.monotonic() < deadline and not ask(
-            good, link.keys("mm_beagle")["cmd"], b'{"cmd": "info"}', 0.5
-        ):
-            pass
+        wait_until(lambda: ask(good, link.keys("mm_beagle")["cmd"], b'{"cmd": "info"}', 0.5), 60,
+                   "the agent's answer to 'info' with the credentials",
+                   interval=0.1)
         wrong = tmp_path / "wrong.credentials"
         wrong.write_text("mm:not-the-password-at-all\n")
         wrong.chmod(0o600)
@@ -290,16 +292,20 @@ def node_totals(client) -> dict[str, tuple[int, int, int]]:
     return {d.id: (d.seq, d.x_total_counts, d.y_total_counts) for d in res.data}
 
 
-def wait_link(client, up: bool, timeout: float = 20) -> str:
-    deadline = time.monotonic() + timeout
-    msg = ""
-    while time.monotonic() < deadline:
-        res = client.call("get_sensor_data", id="")
-        msg = res.message
-        if res.success == up and (up or "unreachable" in msg):
-            return msg
-        time.sleep(0.1)
-    raise AssertionError(f"link never {'up' if up else 'down'}: {msg}")
+def wait_link(client, up: bool, timeout: float = 60) -> str:
+    """Wait until get_sensor_data says the link is up (or the agent unreachable): its message."""
+    seen = [""]
+
+    def link_is() -> bool:
+        res = client.call("get_sensor_data", id="", timeout=scaled(30))
+        seen[0] = res.message
+        return res.success == up and (up or "unreachable" in res.message)
+
+    try:
+        wait_until(link_is, timeout, f"the link {'up' if up else 'down'}", interval=0.1)
+    except AssertionError as exc:
+        raise AssertionError(f"{exc}; the node's last answer: {seen[0]!r}") from None
+    return seen[0]
 
 
 def sample_sums(client, dev: str, since: int, until: int) -> tuple[int, int, int]:
@@ -333,7 +339,7 @@ def test_link_drops_lose_no_poll_and_an_agent_restart_keeps_totals_monotone(tmp_
                 log_path=str(node_log),
             ),
         ):
-            assert client.wait(30), node_log.read_text()
+            assert client.wait(scaled(60)), node_log.read_text()
             wait_link(client, up=True)
             start = node_totals(client)
             lost: dict[str, int] = {}
@@ -343,11 +349,11 @@ def test_link_drops_lose_no_poll_and_an_agent_restart_keeps_totals_monotone(tmp_
                 assert proxy.endpoint in msg
                 r = client.call("set_resolution", id=S0, cpi=800)
                 assert not r.success and "unreachable" in r.message
-                time.sleep(1.5)
+                time.sleep(1.5)  # an outage long enough for polls to pile up in the agent's ring
                 proxy.restore()
                 wait_link(client, up=True)
             end = node_totals(client)
-            diag = client.diagnostics(time.monotonic())
+            diag = client.diagnostics(time.monotonic(), timeout=scaled(30))
             for dev in (S0, S1):
                 seq0, x0, y0 = start[dev]
                 seq1, x1, y1 = end[dev]
@@ -362,16 +368,20 @@ def test_link_drops_lose_no_poll_and_an_agent_restart_keeps_totals_monotone(tmp_
                 assert lost[dev] == 0
             # the agent restarts: the node's totals and seq continue, never go back
             agent.send_signal(2)
-            agent.wait(10)
+            agent.wait(scaled(30))
             wait_link(client, up=False)
             with agent_process(opts, str(tmp_path / "agent2.log")):
                 wait_link(client, up=True)
-                time.sleep(0.5)
-                after = node_totals(client)
+
+                def past_end():
+                    now = node_totals(client)
+                    return now if all(now[d][0] > end[d][0] for d in (S0, S1)) else None
+
+                after = wait_until(past_end, 30, "polls from the restarted agent on both sensors")
                 for dev in (S0, S1):
                     assert after[dev][0] > end[dev][0]
                     assert after[dev][2] > end[dev][2]  # meander drives forward
-                d = client.diagnostics(time.monotonic())
+                d = client.diagnostics(time.monotonic(), timeout=scaled(30))
                 assert d[S0]["agent_restarts"] == "1"
     finally:
         client.close()
@@ -397,18 +407,25 @@ def test_a_link_that_drops_again_while_the_gap_is_fetched_loses_no_poll(tmp_path
                 log_path=str(node_log),
             ),
         ):
-            assert client.wait(30), node_log.read_text()
+            assert client.wait(scaled(60)), node_log.read_text()
             wait_link(client, up=True)
             start = node_totals(client)
             for _ in range(2):
                 proxy.cut()
                 wait_link(client, up=False)
-                time.sleep(1.0)
+                time.sleep(1.0)  # down a while before it flaps
                 proxy.flap(0.05, 2.0)
                 wait_link(client, up=True)
-            time.sleep(0.5)
-            end = node_totals(client)
-            diag = client.diagnostics(time.monotonic())
+            # the link is up again once a batch arrives, before its gap is fetched: wait for
+            # a batch applied after that, so a gap counted lost is on the diagnostics read
+            up = node_totals(client)
+
+            def past_up():
+                now = node_totals(client)
+                return now if all(now[d][0] > up[d][0] for d in (S0, S1)) else None
+
+            end = wait_until(past_up, 30, "polls applied after the link came back")
+            diag = client.diagnostics(time.monotonic(), timeout=scaled(30))
             for dev in (S0, S1):
                 seq0, x0, y0 = start[dev]
                 seq1, x1, y1 = end[dev]
@@ -432,19 +449,19 @@ def test_bad_frames_on_the_polls_key_are_dropped_and_counted(tmp_path):
                 env=dict(os.environ),
             ),
         ):
-            assert client.wait(30)
+            assert client.wait(scaled(60))
             wait_link(client, up=True)
             rogue = session_to(endpoint)
             for junk in (b"", b"MMB1", b"\x00" * 200, b"MMB1\x01\x09" + b"\x00" * 100):
                 rogue.put(link.keys("mm_beagle")["polls"], junk)
-            time.sleep(1.0)
+            wait_until(
+                lambda: int(client.diagnostics(time.monotonic(), timeout=scaled(30))[S0][
+                    "link_bad_frames"]) >= 4, 30, "/diagnostics counting the 4 bad frames")
             rogue.close()
             before = node_totals(client)
-            time.sleep(0.3)
-            after = node_totals(client)
-            assert after[S0][0] > before[S0][0]  # still fed by the real agent
-            diag = client.diagnostics(time.monotonic())
-            assert int(diag[S0]["link_bad_frames"]) >= 4
+            # still fed by the real agent
+            wait_until(lambda: node_totals(client)[S0][0] > before[S0][0], 30,
+                       "polls from the real agent after the bad frames")
     finally:
         client.close()
 
