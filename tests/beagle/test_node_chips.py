@@ -14,6 +14,7 @@ import sys
 import time
 
 import pytest
+from fakes import scaled, wait_until
 
 rclpy = pytest.importorskip("rclpy")
 
@@ -54,7 +55,7 @@ def node(request, client, tmp_path_factory):
     if request.param == "sim":
         params = {"backend": "sim", **common, **sim}
         with beagle_process(params, env=env, log_path=str(log), namespace="/chips"):
-            assert client.wait(30), f"services did not come up; log:\n{log.read_text()}"
+            assert client.wait(scaled(60)), f"services did not come up; log:\n{log.read_text()}"
             yield request.param, log
         return
     endpoint = f"tcp/127.0.0.1:{free_port()}"
@@ -76,23 +77,43 @@ def node(request, client, tmp_path_factory):
             namespace="/chips",
         ),
     ):
-        assert client.wait(30), f"services did not come up; log:\n{log.read_text()}"
+        assert client.wait(scaled(60)), f"services did not come up; log:\n{log.read_text()}"
         yield request.param, log
 
 
-def _wait_up(client, timeout=20.0):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        res = client.call("get_sensor_data", id="")
-        if res.success and len(res.data) == len(DEVICES):
-            return res
-        time.sleep(0.2)
-    raise AssertionError(f"not every sensor came up: {res.message}")
+def _wait_up(client):
+    """The first get_sensor_data reply that serves every sensor (it reads and clears)."""
+
+    def every_sensor():
+        res = client.call("get_sensor_data", id="", timeout=scaled(30))
+        return res if res.success and len(res.data) == len(DEVICES) else None
+
+    return wait_until(every_sensor, 60, "a reply serving every sensor", interval=0.2)
+
+
+def _wait_polled(client, more_than: dict[str, int], newer_than: float) -> None:
+    """Wait until /diagnostics received after ``newer_than`` (monotonic s; the client
+    also holds the previous node's) counts more than ``more_than[dev]`` polls of each
+    sensor, and a low-quality event on each chip that has a quality figure (it reads
+    and clears nothing)."""
+
+    def polled() -> bool:
+        diag = client.diagnostics(newer_than, timeout=scaled(30))
+        for dev, chip in zip(DEVICES, CHIPS, strict=True):
+            if int(diag[dev]["polls"]) <= more_than[dev]:
+                return False
+            if registry.chip_info(chip).quality_name and int(diag[dev]["low_quality_events"]) == 0:
+                return False
+        return True
+
+    wait_until(polled, 60, "/diagnostics counting the polls (and a low-quality event) awaited")
 
 
 def test_sensor_data_names_each_chip_and_its_quality(node, client):
-    _wait_up(client)
-    time.sleep(1.5)
+    t0 = time.monotonic()
+    up = _wait_up(client)
+    # the next reply covers the polls since this one: wait for more than 500 of them
+    _wait_polled(client, {d.id: d.seq + 500 for d in up.data}, t0)
     res = client.call("get_sensor_data", id="")
     assert res.success, res.message
     by_id = {d.id: d for d in res.data}
@@ -112,10 +133,25 @@ def test_sensor_data_names_each_chip_and_its_quality(node, client):
 
 def test_get_samples_carry_quality_and_the_low_quality_flag(node, client):
     _wait_up(client)
-    time.sleep(1.0)
-    for dev, chip in zip(DEVICES, CHIPS, strict=True):
+
+    def rings_filled():
+        """Each ring's first 3000 polls, once they are more than 500 with a poor one
+        on each chip that has a quality figure."""
+        replies = [
+            client.call("get_samples", id=dev, since_seq=0, max_samples=3000)
+            for dev in DEVICES
+        ]
+        for res, chip in zip(replies, CHIPS, strict=True):
+            if not res.success or len(res.dx) <= 500:
+                return None
+            poor = any(f & FLAG_LOW_QUALITY for f in res.flags)
+            if registry.chip_info(chip).quality_name and not poor:
+                return None
+        return replies
+
+    replies = wait_until(rings_filled, 60, "more than 500 polls and a poor one in each ring")
+    for res, chip in zip(replies, CHIPS, strict=True):
         info = registry.chip_info(chip)
-        res = client.call("get_samples", id=dev, since_seq=0, max_samples=3000)
         assert res.success, res.message
         q, flags = list(res.quality), list(res.flags)
         assert len(q) == len(res.dx) == len(flags) > 500
@@ -179,7 +215,7 @@ def test_cpi_is_refused_per_chip_with_that_chips_message(node, client):
 
 
 def test_diagnostics_name_each_sensors_chip(node, client):
-    diag = client.diagnostics(newer_than=time.monotonic())
+    diag = client.diagnostics(newer_than=time.monotonic(), timeout=scaled(30))
     assert {v["chip"] for v in diag.values()} == set(CHIPS)
     for dev, chip in zip(DEVICES, CHIPS, strict=True):
         assert diag[dev]["chip"] == chip
@@ -195,11 +231,10 @@ def test_otos_on_chip_pose_is_a_second_odometry(node, client):
 
     got: list = []
     sub = client.node.create_subscription(Odometry, f"{NS}/otos/odom", got.append, 10)
-    deadline = time.monotonic() + 10
-    while len(got) < 20 and time.monotonic() < deadline:
-        time.sleep(0.05)
-    client.node.destroy_subscription(sub)
-    assert len(got) >= 20
+    try:
+        wait_until(lambda: len(got) >= 20, 30, "20 messages on ~/otos/odom")
+    finally:
+        client.node.destroy_subscription(sub)
     first, last = got[0], got[-1]
     assert (last.header.frame_id, last.child_frame_id) == ("odom", "base_link")
     dt = (last.header.stamp.sec - first.header.stamp.sec) + (
@@ -229,7 +264,7 @@ BAD = [
 def test_bad_chips_exit_2_from_the_command_line(params, expect):
     cmd = node_command({"backend": "sim", **params}, "/badchips")
     out = subprocess.run(
-        cmd, capture_output=True, text=True, timeout=60, env=isolated_ros_env()
+        cmd, capture_output=True, text=True, timeout=scaled(120), env=isolated_ros_env()
     )
     assert out.returncode == 2, out.stderr
     assert expect in out.stderr and "Traceback" not in out.stderr
@@ -240,7 +275,7 @@ def test_bad_chips_exit_2_from_a_params_file(tmp_path):
     f.write_text("mm_beagle:\n  ros__parameters:\n    backend: sim\n    chips: [pmw9999]\n")
     out = subprocess.run(
         [sys.executable, "-m", "mm_beagle.node", "--ros-args", "--params-file", str(f)],
-        capture_output=True, text=True, timeout=60, env=isolated_ros_env(),
+        capture_output=True, text=True, timeout=scaled(120), env=isolated_ros_env(),
     )  # fmt: skip
     assert out.returncode == 2 and "allowed: pln2033" in out.stderr, out.stderr
 
@@ -256,7 +291,7 @@ def test_bad_chips_exit_2_from_a_params_file(tmp_path):
 )
 def test_bad_chips_exit_2_from_the_agents_cli(options, expect, tmp_path):
     cmd = agent_command({"backend": "sim", **options})
-    out = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=scaled(120))
     assert out.returncode == 2, out.stderr
     assert expect in out.stderr and "Traceback" not in out.stderr
 

@@ -7,9 +7,9 @@ monitor's session is fed their real replies.
 from __future__ import annotations
 
 import os
-import time
 
 import pytest
+from fakes import scaled, wait_until
 
 rclpy = pytest.importorskip("rclpy")
 
@@ -29,11 +29,22 @@ def _reply(client) -> Reply:
 
 
 def _up(client, log) -> None:
-    assert client.wait(30), log.read_text()
-    deadline = time.monotonic() + 15
-    while not client.call("get_sensor_data", id="").success:
-        assert time.monotonic() < deadline, log.read_text()
-        time.sleep(0.2)
+    assert client.wait(scaled(60)), log.read_text()
+    try:
+        wait_until(lambda: client.call("get_sensor_data", id="", timeout=scaled(30)).success, 60,
+                   "a get_sensor_data reply that succeeds", interval=0.2)
+    except AssertionError as exc:
+        raise AssertionError(f"{exc}; log:\n{log.read_text()}") from None
+
+
+def _reply_past(client, seq: int) -> Reply:
+    """The first reply in which every sensor has polled past ``seq``."""
+
+    def past():
+        reply = _reply(client)
+        return reply if min(r.seq for r in reply.readings) > seq else None
+
+    return wait_until(past, 60, f"a reply with every sensor past poll {seq}", interval=0.2)
 
 
 def test_a_longer_running_new_node_is_detected_as_a_restart(tmp_path):
@@ -46,20 +57,15 @@ def test_a_longer_running_new_node_is_detected_as_a_restart(tmp_path):
             _up(client, log)
             first = _reply(client)
             session.process(first)
-            time.sleep(0.3)
-            old = _reply(client)
+            old = _reply_past(client, max(r.seq for r in first.readings))
             assert session.process(old)
             samples = client.call("get_samples", id=S0, since_seq=0, max_samples=10)
             assert samples.instance_id == old.readings[0].instance_id != 0
         log = tmp_path / "second.log"
         with beagle_process(params, env=dict(os.environ), log_path=str(log)):
             _up(client, log)
-            old_seq = max(r.seq for r in old.readings)
-            while True:  # until the new node has polled more than the old one ever did
-                new = _reply(client)
-                if min(r.seq for r in new.readings) > old_seq + 500:
-                    break
-                time.sleep(0.2)
+            # the new node has polled more than the old one ever did
+            new = _reply_past(client, max(r.seq for r in old.readings) + 500)
             x_before = session.pose.x
             assert new.readings[0].instance_id not in (0, old.readings[0].instance_id)
             assert not session.process(new)  # a new baseline, not a step

@@ -10,6 +10,7 @@ import os
 import time
 
 import pytest
+from fakes import scaled, wait_until
 
 rclpy = pytest.importorskip("rclpy")
 
@@ -31,13 +32,13 @@ def devices(client, tmp_path_factory):
     log = tmp_path_factory.mktemp("node") / "mm_beagle.log"
     params = {"backend": "sim", "sim_trajectory": "figure_eight", "sim_duration": 4.0}
     with beagle_process(params, env=dict(os.environ), log_path=str(log)):
-        assert client.wait(30), f"services did not come up; log:\n{log.read_text()}"
-        deadline = time.monotonic() + 15
-        while time.monotonic() < deadline:  # both sensors up
-            res = client.call("get_sensor_data", id="")
-            if res.success and len(res.data) == 2 and not res.message:
-                break
-            time.sleep(0.1)
+        assert client.wait(scaled(60)), f"services did not come up; log:\n{log.read_text()}"
+
+        def both_up() -> bool:
+            res = client.call("get_sensor_data", id="", timeout=scaled(30))
+            return res.success and len(res.data) == 2 and not res.message
+
+        wait_until(both_up, 60, "a reply serving both sensors", interval=0.1)
         yield client.get_parameters("devices")[0]
 
 
@@ -50,11 +51,19 @@ def test_a_lost_reply_is_served_again_then_the_next_interval(client, devices):
     first = client.call("get_sensor_data", **reader.fields(""))
     assert first.success, first.message
     assert [d.id for d in first.data] == devices
-    time.sleep(0.05)
+    time.sleep(0.05)  # on purpose: the node polls on, yet the lost interval is served again
     again = client.call("get_sensor_data", **reader.fields(""))  # "first" was lost
     assert [key(d) for d in again.data] == [key(d) for d in first.data]
     reader.received(again)
-    time.sleep(0.05)
+    # a poll of each sensor after "again" (get_samples reads and clears nothing)
+    wait_until(
+        lambda: all(
+            len(client.call("get_samples", id=d.id, since_seq=d.seq, max_samples=1).dx) == 1
+            for d in again.data
+        ),
+        30,
+        "a poll of each sensor after the reply served again",
+    )
     nxt = client.call("get_sensor_data", **reader.fields(""))
     assert nxt.success
     for a, b in zip(again.data, nxt.data, strict=True):
@@ -80,7 +89,7 @@ def test_one_sensor_at_a_time_and_other_clients_take_nothing(client, devices):
         sums[0] += d.x_counts
         sums[1] += d.y_counts
         last = d
-        time.sleep(0.01)
+        time.sleep(0.01)  # pacing: the 40 reads spread over a few hundred polls
     assert sums == [last.x_total_counts, last.y_total_counts]  # since the node started
 
 
@@ -101,7 +110,7 @@ def test_sums_equal_the_totals_over_a_run_with_lost_replies(client, devices):
         for d in res.data:
             sums[d.id][0] += d.x_counts
             sums[d.id][1] += d.y_counts
-        time.sleep(0.005)
+        time.sleep(0.005)  # pacing
     for _ in range(2):  # the first may repeat a lost interval, the second ends now
         res = client.call("get_sensor_data", **reader.fields(""))
         reader.received(res)
