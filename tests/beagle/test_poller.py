@@ -15,7 +15,7 @@ from multiprocessing import Pipe
 
 import numpy as np
 import pytest
-from fakes import FakeClock
+from fakes import FakeClock, scaled, wait_until
 
 from mm_beagle import poller as poller_mod
 from mm_beagle import shared_state as ss
@@ -727,8 +727,6 @@ def test_start_up_failure_retries_after_the_interval():
 
 def test_run_loop_polls_serves_commands_and_checks_health(monkeypatch):
     """run() in a thread for a moment, on the sim backend's own real-time emulators."""
-    import time
-
     monkeypatch.setattr(poller_mod, "HEALTH_CHECK_S", 0.05)
     n, ring = 2, 4096
     state = ss.SharedState(bytearray(ss.SharedState.size(n, ring)), n, ring)
@@ -744,21 +742,18 @@ def test_run_loop_polls_serves_commands_and_checks_health(monkeypatch):
     th = threading.Thread(target=p.run, daemon=True)
     th.start()
     try:
-        deadline = time.monotonic() + 10
-        while state.glob[ss.G_POLLS] < 100 and time.monotonic() < deadline:
-            time.sleep(0.01)
+        wait_until(lambda: state.glob[ss.G_POLLS] >= 100, 30, "100 polls", interval=0.01)
         assert state.glob[ss.G_RUNNING] == 1
         cmd.send(("set_cpi", 1, 800))
         state.glob[ss.G_COMMANDS_SENT] += 1  # as PollerClient.command does
-        assert cmd.poll(5), "the loop did not serve the command"
+        assert cmd.poll(scaled(30)), "the loop did not serve the command"
         assert cmd.recv() == ("ok", 800)
         polls = int(state.glob[ss.G_POLLS])
-        deadline = time.monotonic() + 10
-        while state.glob[ss.G_POLLS] < polls + 150 and time.monotonic() < deadline:
-            time.sleep(0.01)
+        wait_until(lambda: state.glob[ss.G_POLLS] >= polls + 150, 30,
+                   "150 polls after the command", interval=0.01)
     finally:
         p.running = False
-        th.join(5)
+        th.join(scaled(30))
     assert not th.is_alive()
     assert state.glob[ss.G_RUNNING] == 0
     polls = int(state.glob[ss.G_POLLS])

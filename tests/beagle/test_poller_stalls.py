@@ -14,6 +14,7 @@ import time
 
 import psutil
 import pytest
+from fakes import scaled, wait_until
 
 rclpy = pytest.importorskip("rclpy")
 
@@ -32,18 +33,19 @@ def client():
     c.close()
 
 
-def poller_pid(node_pid: int, timeout: float = 10.0) -> int:
+def poller_pid(node_pid: int, timeout: float = 60.0) -> int:
     """The node's poller: its child started by multiprocessing.spawn (not the resource tracker)."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
+
+    def spawned() -> int | None:
         for child in psutil.Process(node_pid).children():
             try:
                 if "spawn_main" in " ".join(child.cmdline()):
                     return child.pid
             except psutil.Error:
                 continue
-        time.sleep(0.1)
-    raise AssertionError("no poller process under the node")
+        return None
+
+    return wait_until(spawned, timeout, "a poller process under the node", interval=0.1)
 
 
 def start_node(client, tmp_path, **extra):
@@ -55,14 +57,16 @@ def start_node(client, tmp_path, **extra):
 def wait_up(client, log):
     """Until a reply serves both sensors: right after a (re)start of the poller a sensor
     may still be down, and the reply then serves the other alone ("down: ...")."""
-    assert client.wait(30), f"services did not come up; log:\n{log.read_text()}"
-    deadline = time.monotonic() + 15
-    while time.monotonic() < deadline:
-        res = client.call("get_sensor_data", id="")
-        if res.success and {d.id for d in res.data} == {S0, S1}:
-            return
-        time.sleep(0.2)
-    raise AssertionError(log.read_text())
+    assert client.wait(scaled(60)), f"services did not come up; log:\n{log.read_text()}"
+
+    def both_served() -> bool:
+        res = client.call("get_sensor_data", id="", timeout=scaled(30))
+        return res.success and {d.id for d in res.data} == {S0, S1}
+
+    try:
+        wait_until(both_served, 60, "a reply serving both sensors", interval=0.2)
+    except AssertionError as exc:
+        raise AssertionError(f"{exc}; log:\n{log.read_text()}") from None
 
 
 def test_60ms_stop_bursts_never_stop_the_node_and_keep_totals_exact(client, tmp_path):
@@ -73,7 +77,7 @@ def test_60ms_stop_bursts_never_stop_the_node_and_keep_totals_exact(client, tmp_
         done = threading.Event()
         bursts = [0]
 
-        def stall() -> None:
+        def stall() -> None:  # stopped 60 ms of every 80 ms
             while not done.is_set():
                 os.kill(pid, signal.SIGSTOP)
                 time.sleep(0.06)
@@ -85,26 +89,28 @@ def test_60ms_stop_bursts_never_stop_the_node_and_keep_totals_exact(client, tmp_
         failures, served = [], 0
         t.start()
         try:
-            end = time.monotonic() + 5.0
+            end = time.monotonic() + 5.0  # 5 s of calls through the bursts
             while time.monotonic() < end:
-                res = client.call("get_sensor_data", id="", timeout=5.0)
+                res = client.call("get_sensor_data", id="", timeout=scaled(30))
                 if res.success:
                     served += 1
                 else:
                     failures.append(res.message)
-                res = client.call("get_samples", id=S0, since_seq=0, max_samples=50)
+                res = client.call(
+                    "get_samples", id=S0, since_seq=0, max_samples=50, timeout=scaled(30)
+                )
                 if not res.success:
                     failures.append(res.message)
         finally:
             done.set()
-            t.join(2)
+            t.join(scaled(10))
             os.kill(pid, signal.SIGCONT)
         assert bursts[0] >= 40
         assert proc.poll() is None, log.read_text()[-3000:]
         assert served > 0
         assert all(m == BUSY_MESSAGE for m in failures), failures
         # the totals are exact: every count the emulators generated was counted
-        diag = client.diagnostics(time.monotonic())
+        diag = client.diagnostics(time.monotonic(), timeout=scaled(30))
         for dev in (S0, S1):
             assert int(diag[dev]["sim_generated_x_counts"]) == int(diag[dev]["x_total_counts"])
             assert int(diag[dev]["sim_generated_y_counts"]) == int(diag[dev]["y_total_counts"])
@@ -122,16 +128,19 @@ def test_a_stuck_poller_is_reported_and_restarted(client, tmp_path):
         pid = poller_pid(proc.pid)
         os.kill(pid, signal.SIGSTOP)
         try:
-            deadline = time.monotonic() + 15
-            seen_error = False
-            while time.monotonic() < deadline and not seen_error:
+
+            def stuck_error() -> bool:
                 with client._diag_lock:
                     msgs = [m for _, m in client._diag]
-                seen_error = any(
+                return any(
                     s.level == b"\x02" and "stuck" in s.message for m in msgs for s in m.status
                 )
-                time.sleep(0.1)
-            assert seen_error, log.read_text()[-3000:]
+
+            try:
+                wait_until(stuck_error, 60, "an ERROR status saying the poller is stuck",
+                           interval=0.1)
+            except AssertionError as exc:
+                raise AssertionError(f"{exc}; log:\n{log.read_text()[-3000:]}") from None
         finally:
             with contextlib.suppress(ProcessLookupError):  # the node should have killed it
                 os.kill(pid, signal.SIGCONT)
@@ -142,7 +151,7 @@ def test_a_stuck_poller_is_reported_and_restarted(client, tmp_path):
         after = {d.id: d for d in client.call("get_sensor_data", id="").data}
         for dev in (S0, S1):
             assert after[dev].seq > before[dev].seq  # seq and totals carry on, never go back
-        diag = client.diagnostics(time.monotonic())
+        diag = client.diagnostics(time.monotonic(), timeout=scaled(30))
         assert all(v["poller_restarts"] == "1" for v in diag.values())
         assert "restarted" in log.read_text()
 
@@ -186,9 +195,12 @@ def test_a_poller_stopped_mid_write_gets_busy_answers_that_change_nothing():
             if odd_by_us:
                 ints[0][ss.I_VERSION] -= 1
             os.kill(pid, signal.SIGCONT)
-        time.sleep(0.05)
-        res = node.on_get_sensor_data(req, GetSensorData.Response())
-        assert res.success
+
+        def served():  # the poller finishes its write once continued; until then: busy again
+            r = node.on_get_sensor_data(req, GetSensorData.Response())
+            return r if r.success else None
+
+        res = wait_until(served, 30, "a reply once the poller is continued")
         (d,) = res.data
         # the refused call moved no cursor: this interval starts where the first one ended
         assert d.samples == d.seq - first.data[0].seq
@@ -202,40 +214,52 @@ def test_a_poller_stopped_mid_write_gets_busy_answers_that_change_nothing():
         rclpy.shutdown(context=ctx)
 
 
-def _statuses(client, newer_than: float, timeout: float):
-    """Every /diagnostics status received after ``newer_than``, collected for ``timeout`` s.
-
-    The client keeps only its newest 5 messages: read them often.
-    """
-    seen: dict[int, object] = {}
-    deadline = time.monotonic() + timeout
-    while True:
-        with client._diag_lock:
-            for t, m in client._diag:
-                if t > newer_than:
-                    seen[id(m)] = (t, m)
-        if time.monotonic() >= deadline:
-            break
-        time.sleep(0.05)
+def _collect(client, newer_than: float, seen: dict) -> list:
+    """Add the client's /diagnostics received after ``newer_than`` to ``seen``; return
+    every status in ``seen``, oldest first. The client keeps only its newest 5 messages:
+    call this often."""
+    with client._diag_lock:
+        for t, m in client._diag:
+            if t > newer_than:
+                seen[id(m)] = (t, m)
     msgs = [m for _, m in sorted(seen.values(), key=lambda tm: tm[0])]
     return [(s.hardware_id, s.level, s.message, {kv.key: kv.value for kv in s.values})
             for m in msgs for s in m.status]  # fmt: skip
 
 
-def _wait_clear(client, timeout: float = 15.0):
-    """The first round in which no status reports a stall or a wrap (and none is ERROR).
+def _statuses(client, newer_than: float, duration: float):
+    """Every /diagnostics status received after ``newer_than``, collected for ``duration`` s."""
+    seen: dict[int, object] = {}
+    end = time.monotonic() + duration
+    while time.monotonic() < end:
+        _collect(client, newer_than, seen)
+        time.sleep(0.05)
+    return _collect(client, newer_than, seen)
 
-    A loaded machine may still WARN for overruns: that is not what these tests watch.
+
+def _wait_status(client, newer_than: float, wanted, what: str, timeout: float = 30.0) -> list:
+    """The statuses received after ``newer_than`` for which ``wanted(status)``, once any came."""
+    seen: dict[int, object] = {}
+    return wait_until(
+        lambda: [s for s in _collect(client, newer_than, seen) if wanted(s)], timeout, what,
+        interval=0.05,
+    )
+
+
+def _wait_clear(client, timeout: float = 60.0):
+    """The first round (0.6 s of statuses) in which none reports a stall or a wrap (and none
+    is ERROR). A loaded machine may still WARN for overruns: that is not what these tests watch.
     """
-    got = []
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        t0 = time.monotonic()
-        got = _statuses(client, t0, 0.6)
+
+    def clear_round():
+        got = _statuses(client, time.monotonic(), 0.6)
         if got and all(s[1] != b"\x02" and "stall" not in s[2] and "wrapped" not in s[2]
                        for s in got):  # fmt: skip
             return got
-    raise AssertionError(f"the stall or wrap never cleared; last: {got}")
+        return None
+
+    return wait_until(clear_round, timeout, "a round of statuses without a stall or a wrap",
+                      interval=0)
 
 
 def test_diagnostics_warn_on_a_stall_error_on_a_wrap_and_back_to_ok(client, tmp_path):
@@ -246,23 +270,26 @@ def test_diagnostics_warn_on_a_stall_error_on_a_wrap_and_back_to_ok(client, tmp_
         _wait_clear(client)
         t0 = time.monotonic()
         os.kill(pid, signal.SIGSTOP)
-        time.sleep(0.3)
+        time.sleep(0.3)  # the stall
         os.kill(pid, signal.SIGCONT)
-        got = _statuses(client, t0, 1.0)
-        warned = [s for s in got if s[1] == b"\x01" and "stall" in s[2]]
-        assert warned, got
+        warned = _wait_status(client, t0, lambda s: s[1] == b"\x01" and "stall" in s[2],
+                              "a WARN status for the stall")
         assert float(warned[0][3]["longest_poll_gap_ms"]) > 50
         _wait_clear(client)
         # 4 s without a poll while the robot drives: the 16-bit counter may have wrapped
         t0 = time.monotonic()
         os.kill(pid, signal.SIGSTOP)
         try:
-            during = _statuses(client, t0, 4.0)
+            during = _statuses(client, t0, 4.0)  # the 4-s stop
         finally:
             os.kill(pid, signal.SIGCONT)
-        got = during + _statuses(client, time.monotonic(), 1.5)
-        errors = [s for s in got if s[1] == b"\x02" and "wrapped" in s[2]]
-        assert errors, got
+
+        def wrapped(s) -> bool:
+            return s[1] == b"\x02" and "wrapped" in s[2]
+
+        errors = [s for s in during if wrapped(s)] or _wait_status(
+            client, time.monotonic(), wrapped, "an ERROR status for the wrapped counter"
+        )
         assert int(errors[0][3]["est_wrap_loss_counts"]) >= 65_536
         assert float(errors[0][3]["est_wrap_loss_m"]) > 0.5
         _wait_clear(client)
@@ -302,7 +329,7 @@ def test_exit_code_2_only_for_bad_configuration(case, code, text):
 
     r = subprocess.run(
         [sys.executable, "-c", EXIT_CODE_SCRIPT, case],
-        capture_output=True, text=True, timeout=60, env=dict(os.environ),
+        capture_output=True, text=True, timeout=scaled(120), env=dict(os.environ),
     )  # fmt: skip
     assert r.returncode == code, r.stderr
     assert text in r.stderr
