@@ -14,6 +14,7 @@ from pathlib import Path
 
 import psutil
 import pytest
+from fakes import scaled, wait_until
 
 from mm_beagle import harness
 from mm_beagle.harness import ISOLATED_DOMAINS, ISOLATED_MARK, isolated_ros_env
@@ -66,18 +67,16 @@ def test_a_child_stops_when_its_parent_with_sigint_ignored_is_killed(tmp_path):
     child = None
     try:
         child = psutil.Process(int(parent.stdout.readline()))
-        deadline = time.monotonic() + 20
-        while "child up" not in Path(log).read_text() and time.monotonic() < deadline:
-            time.sleep(0.05)
+        wait_until(lambda: "child up" in Path(log).read_text(), 60, "the child's 'child up' line")
         assert child.is_running()
         parent.send_signal(signal.SIGKILL)
-        parent.wait(5)
-        _, alive = psutil.wait_procs([child], timeout=5)
+        parent.wait(scaled(30))
+        _, alive = psutil.wait_procs([child], timeout=scaled(30))
         assert not alive, "the child outlived its SIGKILLed parent"
     finally:
         if parent.poll() is None:
             parent.kill()
-            parent.wait(5)
+            parent.wait(scaled(30))
         if child is not None and child.is_running():
             child.kill()
 
@@ -113,25 +112,23 @@ def test_a_real_node_and_its_poller_stop_when_a_nohup_parent_is_killed(when, tmp
         node = psutil.Process(int(parent.stdout.readline()))
         procs = [node]
         if when == "polling":
-            deadline = time.monotonic() + 30
-            while not node.children() and time.monotonic() < deadline:
-                time.sleep(0.1)  # the poller is up
+            wait_until(node.children, 60, "the node's poller process", interval=0.1)
             procs += node.children(recursive=True)
             assert len(procs) >= 2, log.read_text()
         else:
-            time.sleep(0.3)
+            time.sleep(0.3)  # on purpose: the parent dies while the node still starts
         parent.send_signal(signal.SIGKILL)
-        parent.wait(5)
+        parent.wait(scaled(30))
         time.sleep(1.0)  # anything the node starts meanwhile is found and watched too
         with contextlib.suppress(psutil.Error):
             procs += node.children(recursive=True)
-        _, alive = psutil.wait_procs(procs, timeout=15)
+        _, alive = psutil.wait_procs(procs, timeout=scaled(30))
         assert not alive, f"still running after the parent's SIGKILL: {alive}"
         assert "Traceback" not in log.read_text()
     finally:
         if parent.poll() is None:
             parent.kill()
-            parent.wait(5)
+            parent.wait(scaled(30))
         for p in procs:
             with contextlib.suppress(psutil.Error):
                 p.kill()
