@@ -42,6 +42,7 @@ import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -93,9 +94,9 @@ LIFT_CONTEXT_POLLS = 64
 MIN_DT_S = 1e-6
 
 
-@dataclass(frozen=True)
-class SensorTotals:
-    """One sensor's monotone totals in one ``get_sensor_data`` reply.
+class SensorTotals(NamedTuple):
+    """One sensor's monotone totals in one ``get_sensor_data`` reply (a NamedTuple: made
+    for every reply of both sensors, where a frozen dataclass took 2 µs each).
 
     ``seq``: polls done so far; ``stamp_ns``: newest poll (ns); ``x_counts``,
     ``y_counts``: measured counts; ``x_m``, ``y_m``: the same in metres (exact
@@ -375,6 +376,108 @@ class PollTracker:
             self._est_ref = [(t.x_est_m, t.y_est_m) for t in totals]
         return steps
 
+    def step_many(
+        self, items: Sequence[tuple[Sequence[SensorTotals], Sequence[PollBatch | None]]]
+    ) -> tuple[PollSteps, list[int]]:
+        """:meth:`step` for each ``(totals, polls)`` in turn, in one go: the steps of all of
+        them and, per item, how many steps were made up to and including it.
+
+        Exactly what the calls one by one give, whatever the grouping (a client that
+        takes replies in batches keeps the pose, the gaps and each reply's share of the
+        steps of one that takes them singly). The common case -- every sensor polled in
+        the same ticks, no lift, no command read, no CPI change, nothing held back -- is
+        paired once for all items; anything else goes item by item through :meth:`step`.
+        """
+        fast = self._step_many_plain(items)
+        if fast is not None:
+            return fast
+        parts, ends, made = [], [], 0
+        for totals, polls in items:
+            s = self.step(totals, polls)
+            parts.append(s)
+            made += len(s)
+            ends.append(made)
+        return PollSteps.concat(parts, self.n), ends
+
+    def _step_many_plain(self, items) -> tuple[PollSteps, list[int]] | None:
+        """:meth:`step_many` for the common case, or None (nothing changed) when it is not.
+
+        The checks are :meth:`step`'s for each item (:meth:`restart_in`,
+        :meth:`_why_not_usable` with the cursors moved on item by item), done for all
+        items at once; the state left is the one the items one by one leave."""
+        n = self.n
+        if self._cursor is None or not items or self._pending_any():
+            return None
+        lens, cpi = [], None
+        cursor = list(self._cursor)
+        for totals, polls in items:
+            if len(totals) != n or len(polls) != n:
+                return None
+            k = None
+            for i, (t, b) in enumerate(zip(totals, polls, strict=True)):
+                if (
+                    b is None or t.seq <= cursor[i] or b.dropped or b.first_seq != cursor[i]
+                    or b.next_seq != t.seq or t.instance_id != self._instance[i]
+                    or (b.instance_id and t.instance_id and b.instance_id != t.instance_id)
+                    or (k is not None and len(b) != k) or (cpi is not None and b.cpi != cpi)
+                ):  # fmt: skip
+                    return None  # missing, or not the same ticks, or step() would object
+                k, cpi = len(b), b.cpi
+                cursor[i] = t.seq
+            lens.append(k)
+        cols = [[polls[i] for _, polls in items] for i in range(n)]
+        stamps = [np.concatenate([b.stamp_ns for b in c]) for c in cols]
+        first = stamps[0]
+        if first[0] <= self._last_stamp or (len(first) > 1 and not (first[1:] > first[:-1]).all()):
+            return None
+        kk = len(first)
+        counts = np.empty((kk, n, 2), np.int64)
+        for i, c in enumerate(cols):
+            if i and not np.array_equal(stamps[i], first):
+                return None
+            if (np.concatenate([b.flags for b in c]) & (FLAG_UNSEEN | FLAG_COMMAND_READ)).any():
+                return None
+            counts[:, i, 0] = np.concatenate([b.dx for b in c])
+            counts[:, i, 1] = np.concatenate([b.dy for b in c])
+        ends = list(itertools.accumulate(lens))
+        sums = np.add.reduceat(counts, [0, *ends[:-1]], axis=0)  # (items, n, 2) per item
+        tot = np.array(
+            [[self._acc_counts[i] for i in range(n)]]
+            + [[(t.x_counts, t.y_counts) for t in totals] for totals, _ in items], np.int64
+        )
+        if not np.array_equal(sums, np.diff(tot, axis=0)):
+            return None
+        scale = INCH_M / cpi  # cpi > 0: PollBatch checked it for polls
+        want = np.diff(np.array(
+            [[self._acc_m[i] for i in range(n)]]
+            + [[(t.x_m, t.y_m) for t in totals] for totals, _ in items], float
+        ), axis=0)  # fmt: skip
+        got = sums * scale
+        diff = np.abs(want - got)  # math.isclose(got, want, rel_tol=1e-9, abs_tol=1e-12)
+        close = (got == want) | (diff <= np.abs(1e-9 * want)) | (diff <= np.abs(1e-9 * got))
+        if not (close | (diff <= 1e-12)).all():
+            return None  # a CPI change within an interval: step() makes it a gap
+        # usable: the state the items one by one leave behind
+        last = items[-1][0]
+        self._cursor = [t.seq for t in last]
+        self._acc_counts = [(t.x_counts, t.y_counts) for t in last]
+        self._acc_m = [(t.x_m, t.y_m) for t in last]
+        self._est_ref = [(t.x_est_m, t.y_est_m) for t in last]
+        for i in range(n):
+            self._pending[i].cpi = cpi
+            self.polls_used[i] += kk
+        for s in sums.tolist():  # added item by item, as step() adds them
+            for i in range(n):
+                self._emitted_m[i][0] += float(s[i][0] * scale)
+                self._emitted_m[i][1] += float(s[i][1] * scale)
+        dt = np.maximum(np.diff(first, prepend=self._last_stamp) / 1e9, MIN_DT_S)
+        self._last_stamp = int(first[-1])
+        lifted = np.zeros((kk, n), bool)
+        self._ctx_counts = np.concatenate([self._ctx_counts, counts])[-LIFT_CONTEXT_POLLS:]
+        self._ctx_lifted = np.concatenate([self._ctx_lifted, lifted])[-LIFT_CONTEXT_POLLS:]
+        d = counts.astype(float) * scale
+        return PollSteps(first, dt, d, counts, lifted, np.zeros(kk, bool)), ends
+
     def _why_not_usable(self, totals, polls) -> str:
         for i, (t, b) in enumerate(zip(totals, polls, strict=True)):
             want = t.seq - self._cursor[i]
@@ -553,11 +656,15 @@ class PollTracker:
         return out
 
 
-def integrate_steps(odometry, steps: PollSteps, d: np.ndarray | None = None) -> np.ndarray:
+def integrate_steps(
+    odometry, steps: PollSteps, d: np.ndarray | None = None, return_residual: bool = False
+):
     """``odometry.integrate`` over the steps (``d``: their displacements after calibration,
     default ``steps.d``); the lift mask goes along where ``integrate`` takes ``lifted``
-    (``two-sensor`` then drops a lifted sensor's equations). Returns the (N, 3) poses."""
+    (``two-sensor`` then drops a lifted sensor's equations). Returns the (N, 3) poses, with
+    ``return_residual`` also the (N,) residuals (as ``integrate`` gives them)."""
     d = steps.d if d is None else d
+    kw = {"return_residual": True} if return_residual else {}
     if steps.lifted.any() and "lifted" in inspect.signature(odometry.integrate).parameters:
-        return odometry.integrate(steps.dt, d, lifted=steps.lifted)
-    return odometry.integrate(steps.dt, d)
+        return odometry.integrate(steps.dt, d, lifted=steps.lifted, **kw)
+    return odometry.integrate(steps.dt, d, **kw)

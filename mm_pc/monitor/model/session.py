@@ -30,9 +30,10 @@ Every reply of mm_beagle (live, or replayed from a recording) goes through
 
 :meth:`MonitorSession.process_batch` takes the replies the bridge delivers
 together (up to a screen frame's worth): each reply is checked and gets its
-row as above, but the single polls of all of them go through the poll
-tracker and the pose integration once, and a row's pose is the per-poll pose
-at its reply's stamp (docs/monitor.md, "Threads").
+row as above, the single polls of all of them go through the poll tracker
+(:meth:`PollTracker.step_many`: each reply's steps as one by one) and the pose
+integration once, and a row's pose is the pose after its own reply's steps, so
+the history does not depend on the grouping (docs/monitor.md, "Threads").
 
 Units and frames: metres, seconds, radians. Sensor displacements are in the
 sensor frame of the seed (X right, Y forward); poses are odom -> base_link
@@ -122,7 +123,9 @@ def _map_keep(poses: np.ndarray) -> np.ndarray:
 
 
 class _Deferred(NamedTuple):
-    """A reply checked and turned into deltas, waiting for its pose (``t``, ``dt``: s)."""
+    """A reply checked and turned into deltas, waiting for its pose (``t``, ``dt``: s);
+    with single polls also the poll tracker's input: the totals, each sensor's polls
+    since the previous step (None: missing) and why they could not be joined ('')."""
 
     reply: Reply
     now: list[Reading]
@@ -130,6 +133,9 @@ class _Deferred(NamedTuple):
     processed: list[tuple[float, float]]
     t: float
     dt: float
+    totals: list[SensorTotals] | None = None
+    polls: list[PollBatch | None] | None = None
+    bad: str = ""
 
 
 def sensor_columns(k: int) -> dict[str, str]:
@@ -499,11 +505,11 @@ class MonitorSession:
     def process_batch(self, replies: Sequence[Reply]) -> int:
         """Take replies delivered together, oldest first; the number of rows made.
 
-        The same as :meth:`process` one by one, except that the single polls of
-        the whole batch are integrated in one go: a row's pose is the newest
-        per-poll pose at or before its reply's stamp (a lift held back at one
-        reply and released by a later one of the batch is in the earlier row
-        already), and polls that do not fit make the batch's interval one gap step.
+        The same history, pose and gaps as :meth:`process` one by one, whatever the
+        grouping (a replay feeds the replies singly): the batch's polls are stepped
+        as one by one (:meth:`PollTracker.step_many`) and integrated in one go, and
+        each row takes the pose after its own reply's steps. Only the map keeps one
+        forced row per batch instead of per reply.
         """
         self._batching = True
         try:
@@ -582,7 +588,9 @@ class MonitorSession:
         self.stats.used += 1
         if reply.polls is not None:
             self._stash_polls(reply)
-            self._deferred.append(_Deferred(reply, now, raw, processed, t, dt))
+            polls, bad = self._take_polls()
+            totals = [_totals(r) for r in now]
+            self._deferred.append(_Deferred(reply, now, raw, processed, t, dt, totals, polls, bad))
             if not self._batching:
                 self._flush()
             return
@@ -592,32 +600,32 @@ class MonitorSession:
         else:
             self.stats.per_reply += 1
             pose = self.odometry.update(Sample.of(dt, *processed))
-        self._row(_Deferred(reply, now, raw, processed, t, dt), pose)
+        self._row(_Deferred(reply, now, raw, processed, t, dt), pose, self.odometry.residual)
         self._append_map(t, pose)
 
     def _flush(self) -> None:
-        """The rows of the deferred replies: their polls integrated in one go, each row
-        with the pose at its reply's stamp; the map's rows from the per-poll poses."""
+        """The rows of the deferred replies: their polls stepped as one by one and
+        integrated in one go, each row with the pose after its own reply's steps (so a
+        row does not depend on which replies came together); the map's rows from the
+        per-poll poses."""
         if not self._deferred:
             return
         group, self._deferred = self._deferred, []
-        last = group[-1]
-        before = self.odometry.pose
-        pose = self._pose_from_polls(last.now, last.t)
-        if self._poll_poses is not None and len(group) > 1:
-            ts, poses = self._poll_poses
-            at = np.searchsorted(ts, [d.t for d in group], side="right") - 1
-            for d, j in zip(group, at.tolist(), strict=True):
-                self._row(d, before if j < 0 else Pose2D(*map(float, poses[j])))
-        else:
-            for d in group:
-                self._row(d, pose)
-        self._append_map(last.t, pose)
+        before, res_before = self.odometry.pose, self.odometry.residual
+        self.tracker.use_lift_estimates = self.use_lift_estimates
+        steps, ends = self.tracker.step_many([(d.totals, d.polls) for d in group])
+        poses, resid = self._integrate(steps, group, ends, before)
+        for d, e in zip(group, ends, strict=True):
+            if poses is None or e == 0:
+                self._row(d, before, res_before)
+            else:
+                r = float(resid[e - 1])
+                self._row(d, Pose2D(*map(float, poses[e - 1])), None if math.isnan(r) else r)
+        self._append_map(group[-1].t, self.odometry.pose)
 
-    def _row(self, d: _Deferred, pose: Pose2D) -> None:
+    def _row(self, d: _Deferred, pose: Pose2D, residual: float | None) -> None:
         """The history row and the log lines of one reply with ``pose`` as its pose."""
-        reply, now, raw, processed, t, dt = d
-        residual = self.odometry.residual
+        reply, now, raw, processed, t, dt = d[:6]
         row = [
             t,
             dt,
@@ -659,10 +667,9 @@ class MonitorSession:
             rows[:, 5 + 2 * k] = poses[:, 1] + s * m.x + c * m.y
         self.map_history.extend(rows)
 
-    def _pose_from_polls(self, now: list[Reading], t: float) -> Pose2D:
-        """Integrate the single polls stashed up to the totals ``now`` (at ``t``, s); a gap
-        step where they are missing. The pose after the newest step made (an open lift
-        holds steps back)."""
+    def _take_polls(self) -> tuple[list[PollBatch | None], str]:
+        """Each sensor's polls stashed since the previous step, joined (None: missing, or
+        not joinable), and why they could not be joined ('')."""
         batches: list[PollBatch | None] = []
         bad = ""
         for dev in self.devices:
@@ -672,10 +679,14 @@ class MonitorSession:
             except ValueError as e:
                 batches.append(None)
                 bad = f"{dev}: {e}"
-        self.tracker.use_lift_estimates = self.use_lift_estimates
-        steps = self.tracker.step([_totals(r) for r in now], batches)
+        return batches, bad
+
+    def _integrate(self, steps, group: list[_Deferred], ends: list[int], before: Pose2D):
+        """Filter, calibrate and integrate the steps of the deferred replies ``group``
+        (``ends``: steps made up to each), record their gaps; the (N, 3) poses and (N,)
+        residuals, or (None, None) when there is nothing to integrate."""
         if not len(steps):
-            return self.odometry.pose
+            return None, None
         d = steps.d.copy()
         for k, dev in enumerate(self.devices):
             dx, dy = d[:, k, 0], d[:, k, 1]
@@ -684,22 +695,26 @@ class MonitorSession:
                 dx, dy = pf.push_many(dx, dy)
             d[:, k, 0], d[:, k, 1] = self.calibration.apply(dev, dx, dy)
         if self.calibrating:
-            return self.odometry.pose  # a calibration run is open: the robot stays put
-        before = self.odometry.pose
-        poses = integrate_steps(self.odometry, steps, d)
-        self._poll_poses = ((steps.stamp_ns - self._t0_ns) / 1e9, np.asarray(poses, float))
+            return None, None  # a calibration run is open: the robot stays put
+        poses, resid = integrate_steps(self.odometry, steps, d, return_residual=True)
+        poses = np.asarray(poses, float)
+        self._poll_poses = ((steps.stamp_ns - self._t0_ns) / 1e9, poses)
         self.stats.polls += int((~steps.gap).sum())
         gaps = np.flatnonzero(steps.gap)
+        if not len(gaps):
+            return poses, resid
         reasons = [*["polls missing"] * len(gaps), *self.tracker.gap_reasons]
         reasons = reasons[len(reasons) - len(gaps) :]
-        for j, why in zip(gaps, reasons, strict=True):
+        owner = np.searchsorted(ends, gaps, side="right")  # the reply that made each gap
+        for j, why, r in zip(gaps.tolist(), reasons, owner.tolist(), strict=True):
             start = poses[j - 1] if j > 0 else before.as_array()
-            if bad:
-                why = f"{why} ({bad})"
+            d_r = group[r]
+            if d_r.bad:
+                why = f"{why} ({d_r.bad})"
             self.stats.gaps += 1
             self.stats.events.append(("gap", f"no single polls: {why}; step from the totals"))
-            self.gaps.append(Gap(t, *map(float, start[:2]), *map(float, poses[j, :2]), why))
-        return self.odometry.pose
+            self.gaps.append(Gap(d_r.t, *map(float, start[:2]), *map(float, poses[j, :2]), why))
+        return poses, resid
 
     def _stash_polls(self, reply: Reply) -> None:
         """Keep the polls of a reply until a reply makes a step (None = a failed fetch)."""
