@@ -146,13 +146,17 @@ def unresolved(files: list[Path], ldd_output: str | None = None) -> list[str]:
     return sorted({ln.split()[0] for ln in ldd_output.splitlines() if "not found" in ln})
 
 
-def qt_missing_libraries(needs: tuple[str, ...] = ("headless", "window")) -> list[str]:
-    """Every system library that PySide6's files for ``needs`` cannot load (ldd)."""
+def qt_files(needs: tuple[str, ...] = ("headless", "window")) -> list[Path]:
+    """PySide6's files of :data:`QT_FILES` for ``needs`` that this install has."""
     root = _pyside_dir()
     if root is None:
         return []
-    files = sorted({f for need in needs for pattern in QT_FILES[need] for f in root.glob(pattern)})
-    return unresolved(files)
+    return sorted({f for need in needs for pattern in QT_FILES[need] for f in root.glob(pattern)})
+
+
+def qt_missing_libraries(needs: tuple[str, ...] = ("headless", "window")) -> list[str]:
+    """Every system library that PySide6's files for ``needs`` cannot load (ldd)."""
+    return unresolved(qt_files(needs))
 
 
 def install_line(sonames: list[str]) -> tuple[str, list[str]]:

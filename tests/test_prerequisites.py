@@ -166,3 +166,12 @@ def test_monitor_whose_qt_cannot_load_a_library_names_the_package(tmp_path, modu
     assert "Traceback" not in out.stderr
     assert "the system library libEGL.so.1 is missing" in out.stderr
     assert "sudo apt-get install libegl1" in out.stderr
+
+
+def test_qt_platform_report_over_every_qt_file_and_its_usage():
+    from mm_pc.monitor import qt_platform
+
+    assert qt_platform.main(["--bogus"]) == 2
+    files = prerequisites.qt_files()
+    assert any(f.name == "libqxcb.so" for f in files)  # the window's plugin is among them
+    assert any(f.name == "libqoffscreen.so" for f in files)

@@ -18,7 +18,7 @@ import os
 import sys
 from pathlib import Path
 
-from mm_pc.prerequisites import library_packages, qt_missing_libraries, unresolved
+from mm_pc.prerequisites import library_packages, qt_files, unresolved
 
 __all__ = ["DEBIAN_PACKAGES", "missing_libraries", "problem", "uses_xcb", "xcb_plugin"]
 
@@ -104,11 +104,16 @@ def main(argv: list[str] | None = None) -> int:
         print("usage: python -m mm_pc.monitor.qt_platform [--all]", file=sys.stderr)
         return 2
     if argv == ["--all"]:
-        missing = qt_missing_libraries()
+        files = qt_files()
+        if not files:
+            print("PySide6 is not installed here (or has none of the Qt files the monitor loads)")
+            return 1
+        missing = unresolved(files)
         if missing:
             print(problem(missing).replace("X11 platform plugin", "monitor (headless or windowed)"))
             return 1
-        print("Qt has every system library the monitor loads, headless and in a window")
+        print(f"Qt has every system library the monitor loads, headless and in a window "
+              f"(ldd on {len(files)} files of {files[0].parents[2]})")  # fmt: skip
         return 0
     plugin = xcb_plugin()
     if plugin is None:
