@@ -10,7 +10,10 @@ counted as lost and the ring starts after them, while the totals, which come
 with every batch, stay exact. A restarted agent (new boot id) continues the
 node's totals and sequence numbers instead of resetting them. Stamps are moved
 to this machine's clock (offset = the smallest seen delay, allowed to drift
-100 ppm), unless ``clock_sync`` is off because both clocks run NTP.
+100 ppm), unless ``clock_sync`` is off because both clocks run NTP. A smaller
+delay lowers that estimate at once; the offset applied to the stamps follows it
+slewed (at most ``CLOCK_SLEW`` of the time between two polls), so a sensor's
+stamps never step back: they stay strictly increasing, as the agent took them.
 """
 
 from __future__ import annotations
@@ -36,6 +39,11 @@ COMMAND_TIMEOUT_S = 2.0
 HISTORY_TIMEOUT_S = 2.0
 GAP_RETRY_S = 5.0  # how long a gap is asked for before its polls count as lost
 CLOCK_LEAK = 1e-4  # the clock offset estimate may rise this much per second (100 ppm)
+# A lower estimate reaches the stamps at most this fast (ns per ns of poll time): a step of
+# d ms is taken in over d / CLOCK_SLEW ms of polls, whose intervals look 5 % shorter meanwhile,
+# instead of at once, which put a poll's stamp before its predecessor's (steps of several ms
+# under load, against 1 ms between polls).
+CLOCK_SLEW = 0.05
 RING_DTYPES = ("<i8", "<i2", "<i2", "<u2", "<u2", "u1", "<i2")
 
 
@@ -92,10 +100,14 @@ class RemoteAgent:
         self.latency_ms: collections.deque = collections.deque(maxlen=4096)
         # poll stamp -> applied here (ms; meaningful on one clock: benchmarks)
         self.apply_latency_ms: collections.deque = collections.deque(maxlen=100_000)
-        self._offset_ns: int | None = None
+        self._offset_ns: int | None = None  # the estimate (smallest delay, leaking up)
         self._offset_t = 0.0
+        # per sensor: the offset applied to its newest poll's stamp, and that poll's agent stamp
+        self._stamp_off: list[int | None] = [None] * n
+        self._stamp_raw: list[int] = [0] * n
         # sequence bookkeeping, per sensor
         self.boot: int | None = None
+        self.batch_number = 0  # the newest batch frame of this boot applied
         self.next_agent = [None] * n  # next agent seq expected
         self.base_i = np.zeros((n, ss.N_INT), np.int64)
         self.base_f = np.zeros((n, ss.N_FLOAT), np.float64)
@@ -282,17 +294,23 @@ class RemoteAgent:
             self.link_up = self.ever_up = True
             self.since_wall = time.time()
             self._emit("log", f"link to the agent at {self.endpoint} up")
-        self.state.glob[:] = np.frombuffer(batch.glob, np.int64)
-        newest = 0
+        # a frame overtaken by a newer one (the subscriber's callbacks may run on several
+        # threads): its polls are skipped as already applied, its older counters too
+        if batch.number > self.batch_number:
+            self.batch_number = batch.number
+            self.state.glob[:] = np.frombuffer(batch.glob, np.int64)
+        newest = max(
+            (int(np.frombuffer(b.ints, np.int64)[ss.I_STAMP_NS]) for b in batch.blocks if b.count),
+            default=0,
+        )
+        if newest:  # before applying: the very first polls get an offset too
+            self._clock(recv_ns, newest)
         for block in batch.blocks:
             self._apply(block, fetch_gaps=True)
-            if block.count:
-                newest = max(newest, int(np.frombuffer(block.ints, np.int64)[ss.I_STAMP_NS]))
         # a gap fetch can take seconds: frames that kept arriving meanwhile mean the link is
         # up (else the feeder would call it lost the moment the fetch returns)
         self.last_heard = max(self.last_heard, self.last_rx)
         if newest:
-            self._clock(recv_ns, newest)
             self.apply_latency_ms.append((time.time_ns() - newest) / 1e6)
 
     def _new_boot(self, boot_id: int) -> None:
@@ -305,8 +323,16 @@ class RemoteAgent:
             self.next_agent = [0] * self.n  # its polls since it started: fetch what we missed
             self._emit("log", "the agent restarted: totals and sequence numbers continue")
         self.boot = boot_id
+        self.batch_number = 0
 
-    def _apply(self, block: link.Block, fetch_gaps: bool) -> None:
+    def _apply(self, block: link.Block, fetch_gaps: bool, totals: bool = True) -> None:
+        """Write a block's new polls into the ring and, with ``totals``, publish its totals.
+
+        A history reply (``totals=False``) carries the agent's newest totals, not those
+        after its polls: published, they would serve a seq beyond the polls written (old
+        ring slots) that steps back with the next batch. Its polls stay unseen until the
+        live batch after the gap publishes its own totals.
+        """
         i = block.index
         first, count = block.first_seq, block.count
         end = first + count
@@ -333,6 +359,7 @@ class RemoteAgent:
         skip = expected - first
         ints = np.frombuffer(block.ints, np.int64)
         floats = np.frombuffer(block.floats, np.float64)
+        sync = self.clock_sync and self._offset_ns is not None
         st = self.state.ints[i]
         st[ss.I_VERSION] += 1  # odd: writing
         if count > skip:
@@ -340,21 +367,24 @@ class RemoteAgent:
             slots = np.arange(node_first, node_first + count - skip) % self.state.ring_size
             for ring, data, dtype in zip(self._rings[i], block.arrays, RING_DTYPES, strict=True):
                 ring[slots] = np.frombuffer(data, dtype)[skip:]
-            if self.clock_sync and self._offset_ns is not None:
-                self._rings[i][0][slots] += self._offset_ns
-        if end >= expected:
+            if sync:
+                stamps = self._rings[i][0]
+                stamps[slots] += self._stamp_offsets(i, stamps[slots])
+        if end >= expected and totals:
             self.agent_i[i] = ints
             self.agent_f[i] = floats
             # every field but the lock word (never the agent's version, even for a moment:
             # a reader would take a half-written snapshot) and the node's own ring start
             fields = ints.copy()
             fields[self._mono] += self.base_i[i][self._mono]
-            if self.clock_sync and self._offset_ns is not None:
-                fields[ss.I_STAMP_NS] += self._offset_ns
+            if sync:  # the newest poll's stamp, as its ring slot has it
+                off = self._stamp_off[i]
+                fields[ss.I_STAMP_NS] += self._offset_ns if off is None else off
             st[1 : ss.I_RING_FROM] = fields[1 : ss.I_RING_FROM]
             st[ss.I_RING_FROM + 1 :] = fields[ss.I_RING_FROM + 1 :]
             self.state.floats[i] = floats
             self.state.floats[i][: ss.N_TOTAL_FLOAT] += self.base_f[i][: ss.N_TOTAL_FLOAT]
+        if end >= expected:
             self.next_agent[i] = end
         st[ss.I_VERSION] += 1  # even: consistent
 
@@ -411,7 +441,7 @@ class RemoteAgent:
                 self.query_error = "the agent restarted meanwhile"
                 return True
             block = batch.blocks[0]
-            self._apply(block, fetch_gaps=False)
+            self._apply(block, fetch_gaps=False, totals=False)
             since = block.first_seq + block.count
         return False
 
@@ -491,6 +521,23 @@ class RemoteAgent:
             ):
                 return
             time.sleep(0.002)
+
+    def _stamp_offsets(self, i: int, raw: np.ndarray) -> np.ndarray:
+        """The offsets to add to sensor i's next polls (agent stamps ``raw``, in order).
+
+        Up to the estimate at once (stamps only move forward); down towards it by at
+        most ``CLOCK_SLEW`` of the agent time since sensor i's last poll, so each
+        mapped stamp stays after the one before it.
+        """
+        target = int(self._offset_ns)  # type: ignore[arg-type]
+        prev = self._stamp_off[i]
+        if prev is None or target >= prev:
+            offs = np.full(len(raw), target, np.int64)
+        else:
+            since = np.maximum(raw - self._stamp_raw[i], 0)
+            offs = np.maximum(target, prev - (since * CLOCK_SLEW).astype(np.int64))
+        self._stamp_off[i], self._stamp_raw[i] = int(offs[-1]), int(raw[-1])
+        return offs
 
     def _clock(self, recv_ns: int, stamp_ns: int) -> None:
         sample = recv_ns - stamp_ns

@@ -7,6 +7,7 @@ zenoh; the test talks to it from its own client node in this process.
 
 from __future__ import annotations
 
+import itertools
 import os
 import signal
 import subprocess
@@ -16,6 +17,7 @@ from pathlib import Path
 
 import psutil
 import pytest
+from fakes import wait_until
 
 rclpy = pytest.importorskip("rclpy")
 from rclpy.qos import qos_profile_sensor_data  # noqa: E402
@@ -105,13 +107,11 @@ def test_failed_sensor_is_reported_and_the_other_keeps_working(node, client):
 
 
 def test_failed_sensor_recovers(node, client):
-    deadline = time.monotonic() + 15
-    while time.monotonic() < deadline:
+    def up():
         res = client.call("get_sensor_data", id=S1)
-        if res.success:
-            break
-        time.sleep(0.2)
-    assert res.success, res.message
+        return res if res.success else None
+
+    res = wait_until(up, 15, f"{S1} to come up after its fail window", interval=0.2)
     assert res.data[0].id == S1
 
 
@@ -181,8 +181,12 @@ def test_set_resolution_reads_back_and_scales_metres(node, client):
         s = client.call("get_sensor_settings", id=S0).settings
         assert (s.cpi, s.x_cpi, s.y_cpi) == (800, 800, 800)
         client.call("get_sensor_data", id=S0)
-        time.sleep(0.2)
-        d = client.call("get_sensor_data", id=S0).data[0]
+
+        def polled():  # a read that brings polls made at the new CPI
+            d = client.call("get_sensor_data", id=S0).data[0]
+            return d if d.samples else None
+
+        d = wait_until(polled, 5, "a get_sensor_data read with polls at 800 CPI")
         assert d.cpi == 800
         assert d.y_disp == pytest.approx(d.y_counts * 0.0254 / 800, rel=1e-9, abs=1e-12)
         other = client.call("get_sensor_settings", id=S1).settings
@@ -208,10 +212,10 @@ def test_settings_read_does_not_eat_counts(node, client):
 
 
 def wait_both_up(client, timeout: float = 15.0) -> None:
-    deadline = time.monotonic() + timeout
-    while not client.call("get_sensor_data", id=S1).success:
-        assert time.monotonic() < deadline, "sensor 2 never came up"
-        time.sleep(0.2)
+    wait_until(
+        lambda: client.call("get_sensor_data", id=S1).success, timeout, "sensor 2 to come up",
+        interval=0.2,
+    )
 
 
 def test_cpi_parameter_is_live_validated_and_read_back(node, client):
@@ -252,18 +256,31 @@ def test_only_live_parameters_change_and_bad_values_change_nothing(node, client)
         client.set_parameters(publish_rate=20.0, odom_frame="odom")
 
 
+def strictly_increasing(stamps, after: int = 0) -> bool:
+    """Each poll's stamp after its predecessor's (and after ``after``, the one before)."""
+    return all(b > a for a, b in itertools.pairwise([after, *stamps]))
+
+
 def test_get_samples_chain_covers_every_poll_once(node, client):
+    """Chained get_samples replies give every poll once, stamps strictly increasing across
+    them (the remote backend's clock mapping stepped back under load: its offset estimate
+    fell by more than a poll period; tests/beagle/test_remote_feed.py)."""
     first = client.call("get_samples", id=S0, since_seq=0, max_samples=1)
     start_seq = first.next_seq
     d0 = client.call("get_sensor_data", id=S0).data[0]
-    seq, dx_sum, dy_sum, n = start_seq, 0, 0, 0
-    time.sleep(0.3)
-    d1 = client.call("get_sensor_data", id=S0).data[0]
+    seq, dx_sum, dy_sum, n, last = start_seq, 0, 0, 0, 0
+
+    def polled_on():  # at least 300 more polls (0.3 s) than d0 saw
+        d = client.call("get_sensor_data", id=S0).data[0]
+        return d if d.seq >= d0.seq + 300 else None
+
+    d1 = wait_until(polled_on, 10, "300 more polls of sensor 1")
     while seq < d1.seq:
         res = client.call("get_samples", id=S0, since_seq=seq, max_samples=100)
         assert res.success and res.first_seq == seq and res.dropped == 0
         assert len(res.dx) == len(res.dy) == len(res.stamp_ns) == res.next_seq - seq
-        assert list(res.stamp_ns) == sorted(res.stamp_ns)
+        assert strictly_increasing(res.stamp_ns, last), f"stamps from seq {seq}"
+        last = res.stamp_ns[-1] if len(res.stamp_ns) else last
         take = min(len(res.dx), d1.seq - seq)
         dx_sum += sum(res.dx[:take])
         dy_sum += sum(res.dy[:take])
@@ -303,6 +320,7 @@ def test_get_sensor_data_carries_every_poll_once_when_asked(node, client):
     start = {d.id: d for d in first.data}
     cursor = {d.id: d.seq for d in first.data}
     sums = {d.id: [0, 0, 0] for d in first.data}
+    last = {d.id: 0 for d in first.data}  # the newest stamp each sensor's polls brought
     for _ in range(20):
         time.sleep(0.01)
         ids = list(cursor)
@@ -315,8 +333,10 @@ def test_get_sensor_data_carries_every_poll_once_when_asked(node, client):
             assert p.first_seq == cursor[d.id] and p.next_seq == d.seq and p.dropped == 0
             assert len(p.dx) == len(p.dy) == len(p.stamp_ns) == len(p.flags) == d.seq - p.first_seq
             assert p.cpi == d.cpi == 1600
+            assert strictly_increasing(p.stamp_ns, last[d.id]), f"{d.id} from {p.first_seq}"
             if len(p.stamp_ns):
                 assert p.stamp.sec * 10**9 + p.stamp.nanosec == p.stamp_ns[-1]
+                last[d.id] = p.stamp_ns[-1]
             sums[d.id][0] += sum(p.dx)
             sums[d.id][1] += sum(p.dy)
             sums[d.id][2] += len(p.dx)
@@ -372,10 +392,11 @@ def test_topic_carries_sensor_data(node, client):
     sub = client.node.create_subscription(
         SensorData, "/mm_beagle/sensor_data", got.append, qos_profile_sensor_data
     )
-    deadline = time.monotonic() + 10
-    while len({m.id for m in got}) < 2 and time.monotonic() < deadline:
-        time.sleep(0.05)
-    client.node.destroy_subscription(sub)
+    try:
+        wait_until(lambda: len({m.id for m in got}) == 2, 10, "sensor_data of both sensors",
+                   interval=0.05)
+    finally:
+        client.node.destroy_subscription(sub)
     assert {m.id for m in got} == {S0, S1}
     for m in got:
         assert m.samples > 0 and m.interval > 0
@@ -433,11 +454,9 @@ def test_two_robots_in_two_namespaces_stay_apart(tmp_path):
             assert r.successful, r.reason
             assert clients["/robot1"].call("get_sensor_settings", id=S0).settings.cpi == 800
             assert clients["/robot2"].call("get_sensor_settings", id=S0).settings.cpi == 1600
-            deadline = time.monotonic() + 10
             want = {f"/robot{k}/mm_beagle: {d}" for k in (1, 2) for d in (S0, S1)}
-            while not want <= names and time.monotonic() < deadline:
-                time.sleep(0.1)
-            assert want <= names, names
+            wait_until(lambda: want <= names, 10, f"/diagnostics naming all of {sorted(want)}",
+                       interval=0.1)
     finally:
         clients["/robot1"].node.destroy_subscription(listener)
         for c in clients.values():
@@ -586,10 +605,8 @@ def test_onboard_odometry_broadcasts_tf_when_asked_and_resets(tmp_path):
     client.node.create_subscription(TFMessage, "/tf", tfs.append, DYNAMIC_QOS)
     try:
         with beagle_process(params, dict(os.environ), str(tmp_path / "b.log"), ns):
-            deadline = time.monotonic() + 20
-            while not (len(odoms) > 10 and odoms[-1].pose.pose.position.x > 0.1):
-                assert time.monotonic() < deadline, "no onboard odometry"
-                time.sleep(0.05)
+            wait_until(lambda: len(odoms) > 10 and odoms[-1].pose.pose.position.x > 0.1, 20,
+                       "onboard odometry past x = 0.1 m", interval=0.05)
             sent = {(t.header.stamp.sec, t.header.stamp.nanosec): t for m in list(tfs)
                     for t in m.transforms}  # fmt: skip
             matched = 0
@@ -604,10 +621,7 @@ def test_onboard_odometry_broadcasts_tf_when_asked_and_resets(tmp_path):
             assert matched >= 5
             statics: list = []
             client.node.create_subscription(TFMessage, "/tf_static", statics.append, STATIC_QOS)
-            deadline = time.monotonic() + 5
-            while not statics:
-                assert time.monotonic() < deadline, "no /tf_static for a late subscriber"
-                time.sleep(0.05)
+            wait_until(lambda: statics, 5, "/tf_static for a late subscriber", interval=0.05)
             frames = statics[0].transforms
             assert [f.child_frame_id for f in frames] == ["left_mouse", "right_mouse"]
             assert [f.transform.translation.y for f in frames] == [-0.0395, 0.0395]
@@ -615,17 +629,12 @@ def test_onboard_odometry_broadcasts_tf_when_asked_and_resets(tmp_path):
             res = client.trigger(f"{ns}/mm_beagle/reset")
             assert res.success, res.message
             n = len(odoms)
-            deadline = time.monotonic() + 5
-            while len(odoms) < n + 2:
-                assert time.monotonic() < deadline, "no odometry after the reset"
-                time.sleep(0.05)
+            wait_until(lambda: len(odoms) >= n + 2, 5, "odometry after the reset", interval=0.05)
             first = odoms[n + 1]
             assert abs(first.pose.pose.position.x) < 0.03 < before.pose.pose.position.x - 0.05
             assert first.pose.covariance[0] < before.pose.covariance[0] / 2
-            deadline = time.monotonic() + 5
-            while odoms[-1].pose.pose.position.x < first.pose.pose.position.x + 0.05:
-                assert time.monotonic() < deadline, "the pose did not move on after the reset"
-                time.sleep(0.05)
+            wait_until(lambda: odoms[-1].pose.pose.position.x >= first.pose.pose.position.x + 0.05,
+                       5, "the pose to move on after the reset", interval=0.05)
             (r,) = client.set_parameters(base_frame="/base")
             assert not r.successful and "leading '/'" in r.reason
     finally:
