@@ -19,6 +19,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from fakes import scaled, wait_until
 
 from mm_pc.core.angles import quaternion_yaw, yaw_to_quaternion
 from mm_pc.core.fixes.gps import LocalGrid
@@ -525,6 +526,12 @@ class Listener:
             self.node.destroy_node()
 
 
+def running(proc: subprocess.Popen, condition) -> bool:
+    """``condition()``, for wait_until; an AssertionError at once if ``proc`` has exited."""
+    assert proc.poll() is None, f"mm-fusion exited with {proc.returncode}"
+    return bool(condition())
+
+
 def stop(proc: subprocess.Popen) -> str:
     from mm_beagle.harness import stop_process
 
@@ -580,11 +587,25 @@ def test_fused_run_stays_within_decimetres_while_the_mouse_odometry_drifts_metre
             env=env,
             capture_output=True,
             text=True,
-            timeout=90,
+            timeout=scaled(180),
         )
         assert sim.returncode == 0, sim.stdout + sim.stderr
         assert "replayed 687.0 s of the run" in sim.stdout + sim.stderr
-        time.sleep(1.5)  # the last messages through, the last estimate out
+
+        # the last estimate out, and the last late messages through: it no longer changes
+        settled = {"pose": None, "since": 0.0}
+
+        def estimate_at_the_end_settled() -> bool:
+            with listen.lock:
+                if not (fused and truth) or stamp_key(fused[-1]) != max(truth):
+                    return False
+                pose = planar(fused[-1])
+            if pose != settled["pose"]:
+                settled.update(pose=pose, since=time.monotonic())
+            return time.monotonic() - settled["since"] >= 1.0
+
+        wait_until(estimate_at_the_end_settled, 60,
+                   "an estimate at the run's last truth stamp, unchanged for 1 s")
     finally:
         log = stop(fusion)
         listen.close()
@@ -671,10 +692,14 @@ def test_garbage_messages_are_counted_and_ignored_and_the_node_keeps_working(ros
         "wire": node.create_publisher(PointStamped, "/perimeter/contact", 10),
     }
     try:
-        deadline = time.monotonic() + 20
-        while not out or any(p.get_subscription_count() < 1 for p in pubs.values()):
-            assert time.monotonic() < deadline and proc.poll() is None, "mm-fusion did not come up"
-            time.sleep(0.1)
+        wait_until(
+            lambda: running(
+                proc, lambda: out and all(p.get_subscription_count() >= 1 for p in pubs.values())
+            ),
+            60,
+            "mm-fusion's estimate and its subscriptions",
+            interval=0.1,
+        )
         first = out[-1]
         now = node.get_clock().now().to_msg()
 
@@ -714,17 +739,18 @@ def test_garbage_messages_are_counted_and_ignored_and_the_node_keeps_working(ros
         for kind, msg in garbage:
             pubs[kind].publish(msg)
         expect = {"gps": 3, "beacon/SW": 2, "compass": 1, "mouse": 1, "perimeter": 1}
-        deadline = time.monotonic() + 10
-        while True:
+
+        def counted():
             d = diagnostics_of(listen, diags, f"{ns}/mm_fusion")
             got = {s: int(d.get(s, {}).get("invalid", 0)) for s in expect}
-            if got == expect:
-                break
-            assert time.monotonic() < deadline, f"invalid counts {got}, expected {expect}: {d}"
-            time.sleep(0.1)
+            return d if got == expect else None
+
+        d = wait_until(counted, 30, f"/diagnostics counting the invalid messages {expect}",
+                       interval=0.1)
         assert proc.poll() is None, "mm-fusion died"
         assert all(int(d[s]["accepted"]) == 0 for s in expect)
-        time.sleep(1.2)  # at least one more heartbeat of the estimate
+        n = len(out)  # two more heartbeats (1 Hz; 10 Hz had the estimate changed)
+        wait_until(lambda: len(out) >= n + 2, 30, "two more ~/odom heartbeats")
         same = out[-1]
         assert planar(same) == pytest.approx(planar(first))
         assert list(same.pose.covariance) == pytest.approx(list(first.pose.covariance))
@@ -732,12 +758,11 @@ def test_garbage_messages_are_counted_and_ignored_and_the_node_keeps_working(ros
         # a good fix at (6, 5) is still used
         lat, lon = GRID.to_geodetic(6.0, 5.0)
         pubs["gps"].publish(fix(lat=float(lat), lon=float(lon)))
-        deadline = time.monotonic() + 10
-        while diagnostics_of(listen, diags, f"{ns}/mm_fusion")["gps"]["accepted"] != "1":
-            assert time.monotonic() < deadline, "a good fix was not used"
-            time.sleep(0.1)
-        time.sleep(0.3)
-        assert out[-1].pose.pose.position.x > 5.1
+        wait_until(
+            lambda: diagnostics_of(listen, diags, f"{ns}/mm_fusion")["gps"]["accepted"] == "1",
+            30, "/diagnostics counting the good fix accepted", interval=0.1)
+        wait_until(lambda: out[-1].pose.pose.position.x > 5.1, 30,
+                   "an estimate moved by the good fix (x > 5.1)")
     finally:
         log = stop(proc)
         listen.close()
@@ -779,7 +804,7 @@ def test_bad_parameters_exit_2_with_a_message(ros_command):
         for i, (module, params, _) in enumerate(cases)
     ]
     for proc, (module, params, expect) in zip(procs, cases, strict=True):
-        out, _ = proc.communicate(timeout=60)
+        out, _ = proc.communicate(timeout=scaled(120))
         assert proc.returncode == 2, (module, params, out)
         assert expect in out, (module, params, out)
         assert "Traceback" not in out
@@ -829,15 +854,14 @@ def test_map_to_odom_composes_with_the_mouse_pose_reset_and_live_parameters(ros_
             o.x, o.y, o.z, o.w = yaw_to_quaternion(pose.yaw)
             sent[stamp_key(m)] = pose
             mouse_pub.publish(m)
-            time.sleep(0.03)
+            time.sleep(0.03)  # pacing: a mouse at ~30 Hz
 
     try:
-        deadline = time.monotonic() + 20
-        while not fused or mouse_pub.get_subscription_count() < 1:
-            assert time.monotonic() < deadline and proc.poll() is None, "mm-fusion did not come up"
-            time.sleep(0.1)
+        wait_until(
+            lambda: running(proc, lambda: fused and mouse_pub.get_subscription_count() >= 1),
+            60, "mm-fusion's estimate and its mouse subscription", interval=0.1)
         drive(0, 30)
-        time.sleep(0.8)  # idle: everything fused
+        wait_until(lambda: max(sent) in fused, 30, "the estimate at the last mouse pose sent")
         checked = 0
         for msg in list(tfs):
             for t in msg.transforms:
@@ -874,16 +898,13 @@ def test_map_to_odom_composes_with_the_mouse_pose_reset_and_live_parameters(ros_
         assert res.success and "estimate back to" in res.message
         time.sleep(0.3)  # what was on its way before the reset is in
         fused.clear()
-        deadline = time.monotonic() + 5
-        while not fused:
-            assert time.monotonic() < deadline, "no estimate after the reset"
-            time.sleep(0.05)
+        wait_until(lambda: fused, 30, "an estimate after the reset")
         after = next(iter(fused.values()))
         assert planar(after) == pytest.approx(x0, abs=1e-9)
         assert after.header.frame_id == "world"
         assert after.pose.covariance[0] == pytest.approx(0.01**2)
         drive(40, 10)  # a new baseline, then on from the start pose
-        time.sleep(0.8)
+        wait_until(lambda: max(sent) in fused, 30, "the estimate at the last mouse pose sent")
         moved = planar(fused[max(k for k in fused if k in sent)])
         assert math.hypot(moved[0] - x0[0], moved[1] - x0[1]) > 0.1
         assert tfs[-1].transforms[0].header.frame_id == "world"
