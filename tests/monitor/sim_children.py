@@ -15,4 +15,4 @@ def report_error(seed: int, conn) -> None:
 
 
 def hang(seed: int, conn) -> None:
-    time.sleep(60)
+    time.sleep(60)  # a run that never ends: the test cancels it
