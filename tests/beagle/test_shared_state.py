@@ -14,6 +14,7 @@ import time
 
 import numpy as np
 import pytest
+from fakes import scaled, wait_until
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -151,10 +152,14 @@ def test_snapshot_is_consistent_while_a_thread_writes():
     th.start()
     torn = 0  # unlocked reads that saw a half-written state: proof the race was on
     last_seq = 0
-    try:
-        deadline = time.monotonic() + 1.5
-        n = 0
-        while n < 3000 and time.monotonic() < deadline:
+    n = 0
+
+    def read_on() -> bool:
+        """100 checked snapshots in a row (a pause after each would change the race); True
+        after 3000 over 100 writes, one read torn (a busy machine gives the writer less
+        time than the reader: it reads on)."""
+        nonlocal torn, last_seq, n
+        for _ in range(100):
             t = state.snapshot(0, timeout_s=2.0)
             assert t.y_total == 2 * t.x_total
             assert t.x_total_m == t.x_total / 2
@@ -164,9 +169,14 @@ def test_snapshot_is_consistent_while_a_thread_writes():
             raw = ints[[ss.I_X_TOTAL, ss.I_Y_TOTAL]].tolist()
             torn += raw[1] != 2 * raw[0]
             n += 1
+        return n >= 3000 and written[0] > 100 and torn > 0
+
+    try:
+        wait_until(read_on, 30, "3000 reads over more than 100 writes, one of them torn",
+                   interval=0)
     finally:
         stop.set()
-        th.join(5)
+        th.join(scaled(30))
         sys.setswitchinterval(old)
     assert n >= 200
     assert written[0] > 100
