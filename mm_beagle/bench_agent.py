@@ -3,8 +3,9 @@
 Each figure comes from real processes in one run:
 - ``cpu_us_per_poll``: the agent's own ``--self-test --bench-stub`` (two sensors,
   the motion burst answered by a constant stub after an emulated bring-up, the
-  link served, polling flat out), natively and, where the armhf root can be had,
-  under qemu-arm (``cpu_us_per_poll_qemu_arm``, else null with the reason);
+  link served, polling flat out), natively and, where this machine can have the
+  Debian 12 armhf root of ``tools/armhf-root`` (root, binfmt_misc), under qemu-arm
+  (``cpu_us_per_poll_qemu_arm``, else null with the reason);
 - ``cpu_us_per_poll_minimal_loop``: the smallest loop that polls at all, in the
   same run (this shared 2-core VM is noisy: compare the ratio);
 - ``cpu_percent_paced``: the same at 1 kHz paced;
@@ -21,7 +22,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import struct
 import subprocess
 import sys
@@ -35,20 +35,37 @@ from .link_proxy import ProxyProcess
 from .poller import PollerConfig
 from .remote import RemoteAgent
 
-# The workplace's armhf-root tool: beside the project, or MM_ARMHF_ROOT_TOOL.
-ARMHF_TOOLS = (
-    Path(__file__).resolve().parents[2] / "shared" / "tools" / "armhf-root",
-    Path("/work/shared/tools/armhf-root"),
-)
+# The project's board check (tools/armhf-root in the checkout), or MM_ARMHF_ROOT_TOOL.
+ARMHF_TOOL = Path(__file__).resolve().parents[1] / "tools" / "armhf-root"
+# Where the tool puts things inside the root: ./compile agent's launcher, the checkout's copy.
+AGENT_IN_ROOT = "/opt/mouse-monitor/bin/mm-beagle-agent"
+SRC_IN_ROOT = "/opt/mm-src"
+# The first build of the root takes 5-12 minutes (more while another run holds its lock).
+ARMHF_BUILD_TIMEOUT = 1500
+
+
+class ArmhfUnavailableError(RuntimeError):
+    """This machine cannot have the armhf root (the tool's exit 2): not root, no
+    debootstrap/qemu-user-static and no apt-get to install them, no binfmt_misc."""
 
 
 def armhf_tool() -> str | None:
     """The armhf-root tool's path, or None."""
     env = os.environ.get("MM_ARMHF_ROOT_TOOL")
-    for cand in ([Path(env)] if env else []) + list(ARMHF_TOOLS):
-        if cand.exists():
-            return str(cand)
-    return None
+    cand = Path(env) if env else ARMHF_TOOL
+    return str(cand) if cand.exists() else None
+
+
+def armhf(tool: str, *args: str, timeout: float = ARMHF_BUILD_TIMEOUT) -> str:
+    """``tool args...``'s stdout; ArmhfUnavailableError where it cannot run here (exit 2 and
+    its reason), RuntimeError on any other failure."""
+    res = subprocess.run([tool, *args], capture_output=True, text=True, timeout=timeout)
+    why = [line for line in res.stderr.splitlines() if "cannot run here:" in line]
+    if res.returncode == 2 and why:  # (bash's own errors exit 2 too: those fail)
+        raise ArmhfUnavailableError(why[-1])
+    if res.returncode != 0:
+        raise RuntimeError(f"{tool} {' '.join(args)} failed: {res.stderr[-2000:]}")
+    return res.stdout
 
 
 def minimal_loop_us(polls: int = 200_000) -> float:
@@ -98,21 +115,17 @@ def qemu_arm_self_test(
     """A self-test inside the Debian 12 armhf root (stub bus), or (None, why not)."""
     tool = armhf_tool()
     if tool is None:
-        return None, "no armhf-root tool (set MM_ARMHF_ROOT_TOOL)"
-    if os.geteuid() != 0:
-        return None, "the armhf root needs root (chroot)"
+        return None, f"no armhf-root tool ({ARMHF_TOOL} is missing; set MM_ARMHF_ROOT_TOOL)"
     try:
         armhf_root_with_agent(tool)
+    except ArmhfUnavailableError as exc:
+        return None, f"no armhf root on this machine: {exc}"
     except (subprocess.SubprocessError, OSError, RuntimeError) as exc:
         return None, f"armhf root not available: {exc}"
     cmd = [
         tool,
         "run",
-        "env",
-        "PYTHONPATH=/opt/src",
-        "/opt/venv/bin/python",
-        "-m",
-        "mm_beagle.agent",
+        AGENT_IN_ROOT,
         "--backend",
         "sim",
         "--realtime-priority",
@@ -130,33 +143,10 @@ def qemu_arm_self_test(
 
 
 def armhf_root_with_agent(tool: str) -> Path:
-    """The armhf root with /opt/venv (Debian's packages + the zenoh wheel) and our code."""
-    root = Path(
-        subprocess.run(
-            [tool, "path"], capture_output=True, text=True, check=True, timeout=900
-        ).stdout.strip()
-    )
-    if not (root / "opt/venv/lib/python3.11/site-packages/zenoh").exists():
-        wheels = root / "tmp/wheels"
-        subprocess.run(
-            [tool, "wheels", str(wheels), "eclipse-zenoh>=1.5,<2"],
-            check=True,
-            capture_output=True,
-            timeout=600,
-        )
-        subprocess.run([tool, "venv"], check=True, capture_output=True, timeout=600)
-        subprocess.run(
-            [tool, "run", "sh", "-c", "/opt/venv/bin/pip install -q --no-index /tmp/wheels/*.whl"],
-            check=True,
-            capture_output=True,
-            timeout=900,
-        )
-    src = root / "opt/src"
-    repo = Path(__file__).resolve().parents[1]
-    for pkg in ("pln2033", "mm_beagle", "mm_pc"):
-        shutil.rmtree(src / pkg, ignore_errors=True)
-        shutil.copytree(repo / pkg, src / pkg, ignore=shutil.ignore_patterns("__pycache__"))
-    return root
+    """The armhf root with the agent installed by ``./compile agent`` from this checkout
+    (Debian's packages + the zenoh wheel; built on first use, reinstalled when the code changed)."""
+    armhf(tool, "agent")
+    return Path(armhf(tool, "path").strip())
 
 
 def _truth_and_node(remote: RemoteAgent) -> tuple[int, int]:
