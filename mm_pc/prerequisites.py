@@ -59,7 +59,7 @@ EXIT_INTERRUPTED = 0
 
 #: the project's list of Debian/Ubuntu packages (in a clone; a wheel install has none)
 SYSTEM_PACKAGES = Path(__file__).resolve().parents[1] / "tools" / "system-packages.txt"
-NEEDS = ("setup", "headless", "window")
+NEEDS = ("setup", "headless", "window", "test")
 
 #: PySide6's files the monitor loads (globs under the PySide6 package), by need: ldd on
 #: them lists every system library Qt needs (tools/system-packages.txt says how they were

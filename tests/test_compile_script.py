@@ -151,6 +151,14 @@ def test_root_installs_every_missing_package_at_once(tmp_path):
     assert out.returncode == 1 and "no supported python3" in out.stderr  # went on
 
 
+def test_only_the_test_verb_installs_the_test_packages(tmp_path):
+    packages = PACKAGES + "xvfb  test\n"
+    out, calls = _package_check(tmp_path / "s", "setup", packages, FAKE_MISSING="cmake xvfb")
+    assert calls[-1].endswith("install -y cmake")
+    out, calls = _package_check(tmp_path / "t", "test", packages, FAKE_MISSING="cmake xvfb")
+    assert calls[-1].endswith("install -y cmake xvfb")
+
+
 def test_a_user_with_sudo_gets_the_one_line_and_sudo_runs_it(tmp_path):
     out, calls = _package_check(tmp_path, FAKE_UID="1000", FAKE_MISSING="cmake libegl1")
     assert "running:  sudo apt-get install cmake libegl1" in out.stderr
@@ -208,7 +216,7 @@ def test_the_escape_hatch_and_a_system_without_dpkg(tmp_path):
 @pytest.mark.parametrize(
     ("line", "message"),
     [
-        ("cmake  build", "line 2: need 'build' of cmake is not one of setup, headless, window"),
+        ("cmake  build", "line 2: need 'build' of cmake is not one of setup, headless, window, test"),  # noqa: E501
         ("cmake", "line 2: need '' of cmake"),
         ("Bad_Name setup", "line 2: 'Bad_Name' is not a Debian package name"),
     ],
