@@ -552,7 +552,7 @@ def planar(m) -> tuple[float, float, float]:
 @pytest.mark.ros
 @pytest.mark.slow
 def test_fused_run_stays_within_decimetres_while_the_mouse_odometry_drifts_metres(ros_command):
-    """The whole 206 m run at 30x, with the mouse lifted 30 s: fused error cm, raw error m."""
+    """The whole 206 m run at 15x, with the mouse lifted 30 s: fused error cm, raw error m."""
     pytest.importorskip("rclpy")
     from nav_msgs.msg import Odometry
 
@@ -563,8 +563,9 @@ def test_fused_run_stays_within_decimetres_while_the_mouse_odometry_drifts_metre
     listen.keep(Odometry, "/mm_fusion/odom", fused)
     listen.keep(Odometry, "/field_sim/truth", truth, key=stamp_key, depth=1000)
     fusion = subprocess.Popen(
-        # max_delay 20 s of stamps = 0.7 s of wall time at 30x: on a busy machine one topic
-        # was seen to fall 125 ms (4-5 s of stamps) behind another; the node waits that long
+        # max_delay 20 s of stamps = 1.3 s of wall time at 15x: on a busy machine one topic
+        # was seen to fall 125 ms (4-5 s of stamps) behind another, and with two CPU burners
+        # beside the test fixes came later than 0.7 s (30x) and were dropped as stale
         ros_command(
             "mm_pc.ros.fusion_node",
             {"publish_rate": 50.0, "gps_frame": "gps", "max_delay": 20.0},
@@ -576,7 +577,7 @@ def test_fused_run_stays_within_decimetres_while_the_mouse_odometry_drifts_metre
         text=True,
     )
     sim_params = {
-        "speed": 30.0,
+        "speed": 15.0,
         "wait_for_subscribers": 1,
         "mouse_dropout": "[100.0,30.0]",
         "truth_every": 5,  # 120 truth messages/s are enough to check against
