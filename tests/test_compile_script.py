@@ -153,9 +153,9 @@ def test_root_installs_every_missing_package_at_once(tmp_path):
 
 def test_only_the_test_verb_installs_the_test_packages(tmp_path):
     packages = PACKAGES + "xvfb  test\n"
-    out, calls = _package_check(tmp_path / "s", "setup", packages, FAKE_MISSING="cmake xvfb")
+    _out, calls = _package_check(tmp_path / "s", "setup", packages, FAKE_MISSING="cmake xvfb")
     assert calls[-1].endswith("install -y cmake")
-    out, calls = _package_check(tmp_path / "t", "test", packages, FAKE_MISSING="cmake xvfb")
+    _out, calls = _package_check(tmp_path / "t", "test", packages, FAKE_MISSING="cmake xvfb")
     assert calls[-1].endswith("install -y cmake xvfb")
 
 

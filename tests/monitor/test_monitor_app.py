@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 import pytest
+from fakes import scaled
 
 pytest.importorskip("rclpy")
 pytest.importorskip("PySide6")
@@ -49,7 +50,8 @@ def make_window(qtbot, tmp_path, rate=50.0):
 
 
 def wait_until(qtbot, predicate, timeout=20.0):
-    qtbot.waitUntil(predicate, timeout=int(timeout * 1000))
+    """qtbot.waitUntil in seconds, scaled like fakes.wait_until (Qt's events run meanwhile)."""
+    qtbot.waitUntil(predicate, timeout=int(scaled(timeout) * 1000))
 
 
 def assert_run_counted(qtbot, session, timeout: float) -> None:

@@ -64,13 +64,14 @@ def live_window(qapp, beagle_node, tmp_path_factory):
 
 
 def wait(qapp, predicate, seconds: float) -> None:
-    import time
+    """fakes.wait_until with Qt's events processed between the checks."""
+    from fakes import wait_until
 
-    deadline = time.monotonic() + seconds
-    while time.monotonic() < deadline and not predicate():
+    def ready():
         qapp.processEvents()
-        time.sleep(0.02)
-    assert predicate()
+        return predicate()
+
+    wait_until(ready, seconds, "the live window's data")
 
 
 @pytest.mark.screenshot

@@ -14,6 +14,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from fakes import wait_until
 from PySide6.QtCore import QItemSelectionModel, QObject, Qt, Signal
 from PySide6.QtGui import QGuiApplication, QImage
 
@@ -628,14 +629,11 @@ def beagle(qapp, beagle_node):
     bridge = RosBridge(rate_hz=20.0, node_name="views_test_monitor")
     bridge.start()
     try:
-        deadline = time.monotonic() + 30
         # service readiness is not part of the bridge's API; the test waits on it directly
-        while not (
-            bridge.state == "connected"
-            and all(c.service_is_ready() for c in bridge._clients.values())
-        ):
-            assert time.monotonic() < deadline, "mm-beagle did not come up within 30 s"
-            time.sleep(0.05)
+        wait_until(
+            lambda: bridge.state == "connected"
+            and all(c.service_is_ready() for c in bridge._clients.values()),
+            60, "mm-beagle's services", interval=0.05)  # fmt: skip
         yield bridge
     finally:
         bridge.stop()
