@@ -291,10 +291,17 @@ class BeagleClient:
                 return False
         return True
 
-    def call(self, name: str, timeout: float = 5.0, **fields):
-        return self._wait_future(
-            self.clients[name], self.types[name].Request(**fields), name, timeout
-        )
+    def call(self, name: str, timeout: float = 5.0, retries: int = 0, **fields):
+        """Call service ``name`` and wait up to ``timeout`` s for the reply.
+
+        ``retries``: for requests that change nothing (settings, samples) only, send
+        again after a timeout: a request made just after discovery can go unanswered.
+        """
+        client, request = self.clients[name], self.types[name].Request(**fields)
+        for _ in range(retries):
+            with suppress(TimeoutError):
+                return self._wait_future(client, request, name, timeout)
+        return self._wait_future(client, request, name, timeout)
 
     def _wait_future(self, client, request, what: str, timeout: float):
         import threading
