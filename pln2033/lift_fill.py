@@ -2,7 +2,7 @@
 
 While its lift bit is set the PLN2033 clears its counters and counts nothing, so
 the displacement of the lifted polls is lost and can only be estimated. Shared by
-the board's poller (:mod:`mm_beagle.lift_gap`, streaming, no numpy on the board)
+the board's poller (:mod:`mm_beagle.poller.lift_gap`, streaming, no numpy on the board)
 and the PC's per-poll filter (:func:`mm_pc.core.filters.interpolate_lift_gaps`).
 
 The rule (derivation and figures: docs/pose-math.md, "Lifts"):

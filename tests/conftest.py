@@ -14,7 +14,7 @@ import tempfile
 
 from hypothesis import settings
 
-from mm_beagle.harness import use_isolated_ros_env
+from mm_beagle.tools.harness import use_isolated_ros_env
 
 # the harness's one definition (domain, localhost, no static peers); a private domain
 # even if the shell has a ROS_DOMAIN_ID: tests must not meet the user's live nodes

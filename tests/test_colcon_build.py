@@ -145,7 +145,7 @@ def test_installed_executable_refuses_a_bad_parameter(
     colcon_install, tmp_path, pkg, exe, bad, word
 ):
     install, _log = colcon_install
-    from mm_beagle.harness import isolated_ros_env
+    from mm_beagle.tools.harness import isolated_ros_env
 
     env_prefix = " ".join(
         f"{k}={v}" for k, v in isolated_ros_env().items() if k.startswith(("ROS_", "MM_"))
@@ -198,7 +198,7 @@ sys.exit(service.run())
 @pytest.mark.skipif(not HAVE_LAUNCH, reason="launch/launch_ros not installed (no PyPI wheel)")
 def test_robot_launch_runs_the_chain_from_the_colcon_install(colcon_install, tmp_path):
     """What `ros2 launch mm_beagle robot.launch.py backend:=sim` does, for 10 s."""
-    from mm_beagle.harness import isolated_ros_env
+    from mm_beagle.tools.harness import isolated_ros_env
 
     install, _log = colcon_install
     (tmp_path / "run.py").write_text(RUN_ROBOT)

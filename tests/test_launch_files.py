@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("mm_beagle", "mm_pc")
 LAUNCH_FILES = sorted(p for pkg in PACKAGES for p in (ROOT / pkg / "launch").glob("*.launch.py"))
 # The node modules whose PARAMETERS table lives elsewhere.
-PARAM_TABLE_FILE = {"mm_beagle.node": "mm_beagle/params.py"}
+PARAM_TABLE_FILE = {"mm_beagle.node.node": "mm_beagle/node/params.py"}
 
 
 @cache
@@ -130,7 +130,7 @@ def test_launch_file_statically(path):
     assert used <= declared, f"undeclared launch arguments {used - declared}"
 
     tested = "\n".join(p.read_text() for p in (ROOT / "tests").rglob("*.py"))
-    tested += (ROOT / "mm_beagle/harness.py").read_text()
+    tested += (ROOT / "mm_beagle/tools/harness.py").read_text()
     for node in calls(tree, "Node"):
         pkg, exe = _const(_kw(node, "package")), _const(_kw(node, "executable"))
         module = scripts().get(exe)

@@ -129,12 +129,12 @@ def broken(modules, forbidden, transitive=True) -> list[str]:
 #: what runs on a board without ROS (docs/architecture.md); absent ones are skipped, but the
 #: rule fails if none is there
 BOARD_SIDE = (
-    "mm_beagle.poller",
-    "mm_beagle.shared_state",
-    "mm_beagle.lift_gap",
-    "mm_beagle.sim_backend",
-    "mm_beagle.link",
-    "mm_beagle.agent",
+    "mm_beagle.poller.poller",
+    "mm_beagle.poller.shared_state",
+    "mm_beagle.poller.lift_gap",
+    "mm_beagle.poller.sim_backend",
+    "mm_beagle.link.link",
+    "mm_beagle.link.agent",
 )
 
 RULES = {
@@ -199,8 +199,8 @@ def test_widgets_do_not_import_each_other():
 
 def test_the_walk_sees_lazy_and_relative_imports():
     """The checker itself: a function-level relative import is found and resolved."""
-    assert "mm_pc.ros.spin" in closure("mm_beagle.node")
+    assert "mm_pc.ros.spin" in closure("mm_beagle.node.node")
     assert "rclpy" in closure("mm_pc.ros.odometry_node")
-    # mm_beagle.sim_backend imports the simulator inside its functions
-    assert "mm_pc.sim.robot" in direct_imports("mm_beagle.sim_backend")
+    # mm_beagle.poller.sim_backend imports the simulator inside its functions
+    assert "mm_pc.sim.robot" in direct_imports("mm_beagle.poller.sim_backend")
     assert broken(["mm_pc.ros.odometry_node"], ("rclpy",)) != []

@@ -34,7 +34,7 @@ def _run(args: list[str], tmp_path: Path, block: list[str]) -> subprocess.Comple
 @pytest.mark.parametrize(
     ("module", "command"),
     [
-        ("mm_beagle.node", "mm-beagle"),
+        ("mm_beagle.node.node", "mm-beagle"),
         ("mm_pc.ros.odometry_node", "mm-odometry"),
         ("mm_pc.ros.fusion_node", "mm-fusion"),
         ("mm_pc.ros.field_sim_node", "mm-field-sim"),
@@ -49,7 +49,7 @@ def test_node_without_ros_exits_2_with_the_way_to_get_it(tmp_path, module, comma
 
 
 def test_watch_without_ros_fails_the_same_way_from_inside_main(tmp_path):
-    out = _run(["-c", "import sys; from mm_beagle.watch import main; sys.exit(main([]))"],
+    out = _run(["-c", "import sys; from mm_beagle.tools.watch import main; sys.exit(main([]))"],
                tmp_path, BLOCKED)  # fmt: skip
     assert out.returncode == 2, out.stderr
     assert "rclpy is missing" in out.stderr and "Traceback" not in out.stderr
@@ -70,7 +70,7 @@ def test_other_missing_modules_keep_their_traceback(tmp_path):
 def test_without_any_site_packages(tmp_path):
     env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": str(ROOT), "HOME": str(tmp_path)}
     out = subprocess.run(
-        [sys.executable, "-S", "-m", "mm_beagle.node"], cwd=tmp_path, env=env,
+        [sys.executable, "-S", "-m", "mm_beagle.node.node"], cwd=tmp_path, env=env,
         capture_output=True, text=True, timeout=60,
     )  # fmt: skip
     assert out.returncode == 2, out.stderr
@@ -151,7 +151,7 @@ def test_ldd_not_found_lines_are_the_missing_libraries():
     assert prerequisites.unresolved([], ldd) == ["libEGL.so.1"]
 
 
-@pytest.mark.parametrize("module", ["mm_pc.monitor.app", "mm_beagle.bench"])
+@pytest.mark.parametrize("module", ["mm_pc.monitor.app", "mm_pc.bench.cli"])
 def test_monitor_whose_qt_cannot_load_a_library_names_the_package(tmp_path, module):
     """PySide6 importing on a bare Debian: the loader's ImportError becomes the apt-get line."""
     fake = tmp_path / "PySide6"

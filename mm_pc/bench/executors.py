@@ -21,8 +21,8 @@ def _measure(executor_name: str, rate_hz: float, seconds: float) -> dict:
     import rclpy
     from rclpy.context import Context
 
-    from mm_beagle.services import service_types
     from mm_pc.bench.gui import cpu_figures
+    from mm_pc.ros.services import service_types
 
     ctx = Context()
     rclpy.init(context=ctx)
@@ -83,7 +83,7 @@ def bench_executors(rate_hz: float = 500.0, seconds: float = 8.0, rounds: int = 
     the ratio of the medians of ``cpu_ms_per_reply`` (events / waitset)."""
     import statistics
 
-    from mm_beagle.harness import beagle_process, use_isolated_ros_env
+    from mm_beagle.tools.harness import beagle_process, use_isolated_ros_env
     from mm_pc.monitor.ros_bridge import EXECUTORS, validate_rate
 
     rate_hz = validate_rate(rate_hz)

@@ -226,7 +226,7 @@ def bench_gui(
     with ExitStack() as stack:
         tmp = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="mm_bench_gui_")))
         if node:
-            from mm_beagle.harness import beagle_process, use_isolated_ros_env
+            from mm_beagle.tools.harness import beagle_process, use_isolated_ros_env
 
             env = use_isolated_ros_env()
             params = {"backend": "sim", "sim_trajectory": trajectory}

@@ -263,7 +263,7 @@ def interpolate_lift_gaps(counts, lifted) -> np.ndarray:
 
     Returns:
         A float copy of ``counts`` in which every lifted poll is replaced by the
-        window estimate of :mod:`pln2033.lift_fill`, as :mod:`mm_beagle.lift_gap`
+        window estimate of :mod:`pln2033.lift_fill`, as :mod:`mm_beagle.poller.lift_gap`
         estimates it on the board.
     """
     return fill_lift_gaps(counts, lifted)[0]

@@ -66,7 +66,7 @@ __all__ = [
     "unseen",
 ]
 
-# the bits of GetSamples' flags (the same as mm_beagle.shared_state's FLAG_*)
+# the bits of GetSamples' flags (the same as mm_beagle.poller.shared_state's FLAG_*)
 FLAG_LIFT = 1
 FLAG_MOTION = 2
 FLAG_OVERFLOW = 4

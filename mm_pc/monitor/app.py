@@ -152,7 +152,7 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     if args.sim:
-        from mm_beagle.sim_backend import check_trajectory
+        from mm_beagle.poller.sim_backend import check_trajectory
 
         try:
             check_trajectory(args.sim)
@@ -294,7 +294,7 @@ def _run(args, headless: bool) -> int:
     from PySide6.QtCore import QTimer
     from PySide6.QtWidgets import QApplication
 
-    from mm_beagle.harness import emulated_sensors, use_isolated_ros_env
+    from mm_beagle.tools.harness import emulated_sensors, use_isolated_ros_env
     from mm_pc.monitor.context import MonitorConfig, MonitorContext
     from mm_pc.monitor.export import grab_png
     from mm_pc.monitor.main_window import MainWindow

@@ -193,7 +193,7 @@ class RosBridge(QObject):
         from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.context import Context
 
-        from mm_beagle.services import service_types
+        from mm_pc.ros.services import service_types
 
         self._ctx = Context()
         rclpy.init(context=self._ctx)

@@ -1,7 +1,7 @@
 """Stamps on the node clock (``use_sim_time``), and a word when /clock is missing.
 
 The poller stamps every poll with the wall clock (``time.time_ns()``, or the
-agent's clock moved onto the PC's, :mod:`mm_beagle.remote`). Message header
+agent's clock moved onto the PC's, :mod:`mm_beagle.link.remote`). Message header
 stamps follow the node clock instead: with the system clock that is the poll
 stamp itself; with ``use_sim_time`` (ROS time from /clock) it is the node's
 ROS time minus the poll's age on the wall clock, so a pose stamped 5 ms ago

@@ -19,22 +19,22 @@ from fakes import scaled, wait_until
 
 zenoh = pytest.importorskip("zenoh")
 
-from mm_beagle import link  # noqa: E402
-from mm_beagle.harness import (  # noqa: E402
+from mm_beagle.link import link  # noqa: E402
+from mm_beagle.tools.harness import (  # noqa: E402
     BeagleClient,
     agent_command,
     agent_process,
     beagle_process,
     free_port,
 )
-from mm_beagle.link_proxy import ProxyProcess  # noqa: E402
+from mm_beagle.tools.link_proxy import ProxyProcess  # noqa: E402
 
 S0, S1 = "/dev/spidev1.0", "/dev/spidev1.1"
 
 
 def run_agent(*args: str, timeout: float = 30) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, "-m", "mm_beagle.agent", *args],
+        [sys.executable, "-m", "mm_beagle.link.agent", *args],
         capture_output=True,
         text=True,
         timeout=timeout,
@@ -483,10 +483,10 @@ def test_applying_a_block_never_puts_the_agents_lock_word_into_the_node_state():
     not reach the node's seqlock even for a moment: only the node's own +1/+1."""
     import numpy as np
 
-    from mm_beagle import link
-    from mm_beagle import shared_state as ss
-    from mm_beagle.poller import PollerConfig
-    from mm_beagle.remote import RemoteAgent
+    from mm_beagle.link import link
+    from mm_beagle.link.remote import RemoteAgent
+    from mm_beagle.poller import shared_state as ss
+    from mm_beagle.poller.poller import PollerConfig
 
     remote = RemoteAgent(PollerConfig(devices=[S0, S1], ring_size=1024))
     seen: list[int] = []
@@ -503,7 +503,7 @@ def test_applying_a_block_never_puts_the_agents_lock_word_into_the_node_state():
     ints = np.zeros(ss.N_INT, np.int64)
     ints[ss.I_VERSION] = 12345  # odd: the agent's own lock word mid-write
     ints[ss.I_SEQ], ints[ss.I_Y_TOTAL] = 3, 7
-    from mm_beagle.remote import RING_DTYPES
+    from mm_beagle.link.remote import RING_DTYPES
 
     arrays = tuple(np.zeros(3, dt).tobytes() for dt in RING_DTYPES)
     block = link.Block(0, 0, 3, ints.tobytes(), np.zeros(ss.N_FLOAT).tobytes(), arrays)

@@ -11,7 +11,7 @@ import subprocess
 
 import pytest
 
-from mm_beagle import bench_agent
+from mm_beagle.tools import bench_agent
 
 # The first build of the root (in the module's fixture, so in the first test's setup)
 # takes 5-12 minutes: more than pytest's default 300 s per test.

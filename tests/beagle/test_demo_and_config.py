@@ -12,8 +12,8 @@ import yaml
 from fakes import scaled
 
 pytest.importorskip("rclpy")
-from mm_beagle.params import PARAMETERS
-from mm_beagle.watch import HEADER, SensorView, format_row
+from mm_beagle.node.params import PARAMETERS
+from mm_beagle.tools.watch import HEADER, SensorView, format_row
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -52,7 +52,7 @@ def test_watch_row_shows_mm_per_s_and_metres():
 @pytest.mark.ros
 def test_demo_runs_and_shows_both_sensors():
     out = subprocess.run(
-        [sys.executable, "-m", "mm_beagle.demo", "--duration", "6"],
+        [sys.executable, "-m", "mm_beagle.tools.demo", "--duration", "6"],
         capture_output=True,
         text=True,
         timeout=scaled(120),
@@ -70,7 +70,7 @@ def test_demo_runs_and_shows_both_sensors():
 @pytest.mark.ros
 def test_watch_command_ends_cleanly_after_its_duration(tmp_path):
     """mm-watch --duration used to abort at exit (rc 134, a daemon thread inside spin)."""
-    from mm_beagle.harness import BeagleClient, beagle_process
+    from mm_beagle.tools.harness import BeagleClient, beagle_process
 
     client = BeagleClient("mm_watch_test_client")
     params = {"backend": "sim", "diagnostics_period": 0.3}
@@ -79,7 +79,7 @@ def test_watch_command_ends_cleanly_after_its_duration(tmp_path):
         client.close()
         runs = [
             subprocess.run(
-                [sys.executable, "-m", "mm_beagle.watch", "--duration", "6"],
+                [sys.executable, "-m", "mm_beagle.tools.watch", "--duration", "6"],
                 capture_output=True, text=True, timeout=scaled(120), env=dict(os.environ),
             )
             for _ in range(1)
@@ -92,7 +92,7 @@ def test_watch_command_ends_cleanly_after_its_duration(tmp_path):
 
 def test_bench_rejects_bad_arguments():
     out = subprocess.run(
-        [sys.executable, "-m", "mm_beagle.bench", "poll", "--seconds", "1"],
+        [sys.executable, "-m", "mm_pc.bench.cli", "poll", "--seconds", "1"],
         capture_output=True,
         text=True,
         timeout=scaled(120),
@@ -112,7 +112,7 @@ def test_bench_rejects_bad_arguments():
 )
 def test_bench_poll_rejects_bad_client_options(args, text):
     out = subprocess.run(
-        [sys.executable, "-m", "mm_beagle.bench", "poll", *args],
+        [sys.executable, "-m", "mm_pc.bench.cli", "poll", *args],
         capture_output=True,
         text=True,
         timeout=scaled(120),

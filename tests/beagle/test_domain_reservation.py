@@ -10,7 +10,7 @@ import sys
 # holds it until its stdin closes
 PICK = """
 import sys
-from mm_beagle import harness
+from mm_beagle.tools import harness
 harness.ISOLATED_DOMAINS = range(300, 302)
 print(harness._reserve_domain(), flush=True)
 sys.stdin.read()

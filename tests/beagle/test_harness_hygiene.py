@@ -16,8 +16,8 @@ import psutil
 import pytest
 from fakes import scaled, wait_until
 
-from mm_beagle import harness
-from mm_beagle.harness import ISOLATED_DOMAINS, ISOLATED_MARK, isolated_ros_env
+from mm_beagle.tools import harness
+from mm_beagle.tools.harness import ISOLATED_DOMAINS, ISOLATED_MARK, isolated_ros_env
 
 
 def test_a_users_domain_id_is_kept(monkeypatch):
@@ -47,7 +47,7 @@ PARENT = textwrap.dedent(
     signal.signal(signal.SIGINT, signal.SIG_IGN)   # what `nohup ... &` hands down
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
     sys.path.insert(0, {root!r})
-    from mm_beagle.harness import _child
+    from mm_beagle.tools.harness import _child
     cmd = [sys.executable, "-c", "import time; print('child up', flush=True); time.sleep(120)"]
     with _child(cmd, {{}}, {log!r}) as proc:
         print(proc.pid, flush=True)
@@ -86,7 +86,7 @@ NODE_PARENT = textwrap.dedent(
     import signal, sys, time
     signal.signal(signal.SIGINT, signal.SIG_IGN)   # what `nohup ... &` hands down
     sys.path.insert(0, {root!r})
-    from mm_beagle.harness import beagle_process, isolated_ros_env
+    from mm_beagle.tools.harness import beagle_process, isolated_ros_env
     params = {{"backend": "sim", "devices": ["/dev/spidev1.0"]}}
     with beagle_process(params, isolated_ros_env(), {log!r}, namespace="/orphan") as proc:
         print(proc.pid, flush=True)

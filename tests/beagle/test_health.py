@@ -1,4 +1,4 @@
-"""/diagnostics levels from one period's polls (mm_beagle.health), no ROS."""
+"""/diagnostics levels from one period's polls (mm_beagle.node.health), no ROS."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from mm_beagle import health
+from mm_beagle.node import health
 from pln2033 import INCH_M
 
 

@@ -14,7 +14,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mm_beagle.lift_gap import WINDOW, LiftGapEstimator
+from mm_beagle.poller.lift_gap import WINDOW, LiftGapEstimator
 from pln2033.lift_fill import fill_gap, fill_sequence, gap_runs
 
 

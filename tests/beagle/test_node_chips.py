@@ -18,8 +18,8 @@ from fakes import scaled, wait_until
 
 rclpy = pytest.importorskip("rclpy")
 
-from mm_beagle import chip_config  # noqa: E402
-from mm_beagle.harness import (  # noqa: E402
+from mm_beagle.poller import chip_config  # noqa: E402
+from mm_beagle.tools.harness import (  # noqa: E402
     BeagleClient,
     agent_command,
     agent_process,
@@ -274,7 +274,7 @@ def test_bad_chips_exit_2_from_a_params_file(tmp_path):
     f = tmp_path / "p.yaml"
     f.write_text("mm_beagle:\n  ros__parameters:\n    backend: sim\n    chips: [pmw9999]\n")
     out = subprocess.run(
-        [sys.executable, "-m", "mm_beagle.node", "--ros-args", "--params-file", str(f)],
+        [sys.executable, "-m", "mm_beagle.node.node", "--ros-args", "--params-file", str(f)],
         capture_output=True, text=True, timeout=scaled(120), env=isolated_ros_env(),
     )  # fmt: skip
     assert out.returncode == 2 and "allowed: pln2033" in out.stderr, out.stderr
@@ -297,7 +297,7 @@ def test_bad_chips_exit_2_from_the_agents_cli(options, expect, tmp_path):
 
 
 def test_agent_config_file_takes_chips(tmp_path):
-    from mm_beagle.agent import build_parser, config_from_args
+    from mm_beagle.link.agent import build_parser, config_from_args
 
     f = tmp_path / "agent.yaml"
     f.write_text("chips: [pln2033, pmw3360]\nchip_options: ['pmw3360.check_crc=false']\n")

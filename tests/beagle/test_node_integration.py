@@ -22,7 +22,7 @@ from fakes import scaled, wait_until
 rclpy = pytest.importorskip("rclpy")
 from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 
-from mm_beagle.harness import (  # noqa: E402
+from mm_beagle.tools.harness import (  # noqa: E402
     BeagleClient,
     agent_process,
     beagle_process,
@@ -537,7 +537,7 @@ def test_missing_spidev_device_is_reported_not_fatal():
 
 def test_node_importable_without_running():
     out = subprocess.run(
-        [sys.executable, "-c", "import mm_beagle.node, mm_beagle.poller; print('ok')"],
+        [sys.executable, "-c", "import mm_beagle.node.node, mm_beagle.poller.poller; print('ok')"],
         capture_output=True,
         text=True,
         timeout=60,
@@ -566,7 +566,7 @@ def test_a_node_started_by_the_harness_stops_when_its_parent_dies():
     """A killed test run or demo must not leave mm-beagle running (PR_SET_PDEATHSIG)."""
     script = (
         "import os, time\n"
-        "from mm_beagle.harness import beagle_process\n"
+        "from mm_beagle.tools.harness import beagle_process\n"
         "with beagle_process({'backend': 'sim'}) as p:\n"
         "    print(p.pid, flush=True)\n"
         "    time.sleep(2)\n"

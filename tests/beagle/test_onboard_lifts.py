@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import pytest
 
-from mm_beagle import shared_state as ss
-from mm_beagle.onboard_odometry import OnboardOdometry
-from mm_beagle.params import OdometrySettings
-from mm_beagle.poller import Channel
+from mm_beagle.node.onboard_odometry import OnboardOdometry
+from mm_beagle.node.params import OdometrySettings
+from mm_beagle.poller import shared_state as ss
+from mm_beagle.poller.poller import Channel
 from pln2033 import INCH_M, Motion
 
 MOUNTS = [(0.049, -0.0395, 0.0), (0.049, 0.0395, 0.0)]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from mm_beagle.patches import PatchPathError, resolve_patch_file
+from mm_beagle.poller.patches import PatchPathError, resolve_patch_file
 
 
 @pytest.fixture

@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 from fakes import FakeClock, scaled, wait_until
 
-from mm_beagle import poller as poller_mod
-from mm_beagle import shared_state as ss
-from mm_beagle.poller import ERRORS_BEFORE_DOWN, Poller, PollerConfig
-from mm_beagle.sim_backend import SimConfig, parse_fail_windows
+from mm_beagle.poller import poller as poller_mod
+from mm_beagle.poller import shared_state as ss
+from mm_beagle.poller.poller import ERRORS_BEFORE_DOWN, Poller, PollerConfig
+from mm_beagle.poller.sim_backend import SimConfig, parse_fail_windows
 from pln2033 import INCH_M, PLN2033, EmulatedPLN2033, RegisterMap, SpiError
 from pln2033.motion import ConstantVelocity, SampledPath
 
@@ -882,7 +882,10 @@ def test_poller_module_imports_no_ros():
     import subprocess
     import sys
 
-    code = "import sys, mm_beagle.poller; print(sorted(m for m in sys.modules if 'rclpy' in m))"
+    code = (
+        "import sys, mm_beagle.poller.poller; "
+        "print(sorted(m for m in sys.modules if 'rclpy' in m))"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "[]"

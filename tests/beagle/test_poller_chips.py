@@ -13,10 +13,10 @@ from multiprocessing import Pipe
 import pytest
 from fakes import FakeClock
 
-from mm_beagle import chip_config
-from mm_beagle import shared_state as ss
-from mm_beagle.poller import Poller, PollerConfig
-from mm_beagle.sim_backend import SimConfig
+from mm_beagle.poller import chip_config
+from mm_beagle.poller import shared_state as ss
+from mm_beagle.poller.poller import Poller, PollerConfig
+from mm_beagle.poller.sim_backend import SimConfig
 from pln2033 import chips as registry
 from pln2033.motion import ConstantVelocity
 
@@ -251,7 +251,7 @@ def test_otos_settings_from_the_calibration_file_are_written_at_every_start(tmp_
     """calibration_file -> each OTOS's linear scalar and offset (issue 15 part 5c), written
     by the driver at bring-up and again after the chip lost them (a re-initialisation)."""
     need("otos")
-    from mm_beagle.otos_calibration import otos_options
+    from mm_beagle.node.otos_calibration import otos_options
     from mm_pc.core.calibration import Calibration, SensorCalibration
 
     dev = "/dev/spidev1.0"
@@ -283,7 +283,7 @@ def test_srom_file_goes_to_srom_chips_and_is_ignored_by_the_others(tmp_path):
     PLN2033 next to it takes the patch_file rule, and a PMW3901 ignores both, said once."""
     need("pmw3360")
     need("pmw3901")
-    from mm_beagle.poller import poller_config
+    from mm_beagle.poller.poller import poller_config
     from pln2033.pmw33xx import regs as R  # noqa: N812
 
     blob = bytes((i * 7 + 3) & 0xFF for i in range(R.SROM_LENGTH))

@@ -18,8 +18,8 @@ from fakes import scaled, wait_until
 
 rclpy = pytest.importorskip("rclpy")
 
-from mm_beagle.harness import BeagleClient, beagle_process  # noqa: E402
-from mm_beagle.shared_state import BUSY_MESSAGE  # noqa: E402
+from mm_beagle.poller.shared_state import BUSY_MESSAGE  # noqa: E402
+from mm_beagle.tools.harness import BeagleClient, beagle_process  # noqa: E402
 
 S0, S1 = "/dev/spidev1.0", "/dev/spidev1.1"
 
@@ -160,8 +160,8 @@ def test_a_poller_stopped_mid_write_gets_busy_answers_that_change_nothing():
     """The node in this process; its real poller stopped with the version odd (mid-write)."""
     from rclpy.parameter import Parameter
 
-    from mm_beagle import shared_state as ss
-    from mm_beagle.node import BeagleNode
+    from mm_beagle.node.node import BeagleNode
+    from mm_beagle.poller import shared_state as ss
     from mm_interfaces.srv import GetSamples, GetSensorData
 
     ctx = rclpy.Context()
@@ -298,7 +298,7 @@ def test_diagnostics_warn_on_a_stall_error_on_a_wrap_and_back_to_ok(client, tmp_
 
 EXIT_CODE_SCRIPT = """
 import sys
-from mm_beagle import node
+from mm_beagle.node import node
 from mm_pc.ros import spin
 
 class Fake:

@@ -1,4 +1,4 @@
-"""Per-client read-and-clear cursors (mm_beagle.read_and_clear), without ROS.
+"""Per-client read-and-clear cursors (mm_beagle.poller.read_and_clear), without ROS.
 
 A fake sensor whose totals grow by a known step per "poll"; the intervals a
 client is served must add up to its totals whatever replies it loses.
@@ -9,8 +9,8 @@ from __future__ import annotations
 import dataclasses
 import random
 
-from mm_beagle.read_and_clear import AckedReader, ClientCursors
-from mm_beagle.shared_state import Totals
+from mm_beagle.poller.read_and_clear import AckedReader, ClientCursors
+from mm_beagle.poller.shared_state import Totals
 
 
 class FakeSensors:

@@ -14,8 +14,8 @@ from fakes import scaled, wait_until
 
 rclpy = pytest.importorskip("rclpy")
 
-from mm_beagle.harness import BeagleClient, beagle_process  # noqa: E402
-from mm_beagle.read_and_clear import AckedReader  # noqa: E402
+from mm_beagle.poller.read_and_clear import AckedReader  # noqa: E402
+from mm_beagle.tools.harness import BeagleClient, beagle_process  # noqa: E402
 
 pytestmark = pytest.mark.ros
 

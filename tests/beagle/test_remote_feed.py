@@ -21,10 +21,10 @@ import numpy as np
 import pytest
 from fakes import wait_until
 
-from mm_beagle import link
-from mm_beagle import shared_state as ss
-from mm_beagle.poller import PollerConfig
-from mm_beagle.remote import CLOCK_SLEW, RING_DTYPES, RemoteAgent
+from mm_beagle.link import link
+from mm_beagle.link.remote import CLOCK_SLEW, RING_DTYPES, RemoteAgent
+from mm_beagle.poller import shared_state as ss
+from mm_beagle.poller.poller import PollerConfig
 
 S0, S1 = "/dev/spidev1.0", "/dev/spidev1.1"
 MS = 1_000_000

@@ -11,12 +11,12 @@ import sys
 
 import pytest
 
-from mm_beagle import security
+from mm_beagle.link import security
 
 
 def _run(*args: str, timeout: float = 60.0) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, "-m", "mm_beagle.security", *args],
+        [sys.executable, "-m", "mm_beagle.link.security", *args],
         capture_output=True,
         text=True,
         timeout=timeout,

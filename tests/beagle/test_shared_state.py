@@ -1,6 +1,6 @@
 """SharedState: layout, the sequence lock, the ring buffer reader, period percentiles.
 
-The writer side used here is the poller's own :class:`mm_beagle.poller.Channel`
+The writer side used here is the poller's own :class:`mm_beagle.poller.poller.Channel`
 (its ``record`` is the only writer in production), or a hand-written writer
 that follows the same version protocol.
 """
@@ -18,8 +18,8 @@ from fakes import scaled, wait_until
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mm_beagle import shared_state as ss
-from mm_beagle.poller import Channel
+from mm_beagle.poller import shared_state as ss
+from mm_beagle.poller.poller import Channel
 from pln2033 import INCH_M, Motion
 
 
@@ -349,8 +349,8 @@ def test_period_percentile_zero_is_the_minimum():
 
 def test_late_reply_is_not_taken_for_the_next_commands_answer():
     """A reply that arrives after its command timed out must not answer the next one."""
-    from mm_beagle.poller import PollerConfig
-    from mm_beagle.poller_client import PollerClient, PollerError
+    from mm_beagle.poller.poller import PollerConfig
+    from mm_beagle.poller.poller_client import PollerClient, PollerError
 
     client = PollerClient(PollerConfig(devices=["/dev/spidev1.0"], ring_size=1024))
     poller_end = client._child_ends[0]

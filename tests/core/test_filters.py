@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mm_beagle.lift_gap import WINDOW, LiftGapEstimator
+from mm_beagle.poller.lift_gap import WINDOW, LiftGapEstimator
 from mm_pc.core.filters import (
     MAX_WINDOW,
     MedianFilter,

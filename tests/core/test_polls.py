@@ -261,7 +261,7 @@ def test_polls_from_another_node_run_than_the_totals_are_a_gap():
 
 
 def test_flags_agree_with_the_node():
-    from mm_beagle import shared_state as ss
+    from mm_beagle.poller import shared_state as ss
     from mm_pc.core import polls
 
     assert (polls.FLAG_LIFT, polls.FLAG_MOTION, polls.FLAG_OVERFLOW, polls.FLAG_SPI_ERROR,

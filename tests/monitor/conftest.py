@@ -51,7 +51,7 @@ def beagle_node(request, tmp_path_factory):
     """
     pytest.importorskip("rclpy")
     pytest.importorskip("mm_interfaces")
-    from mm_beagle.harness import beagle_process
+    from mm_beagle.tools.harness import beagle_process
 
     tmp = tmp_path_factory.mktemp("beagle")
     params = getattr(request.module, "BEAGLE_PARAMS", {"backend": "sim"})

@@ -15,7 +15,7 @@ from fakes import scaled
 pytest.importorskip("rclpy")
 pytest.importorskip("PySide6")
 
-from mm_beagle.harness import (
+from mm_beagle.tools.harness import (
     BeagleClient,
     agent_process,
     beagle_process,

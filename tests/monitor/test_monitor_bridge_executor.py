@@ -14,7 +14,7 @@ from fakes import scaled
 pytest.importorskip("PySide6")
 pytest.importorskip("rclpy")
 
-from mm_beagle.harness import beagle_process
+from mm_beagle.tools.harness import beagle_process
 from mm_pc.monitor.ros_bridge import EXECUTORS, RosBridge
 
 pytestmark = pytest.mark.ros

@@ -191,7 +191,7 @@ def test_every_poll_once_against_a_real_node(qtbot, in_reply):
     previous reply's seq and add up to the totals, both with the polls in the reply (no
     get_samples at all) and with get_samples (the fallback)."""
     pytest.importorskip("rclpy")
-    from mm_beagle.harness import beagle_process
+    from mm_beagle.tools.harness import beagle_process
 
     bridge = RosBridge("/mm_beagle", 100.0, node_name=f"mm_monitor_polls_{int(in_reply)}")
     bridge.polls_in_reply = in_reply

@@ -12,7 +12,7 @@ import pytest
 pytest.importorskip("rclpy")
 pytest.importorskip("PySide6")
 
-from mm_beagle.harness import isolated_ros_env
+from mm_beagle.tools.harness import isolated_ros_env
 from mm_pc.monitor.model.sim_feed import sim_replies
 from mm_pc.monitor.recording import McapRecorder
 

@@ -10,7 +10,7 @@ import pytest
 pytest.importorskip("rclpy")
 pytest.importorskip("PySide6")
 
-from mm_beagle.harness import beagle_process
+from mm_beagle.tools.harness import beagle_process
 from mm_pc.monitor.context import MonitorConfig, MonitorContext
 from mm_pc.monitor.main_window import MainWindow
 from mm_pc.monitor.model.session import MonitorSession

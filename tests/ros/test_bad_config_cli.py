@@ -15,13 +15,13 @@ from fakes import scaled
 
 pytest.importorskip("rclpy")
 
-from mm_beagle.harness import isolated_ros_env
+from mm_beagle.tools.harness import isolated_ros_env
 from mm_pc.core.calibration import Calibration
 from mm_pc.ros.spin import params_file_problems
 from pln2033.regmap import RegisterMap, RegisterMapError
 
 NODES = {
-    "mm-beagle": "mm_beagle.node",
+    "mm-beagle": "mm_beagle.node.node",
     "mm-odometry": "mm_pc.ros.odometry_node",
     "mm-fusion": "mm_pc.ros.fusion_node",
 }

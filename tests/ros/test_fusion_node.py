@@ -479,7 +479,7 @@ def test_params_file_lists_every_parameter_with_its_default(module, node):
 
 
 def ros_env() -> dict[str, str]:
-    from mm_beagle.harness import isolated_ros_env
+    from mm_beagle.tools.harness import isolated_ros_env
 
     # the session's private domain (conftest), so this process hears the nodes
     return isolated_ros_env(int(os.environ["ROS_DOMAIN_ID"]))
@@ -533,7 +533,7 @@ def running(proc: subprocess.Popen, condition) -> bool:
 
 
 def stop(proc: subprocess.Popen) -> str:
-    from mm_beagle.harness import stop_process
+    from mm_beagle.tools.harness import stop_process
 
     stop_process(proc, timeout=10.0)
     out, _ = proc.communicate(timeout=5)
@@ -819,7 +819,7 @@ def test_map_to_odom_composes_with_the_mouse_pose_reset_and_live_parameters(ros_
     from nav_msgs.msg import Odometry
     from tf2_msgs.msg import TFMessage
 
-    from mm_beagle.harness import BeagleClient
+    from mm_beagle.tools.harness import BeagleClient
     from mm_pc.core.odometry import compose
     from mm_pc.ros.tf import DYNAMIC_QOS
 

@@ -15,7 +15,7 @@ from fakes import wait_until
 pytest.importorskip("rclpy")
 from nav_msgs.msg import Odometry, Path
 
-from mm_beagle.harness import BeagleClient, beagle_process
+from mm_beagle.tools.harness import BeagleClient, beagle_process
 from mm_pc.core.uncertainty import PoseUncertainty, twist_covariance
 
 pytestmark = pytest.mark.ros
@@ -150,7 +150,7 @@ def test_beagle_onboard_odometry_integrates_every_poll(method, tmp_path):
 
 
 def test_beagle_rejects_bad_odometry_settings():
-    from mm_beagle.harness import node_command
+    from mm_beagle.tools.harness import node_command
 
     for params, expect in (
         ({"backend": "sim", "odometry_rate": 10.0, "odometry_method": "guess"}, "guess"),
@@ -198,7 +198,7 @@ def test_bad_calibration_file_exits_2_naming_the_file(ros_command, tmp_path):
 
 
 def test_beagle_bad_calibration_file_exits_2_naming_the_file(tmp_path):
-    from mm_beagle.harness import node_command
+    from mm_beagle.tools.harness import node_command
 
     bad = _garbage_calibration(tmp_path)
     params = {"backend": "sim", "odometry_rate": 10.0, "calibration_file": str(bad)}

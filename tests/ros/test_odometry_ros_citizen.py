@@ -14,7 +14,7 @@ from fakes import wait_until
 pytest.importorskip("rclpy")
 from nav_msgs.msg import Odometry, Path
 
-from mm_beagle.harness import BeagleClient, beagle_process, stop_process
+from mm_beagle.tools.harness import BeagleClient, beagle_process, stop_process
 from mm_pc.core.angles import quaternion_yaw
 from mm_pc.core.geometry import DEFAULT_MOUNTS
 

@@ -9,9 +9,8 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
+from mm_beagle.poller.shared_state import Totals
 from mm_interfaces.msg import SensorData, SensorPolls, SensorSettings
-
-from .shared_state import Totals
 
 INT32_MIN, INT32_MAX = -(2**31), 2**31 - 1
 
@@ -121,8 +120,9 @@ def chip_odometry(t: Totals, stamp_msg, odom_frame: str, base_frame: str):
 def fill_polls(out, first: int, nxt: int, dropped: int, arr: dict, cpi_now: int):
     """Set the poll fields shared by GetSamples' response and SensorPolls on ``out``.
 
-    ``first``/``nxt``/``dropped``/``arr``: :meth:`~mm_beagle.shared_state.SharedState.samples`'
-    answer; ``cpi_now``: the CPI in force, for when no poll is returned. Returns ``out``.
+    ``first``/``nxt``/``dropped``/``arr``: the answer of
+    :meth:`~mm_beagle.poller.shared_state.SharedState.samples`;
+    ``cpi_now``: the CPI in force, for when no poll is returned. Returns ``out``.
     """
     out.first_seq, out.next_seq, out.dropped = first, nxt, dropped
     out.cpi = int(arr["cpi"][-1]) if len(arr["cpi"]) else int(cpi_now)

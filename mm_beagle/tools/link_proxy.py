@@ -107,7 +107,7 @@ class ProxyProcess:
         import sys
 
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "mm_beagle.link_proxy", str(target_port)],
+            [sys.executable, "-m", "mm_beagle.tools.link_proxy", str(target_port)],
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             text=True,

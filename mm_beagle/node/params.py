@@ -7,12 +7,12 @@ from dataclasses import dataclass
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.node import Node
 
+from mm_beagle.link import link
+from mm_beagle.node.otos_calibration import otos_options
+from mm_beagle.poller import chip_config
+from mm_beagle.poller.poller import PollerConfig, poller_config
+from mm_beagle.poller.sim_backend import SimConfig, check_trajectory, parse_fail_windows
 from mm_pc.ros.tf import frame_ids_problem, sensor_frame_names
-
-from . import chip_config, link
-from .otos_calibration import otos_options
-from .poller import PollerConfig, poller_config
-from .sim_backend import SimConfig, check_trajectory, parse_fail_windows
 
 BACKENDS = ("spidev", "sim", "remote")
 
@@ -270,7 +270,7 @@ def declare(node: Node) -> NodeSettings:
         {**p, "devices": devices, "chips": chips, "chip_options": options}, p["ring_size"], sim
     )
     if p["backend"] == "sim":
-        from .sim_backend import sim_chips
+        from mm_beagle.poller.sim_backend import sim_chips
 
         sim_chips(cfg)  # a bad name now, with a clear message
     cfg.device_options = otos_options(

@@ -15,7 +15,7 @@ import shutil
 import sys
 import tempfile
 
-from .harness import BeagleClient, beagle_process, use_isolated_ros_env
+from mm_beagle.tools.harness import BeagleClient, beagle_process, use_isolated_ros_env
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -59,7 +59,7 @@ def _run(args, env: dict, log: str) -> int:
             print(f"mm-beagle did not come up; see {log}", file=sys.stderr)
             return 1
         print("mm-beagle is up. Live view (Ctrl-C to stop):", flush=True)
-        from .watch import run
+        from mm_beagle.tools.watch import run
 
         received = run(args.duration, "/mm_beagle", 0.5)
     print(f"Stopped. {received} SensorData messages received.")

@@ -14,8 +14,8 @@ import threading
 import time
 from multiprocessing.connection import Connection
 
-from . import shared_state as ss
-from .poller import PollerConfig, run_poller
+from mm_beagle.poller import shared_state as ss
+from mm_beagle.poller.poller import PollerConfig, run_poller
 
 COMMAND_TIMEOUT_S = 2.0
 

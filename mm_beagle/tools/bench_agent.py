@@ -11,10 +11,10 @@ Each figure comes from real processes in one run:
 - ``cpu_percent_paced``: the same at 1 kHz paced;
 - ``rss_mb``: the spidev path (no numpy), sensors absent;
 - ``bandwidth_kib_s``, ``latency_p50_ms``/``p99``: an agent on emulated sensors and
-  the node's :class:`~mm_beagle.remote.RemoteAgent` in this process (no ROS
+  the node's :class:`~mm_beagle.link.remote.RemoteAgent` in this process (no ROS
   needed), latency from a poll's stamp to the node's shared state, one clock;
 - ``counts_lost`` over ``link_drops`` forced drops of a few seconds (a
-  :class:`~mm_beagle.link_proxy.ProxyProcess` cut): node totals and every ring
+  :class:`~mm_beagle.tools.link_proxy.ProxyProcess` cut): node totals and every ring
   poll against the emulator's truth.
 """
 
@@ -30,10 +30,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .harness import agent_command, agent_process, free_port
-from .link_proxy import ProxyProcess
-from .poller import PollerConfig
-from .remote import RemoteAgent
+from mm_beagle.link.remote import RemoteAgent
+from mm_beagle.poller.poller import PollerConfig
+from mm_beagle.tools.harness import agent_command, agent_process, free_port
+from mm_beagle.tools.link_proxy import ProxyProcess
 
 # The project's board check (tools/armhf-root in the checkout), or MM_ARMHF_ROOT_TOOL.
 ARMHF_TOOL = Path(__file__).resolve().parents[1] / "tools" / "armhf-root"

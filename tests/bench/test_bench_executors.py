@@ -8,7 +8,7 @@ import pytest
 
 pytest.importorskip("rclpy")
 
-from mm_beagle.bench import main as bench_main
+from mm_pc.bench.cli import main as bench_main
 from mm_pc.bench.executors import bench_executors
 
 

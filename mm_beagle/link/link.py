@@ -1,6 +1,6 @@
 """The board link: key names, frame layout and zenoh set-up shared by agent and node.
 
-The agent (:mod:`mm_beagle.agent`) serves under ``mm/<name>/``:
+The agent (:mod:`mm_beagle.link.agent`) serves under ``mm/<name>/``:
 
   polls     put, every ~10 ms: a batch frame (below) with each sensor's new polls
             and its totals after them; an empty batch at least every 100 ms
@@ -33,7 +33,7 @@ import struct
 from dataclasses import dataclass
 from pathlib import Path
 
-from . import shared_state as ss
+from mm_beagle.poller import shared_state as ss
 
 MAGIC = b"MMB1"
 VERSION = 3  # 2: four lift-estimate variances (N_FLOAT 10); 3: quality per poll, N_INT 20,

@@ -18,7 +18,7 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager, suppress
 
-from .services import service_types
+from mm_pc.ros.services import service_types
 
 ISOLATED_MARK = "MM_ISOLATED_ROS_DOMAIN"  # set once a process has its private domain
 
@@ -91,7 +91,7 @@ def use_isolated_ros_env(
 
 def node_command(params: dict[str, object], namespace: str = "") -> list[str]:
     """The command line of mm-beagle with ``-p name:=value`` for each parameter."""
-    cmd = [sys.executable, "-m", "mm_beagle.node", "--ros-args"]
+    cmd = [sys.executable, "-m", "mm_beagle.node.node", "--ros-args"]
     if namespace:
         cmd += ["-r", f"__ns:={namespace}"]
     for name, value in params.items():
@@ -180,7 +180,7 @@ def free_port() -> int:
 
 def agent_command(options: dict[str, object]) -> list[str]:
     """The command line of mm-beagle-agent with ``--name value`` for each option."""
-    cmd = [sys.executable, "-m", "mm_beagle.agent"]
+    cmd = [sys.executable, "-m", "mm_beagle.link.agent"]
     for name, value in options.items():
         flag = "--" + name.replace("_", "-")
         if isinstance(value, bool):

@@ -169,7 +169,7 @@ class Totals:
 class SharedState:
     """Views onto one shared buffer; built identically in every process that maps it.
 
-    The writer (:class:`mm_beagle.poller.Channel`) uses the plain memoryviews of
+    The writer (:class:`mm_beagle.poller.poller.Channel`) uses the plain memoryviews of
     :meth:`sensor_views`, :attr:`glob_view` and :attr:`hist_view`, so the board's
     agent needs no numpy; readers use the numpy arrays (``ints``, ``floats``,
     ``glob``, ``hist``, ``ring_*``), made on first use.

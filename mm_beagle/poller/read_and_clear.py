@@ -1,7 +1,7 @@
 """Per-client read-and-clear cursors that survive a lost reply (docs/beagle-node.md §3.1).
 
 A read-and-clear reply is the difference of two snapshots of a sensor's monotone
-totals (:class:`~mm_beagle.shared_state.Totals`). With one shared cursor a reply
+totals (:class:`~mm_beagle.poller.shared_state.Totals`). With one shared cursor a reply
 that DDS drops has still moved the cursor, and its interval is gone for the
 client. Here each client (named by a token in the request) has, per sensor, the
 start of its interval (``acked``: the end of the last interval it acknowledged)
@@ -22,7 +22,7 @@ from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-from .shared_state import Totals
+from mm_beagle.poller.shared_state import Totals
 
 MAX_CLIENTS = 64  # least recently served clients beyond this are forgotten
 MAX_TOKEN = 128  # characters of a client token

@@ -1,13 +1,13 @@
 """mm-beagle-agent: the 1 kHz poller on the board, served over zenoh, without ROS.
 
 A BeagleBone Black cannot run ROS 2 Jazzy, so the board runs only this: the
-same :class:`~mm_beagle.poller.Poller` the node spawns locally (same driver,
+same :class:`~mm_beagle.poller.poller.Poller` the node spawns locally (same driver,
 same conservation rules), writing into a private shared-state buffer, and
 every 10 ms (between polls, on the poll thread: no locks, no second thread)
 it publishes the new polls with the totals after them and answers queued
 queries. ``mm-beagle --ros-args -p backend:=remote`` on any ROS machine turns
-that back into the ROS services (:mod:`mm_beagle.remote`). Keys and frames:
-:mod:`mm_beagle.link`. Needs only Debian's python3-spidev and python3-yaml and
+that back into the ROS services (:mod:`mm_beagle.link.remote`). Keys and frames:
+:mod:`mm_beagle.link.link`. Needs only Debian's python3-spidev and python3-yaml and
 the eclipse-zenoh wheel; ``--backend sim`` also needs python3-numpy.
 """
 
@@ -24,10 +24,11 @@ import time
 import zlib
 from dataclasses import dataclass, field
 
-from . import chip_config, link
-from . import shared_state as ss
-from .poller import Poller, PollerConfig, poller_config, tune_process
-from .sim_backend import SimConfig, check_trajectory, parse_fail_windows
+from mm_beagle.link import link
+from mm_beagle.poller import chip_config
+from mm_beagle.poller import shared_state as ss
+from mm_beagle.poller.poller import Poller, PollerConfig, poller_config, tune_process
+from mm_beagle.poller.sim_backend import SimConfig, check_trajectory, parse_fail_windows
 
 EXIT_CONFIG = 2
 HEARTBEAT_S = 0.1  # an empty batch at least this often: the node's link watchdog
@@ -164,10 +165,9 @@ class AgentLink:
         """The words of the patch file ``msg["file"]`` names in this agent's patch_dir.
 
         A peer names a file; it never sends a path elsewhere or the code itself."""
+        from mm_beagle.poller.patches import PatchPathError, resolve_patch_file
         from pln2033 import read_patch_file
         from pln2033.errors import PatchError
-
-        from .patches import PatchPathError, resolve_patch_file
 
         if "words" in msg:
             raise link.LinkError(
@@ -522,7 +522,7 @@ def config_from_args(args: argparse.Namespace) -> AgentConfig:
     ring = round(values["ring_seconds"] * values["poll_rate"])
     cfg = poller_config(values, ring, sim)
     if values["backend"] == "sim":
-        from .sim_backend import sim_chips
+        from mm_beagle.poller.sim_backend import sim_chips
 
         sim_chips(cfg)
     return AgentConfig(cfg, values["name"], values["listen"], values["credentials"])

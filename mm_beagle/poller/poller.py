@@ -5,7 +5,7 @@ period of 6 ms under load; a separate process at about 1.1 ms. So the
 poller runs in a process of its own (spawned, so it inherits nothing of
 rclpy), owns the SPI devices, and publishes into :mod:`shared_state`.
 
-Each device has its chip (``chips``, :mod:`mm_beagle.chip_config`): a PLN2033 keeps the
+Each device has its chip (``chips``, :mod:`mm_beagle.poller.chip_config`): a PLN2033 keeps the
 hand-tuned hot path below; any other driver is polled through ``read_motion()`` and the
 general :meth:`Channel.record`, which also stores the chip's quality figure per poll and
 treats a poll below the chip's threshold like a lift (its counts stay in the measured
@@ -30,16 +30,15 @@ import traceback
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 
+from mm_beagle.poller import chip_config
+from mm_beagle.poller import shared_state as ss
+from mm_beagle.poller.lift_gap import LiftGapEstimator
+from mm_beagle.poller.patches import resolve_patch_file
+from mm_beagle.poller.sim_backend import SimConfig
 from pln2033 import INCH_M, PLN2033, Motion, Pln2033Error, RegisterMap
 from pln2033 import chips as registry
 from pln2033.errors import FirmwareError, InvalidCpiError
 from pln2033.sensor import QUALITY_NONE, ChipInfo
-
-from . import chip_config
-from . import shared_state as ss
-from .lift_gap import LiftGapEstimator
-from .patches import resolve_patch_file
-from .sim_backend import SimConfig
 
 ERRORS_BEFORE_DOWN = 3  # consecutive failed polls before a sensor is declared down
 HEALTH_CHECK_S = 1.0  # how often the CPI is read back to catch a chip that reset itself
@@ -451,7 +450,7 @@ class Poller:
         return registry.make_driver(ch.chip, ch.bus, ch.device, **opts)
 
     def _sim_buses(self) -> dict[str, object]:
-        from .sim_backend import make_sim_buses
+        from mm_beagle.poller.sim_backend import make_sim_buses
 
         return make_sim_buses(self.cfg, self.t0)
 

@@ -26,12 +26,12 @@ mm-bench agent [--seconds S] [--drops N] [--drop-seconds D] --json
     The board agent (mm-beagle-agent): CPU per poll with a stub bus (x86, and
     under qemu-arm in the armhf root where it can be had), CPU % at 1 kHz, RSS,
     link bandwidth and latency, counts lost over N forced link drops.
-    See mm_beagle.bench_agent.
+    See mm_beagle.tools.bench_agent.
 
 mm-bench chips [--polls N] --json
     CPU per poll of every installed chip's driver in the real poller, in this
     process: with a constant-reply stub (driver + poller only) and with the
-    chip's emulator. See mm_beagle.bench_chips.
+    chip's emulator. See mm_beagle.tools.bench_chips.
 
 mm-bench poll --seconds S [--clients N] [--rate HZ] [--cursor ack|shared] --json
     mm-beagle on emulated sensors (separate process) while N (2) client
@@ -62,7 +62,7 @@ import time
 import numpy as np
 import psutil
 
-from .harness import BeagleClient, beagle_process, use_isolated_ros_env
+from mm_beagle.tools.harness import BeagleClient, beagle_process, use_isolated_ros_env
 
 
 def sleep_loop_periods(seconds: float, period_s: float = 0.001) -> np.ndarray:
@@ -83,13 +83,13 @@ def sleep_loop_periods(seconds: float, period_s: float = 0.001) -> np.ndarray:
 def _client(name: str, seconds: float, rate: float, cursor: str, conn) -> None:
     """One client process: get_sensor_data(id='') at ``rate`` Hz (0: flat out), then a final read.
 
-    ``cursor`` 'ack': its own read-and-clear cursor (mm_beagle.read_and_clear), a
+    ``cursor`` 'ack': its own read-and-clear cursor (mm_beagle.poller.read_and_clear), a
     lost reply asked for again with the same ack; 'shared': the node's one cursor.
     A reply that does not come within 5 s counts as lost.
     """
     import rclpy
 
-    from .read_and_clear import AckedReader
+    from mm_beagle.poller.read_and_clear import AckedReader
 
     client = BeagleClient(name)
     client.wait(20)
@@ -376,13 +376,13 @@ def main(argv: list[str] | None = None) -> int:
     chips.add_argument("--json", action="store_true", help="print JSON only (the default)")
     args = parser.parse_args(argv)
     if args.what == "chips":
-        from .bench_chips import bench_chips
+        from mm_beagle.tools.bench_chips import bench_chips
 
         if args.polls < 1000:
             parser.error("need --polls >= 1000")
         result = bench_chips(args.polls)
     elif args.what == "agent":
-        from .bench_agent import bench_agent
+        from mm_beagle.tools.bench_agent import bench_agent
 
         if not args.seconds >= 1 or args.drops < 0 or not args.drop_seconds > 0:
             parser.error("need --seconds >= 1, --drops >= 0, --drop-seconds > 0")
@@ -420,7 +420,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.chip and args.chips:
             parser.error("give --chip or --chips, not both")
         if chips:
-            from .chip_config import resolve_chips
+            from mm_beagle.poller.chip_config import resolve_chips
 
             try:
                 resolve_chips(chips, ["a", "b"] if len(chips) == 1 else chips)

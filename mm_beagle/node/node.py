@@ -1,7 +1,7 @@
 """mm-beagle: the sensor node. Thin: the poller process (or the board's agent) does the work.
 
 ``backend`` spidev|sim spawns the 1 kHz poller here; ``remote`` reads the same
-shared state from an mm-beagle-agent over zenoh (:mod:`mm_beagle.remote`), so
+shared state from an mm-beagle-agent over zenoh (:mod:`mm_beagle.link.remote`), so
 everything below is one implementation for both.
 
 Services (private namespace, so /mm_beagle/... by default):
@@ -30,18 +30,18 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 
+from mm_beagle.link.remote import RemoteAgent
+from mm_beagle.node import health, messages
+from mm_beagle.node.params import NodeSettings, declare
+from mm_beagle.poller import chip_config
+from mm_beagle.poller import shared_state as ss
+from mm_beagle.poller.poller_client import PollerClient, PollerError
+from mm_beagle.poller.read_and_clear import ClientCursors
 from mm_interfaces.msg import SensorData
 from mm_pc.ros import spin as ros_spin
 from mm_pc.ros.clock import ClockWatch, node_stamp
+from mm_pc.ros.services import service_types
 from mm_pc.ros.tf import frame_ids_problem
-
-from . import chip_config, health, messages
-from . import shared_state as ss
-from .params import NodeSettings, declare
-from .poller_client import PollerClient, PollerError
-from .read_and_clear import ClientCursors
-from .remote import RemoteAgent
-from .services import service_types
 
 NODE_NAME = "mm_beagle"
 
@@ -264,7 +264,7 @@ class BeagleNode(Node):
         """Read-and-clear sums since this service's previous call, per sensor.
 
         With ``req.client`` set: since that client's acknowledged ``ack_seq``
-        (:mod:`mm_beagle.read_and_clear`; a repeated ack gets the same interval).
+        (:mod:`mm_beagle.poller.read_and_clear`; a repeated ack gets the same interval).
         """
         if self._unavailable(res):
             return res
@@ -487,12 +487,11 @@ class BeagleNode(Node):
         """
         from nav_msgs.msg import Odometry as OdometryMsg
 
+        from mm_beagle.node.onboard_odometry import OnboardOdometry
         from mm_pc.core.uncertainty import PoseUncertainty
         from mm_pc.ros.odometry_node import odometry_message
         from mm_pc.ros.reset import create_reset_service
         from mm_pc.ros.tf import TfPublisher, planar_transform, sensor_frame_names
-
-        from .onboard_odometry import OnboardOdometry
 
         o = self.settings.odometry
         self.onboard = OnboardOdometry(o, self.devices, self.poller.state)

@@ -1,6 +1,6 @@
 """mm-bench chips: CPU per poll of each chip's driver in the real poller, in this process.
 
-For every installed chip, one :class:`~mm_beagle.poller.Channel` is brought up on the
+For every installed chip, one :class:`~mm_beagle.poller.poller.Channel` is brought up on the
 chip's emulator (the real driver's bring-up), then polled flat out:
 
 - ``stub_us``: after bring-up the motion burst is answered by a constant reply (the
@@ -26,10 +26,10 @@ import platform
 import time
 from multiprocessing import Pipe
 
-from . import chip_config
-from . import shared_state as ss
-from .poller import Poller, PollerConfig
-from .sim_backend import SimConfig
+from mm_beagle.poller import chip_config
+from mm_beagle.poller import shared_state as ss
+from mm_beagle.poller.poller import Poller, PollerConfig
+from mm_beagle.poller.sim_backend import SimConfig
 
 
 class ConstantBurst:

@@ -1,6 +1,6 @@
 """backend:=remote: the node's side of the board link to mm-beagle-agent.
 
-:class:`RemoteAgent` offers what :class:`~mm_beagle.poller_client.PollerClient`
+:class:`RemoteAgent` offers what :class:`~mm_beagle.poller.poller_client.PollerClient`
 offers (``state``, ``command``, ``drain_events``, ...), so the node's services,
 topic, diagnostics and onboard odometry read the same shared state whichever
 backend fills it. A feeder thread applies the agent's batches in order: a gap
@@ -29,10 +29,11 @@ import zlib
 
 import numpy as np
 
-from . import chip_config, link
-from . import shared_state as ss
-from .poller import PollerConfig
-from .poller_client import PollerError
+from mm_beagle.link import link
+from mm_beagle.poller import chip_config
+from mm_beagle.poller import shared_state as ss
+from mm_beagle.poller.poller import PollerConfig
+from mm_beagle.poller.poller_client import PollerError
 
 LINK_TIMEOUT_S = 1.0  # no batch for this long: the link is down (the agent sends >= 10/s)
 COMMAND_TIMEOUT_S = 2.0

@@ -9,7 +9,7 @@ import pytest
 pytest.importorskip("rclpy")
 pytest.importorskip("PySide6")
 
-from mm_beagle.bench import main as bench_main
+from mm_pc.bench.cli import main as bench_main
 from mm_pc.bench.gui import bench_gui
 
 POSITIVE = (

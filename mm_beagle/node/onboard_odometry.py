@@ -15,13 +15,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from mm_beagle.node.params import OdometrySettings
+from mm_beagle.poller.shared_state import FLAG_LIFT, FLAG_LOW_QUALITY, SharedState
 from mm_pc.core.calibration import Calibration
 from mm_pc.core.geometry import SensorMount
 from mm_pc.core.odometry import Odometry, Pose2D
 from pln2033 import INCH_M
-
-from .params import OdometrySettings
-from .shared_state import FLAG_LIFT, FLAG_LOW_QUALITY, SharedState
 
 
 class OnboardOdometry:

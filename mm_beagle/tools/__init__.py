@@ -1,0 +1,1 @@
+"""Tools around the node: the test/demo harness, benches, mm-watch, the demo, a link proxy."""
