@@ -36,7 +36,7 @@ from mm_beagle.tools.harness import agent_command, agent_process, free_port
 from mm_beagle.tools.link_proxy import ProxyProcess
 
 # The project's board check (tools/armhf-root in the checkout), or MM_ARMHF_ROOT_TOOL.
-ARMHF_TOOL = Path(__file__).resolve().parents[1] / "tools" / "armhf-root"
+ARMHF_TOOL = Path(__file__).resolve().parents[2] / "tools" / "armhf-root"
 # Where the tool puts things inside the root: ./compile agent's launcher, the checkout's copy.
 AGENT_IN_ROOT = "/opt/mouse-monitor/bin/mm-beagle-agent"
 SRC_IN_ROOT = "/opt/mm-src"
