@@ -35,9 +35,10 @@ from mm_beagle.poller import shared_state as ss
 from mm_beagle.poller.lift_gap import LiftGapEstimator
 from mm_beagle.poller.patches import resolve_patch_file
 from mm_beagle.poller.sim_backend import SimConfig
-from pln2033 import INCH_M, PLN2033, Motion, Pln2033Error, RegisterMap
+from pln2033 import INCH_M, Motion, Pln2033Error
 from pln2033 import chips as registry
 from pln2033.errors import FirmwareError, InvalidCpiError
+from pln2033.pln2033 import PLN2033, RegisterMap
 from pln2033.sensor import QUALITY_NONE, ChipInfo
 
 ERRORS_BEFORE_DOWN = 3  # consecutive failed polls before a sensor is declared down
@@ -425,7 +426,7 @@ class Poller:
 
     def _info(self, chip: str) -> ChipInfo:
         if chip == registry.DEFAULT_CHIP:
-            from pln2033.driver import pln2033_info
+            from pln2033.pln2033 import pln2033_info
 
             return pln2033_info(self.regmap)
         return registry.chip_info(chip)
@@ -580,7 +581,7 @@ class Poller:
         try:
             if kind == "settings":
                 motion, regs = ch.driver.read_all_registers()
-                ch.record(time.time_ns(), motion, ss.FLAG_SETTINGS_READ)
+                ch.record(time.time_ns(), motion, ss.FLAG_COMMAND_READ)
                 cpi = ch.info.cpi
                 return (
                     "ok",

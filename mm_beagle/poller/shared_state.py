@@ -17,6 +17,14 @@ import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+# the bits of each poll's ring_flags, defined once in the lowest layer (re-exported here)
+from mm_pc.core.poll_flags import FLAG_COMMAND_READ as FLAG_COMMAND_READ
+from mm_pc.core.poll_flags import FLAG_LIFT as FLAG_LIFT
+from mm_pc.core.poll_flags import FLAG_LOW_QUALITY as FLAG_LOW_QUALITY
+from mm_pc.core.poll_flags import FLAG_MOTION as FLAG_MOTION
+from mm_pc.core.poll_flags import FLAG_OVERFLOW as FLAG_OVERFLOW
+from mm_pc.core.poll_flags import FLAG_SPI_ERROR as FLAG_SPI_ERROR
+
 if TYPE_CHECKING:
     import numpy as np
 
@@ -97,12 +105,6 @@ STATE_UP = 1
 STATE_STARTING = 2
 STATE_NAMES = {STATE_DOWN: "down", STATE_UP: "up", STATE_STARTING: "starting"}
 
-FLAG_LIFT = 1
-FLAG_MOTION = 2
-FLAG_OVERFLOW = 4
-FLAG_SPI_ERROR = 8
-FLAG_SETTINGS_READ = 16
-FLAG_LOW_QUALITY = 32  # quality below the chip's threshold: treated like a lift
 
 LATE_FACTOR = 1.5
 

@@ -47,6 +47,15 @@ from typing import NamedTuple
 import numpy as np
 
 from mm_pc.core.filters import interpolate_lift_gaps
+from mm_pc.core.poll_flags import (  # the bits of GetSamples' flags, defined once
+    FLAG_COMMAND_READ,
+    FLAG_LIFT,
+    FLAG_LOW_QUALITY,
+    FLAG_MOTION,
+    FLAG_OVERFLOW,
+    FLAG_SPI_ERROR,
+    FLAG_UNSEEN,
+)
 from pln2033 import INCH_M
 
 __all__ = [
@@ -65,21 +74,6 @@ __all__ = [
     "integrate_steps",
     "unseen",
 ]
-
-# the bits of GetSamples' flags (the same as mm_beagle.poller.shared_state's FLAG_*)
-FLAG_LIFT = 1
-FLAG_MOTION = 2
-FLAG_OVERFLOW = 4
-FLAG_SPI_ERROR = 8
-FLAG_COMMAND_READ = 16
-#: the chip's surface-quality figure (SQUAL, ...) was below its threshold
-#: (``pln2033.chips.chip_info(chip).quality_threshold``): the counts are unreliable.
-FLAG_LOW_QUALITY = 32
-
-#: The flags after which a poll's counts are not a measurement of the floor: the sensor
-#: was lifted, or it saw the floor too poorly. The pose math treats both the same
-#: (gap filling, dropped equations of ``two-sensor``, the held-back steps): the one rule.
-FLAG_UNSEEN = FLAG_LIFT | FLAG_LOW_QUALITY
 
 
 def unseen(flags) -> np.ndarray:

@@ -21,8 +21,9 @@ from mm_beagle.poller import poller as poller_mod
 from mm_beagle.poller import shared_state as ss
 from mm_beagle.poller.poller import ERRORS_BEFORE_DOWN, Poller, PollerConfig
 from mm_beagle.poller.sim_backend import SimConfig, parse_fail_windows
-from pln2033 import INCH_M, PLN2033, EmulatedPLN2033, RegisterMap, SpiError
+from pln2033 import INCH_M, SpiError
 from pln2033.motion import ConstantVelocity, SampledPath
+from pln2033.pln2033 import PLN2033, EmulatedPLN2033, RegisterMap
 
 MAP = RegisterMap.default()
 DEVICES = ["/dev/spidev1.0", "/dev/spidev1.1"]
@@ -267,7 +268,7 @@ def test_conservation_over_20000_polls_with_lifts_settings_reads_and_a_cpi_chang
         assert int(a["dy"].astype(np.int64).sum()) == t.y_total
         ring_m = (a["dy"].astype(np.float64) * INCH_M / a["cpi"]).sum()
         assert ring_m == pytest.approx(t.y_total_m, rel=1e-9)
-        assert int(np.count_nonzero(a["flags"] & ss.FLAG_SETTINGS_READ)) == settings_reads[i]
+        assert int(np.count_nonzero(a["flags"] & ss.FLAG_COMMAND_READ)) == settings_reads[i]
         assert int(np.count_nonzero(a["flags"] & ss.FLAG_LIFT)) == t.lift_total
         assert not np.any(a["flags"] & (ss.FLAG_OVERFLOW | ss.FLAG_SPI_ERROR))
         assert t.overflows == t.spi_errors == 0
@@ -885,6 +886,28 @@ def test_poller_module_imports_no_ros():
     code = (
         "import sys, mm_beagle.poller.poller; "
         "print(sorted(m for m in sys.modules if 'rclpy' in m))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]"
+
+
+def test_spidev_path_imports_no_numpy():
+    """The board's agent has no numpy: the poller, its flags, shared state and the link
+    import none, and a spidev poller is built and records a poll without it."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "from mm_beagle.poller import poller as p, shared_state as ss\n"
+        "import mm_beagle.link.link, mm_beagle.link.agent, mm_pc.core.poll_flags\n"
+        "from pln2033 import Motion\n"
+        "cfg = p.PollerConfig(devices=['/dev/spidev9.0', '/dev/spidev9.1'], ring_size=64)\n"
+        "state = ss.SharedState(bytearray(ss.SharedState.size(2, 64)), 2, 64)\n"
+        "poller = p.Poller(cfg, state, None, None)\n"
+        "poller.channels[0].record(1, Motion(1, 2, 0x80, True, False, False))\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] == 'numpy'))"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr

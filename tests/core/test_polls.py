@@ -261,12 +261,38 @@ def test_polls_from_another_node_run_than_the_totals_are_a_gap():
 
 
 def test_flags_agree_with_the_node():
+    """One definition: polls and the board's shared state use mm_pc.core.poll_flags'."""
     from mm_beagle.poller import shared_state as ss
-    from mm_pc.core import polls
+    from mm_pc.core import poll_flags, polls
 
-    assert (polls.FLAG_LIFT, polls.FLAG_MOTION, polls.FLAG_OVERFLOW, polls.FLAG_SPI_ERROR,
-            polls.FLAG_COMMAND_READ) == (ss.FLAG_LIFT, ss.FLAG_MOTION, ss.FLAG_OVERFLOW,
-                                         ss.FLAG_SPI_ERROR, ss.FLAG_SETTINGS_READ)
+    for name, bit in poll_flags.FLAGS.items():
+        assert getattr(polls, name) is bit and getattr(ss, name) is bit
+    assert sorted(poll_flags.FLAGS.values()) == [1 << k for k in range(6)]
+    assert not hasattr(ss, "FLAG_SETTINGS_READ") and not hasattr(polls, "FLAG_SETTINGS_READ")
+
+
+def test_sensor_polls_msg_constants_are_the_python_flags():
+    """SensorPolls.msg declares the flag bits as constants: the same names and values."""
+    import re
+    from pathlib import Path
+
+    from mm_pc.core import poll_flags
+
+    msg = Path(__file__).parents[2] / "mm_interfaces" / "msg" / "SensorPolls.msg"
+    consts = {
+        name: int(value)
+        for name, value in re.findall(r"^uint8\s+(FLAG_\w+)\s*=\s*(\d+)", msg.read_text(), re.M)
+    }
+    assert consts == poll_flags.FLAGS
+
+
+def test_generated_sensor_polls_has_the_flags():
+    """The built message module (./compile setup) carries the constants too."""
+    from mm_pc.core import poll_flags
+
+    msgs = pytest.importorskip("mm_interfaces.msg")
+    for name, bit in poll_flags.FLAGS.items():
+        assert getattr(msgs.SensorPolls, name) == bit
 
 
 def test_totals_of_one_reply_a_tick_apart_are_no_gap(s_curve_ring):
