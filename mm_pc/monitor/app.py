@@ -211,7 +211,7 @@ def _record_problem(args) -> str:
     """Why ``--record`` cannot take its path ('' when it can); nothing is created."""
     import os.path
 
-    from mm_pc.monitor.bag_format import recording_target
+    from mm_pc.monitor.io.bag_format import recording_target
 
     try:
         target, folder = recording_target(args.record)

@@ -342,7 +342,7 @@ class RosBridge(QObject):
         )
 
     def record_topics(self, topics, sink) -> None:
-        """Subscribe to ``topics`` (:class:`~mm_pc.monitor.bag_format.LiveTopic`) and call
+        """Subscribe to ``topics`` (:class:`~mm_pc.monitor.io.bag_format.LiveTopic`) and call
         ``sink(topic, type_name, cdr_bytes, offered_qos)`` for each message, on the executor
         thread, until :meth:`stop_recording_topics`. ``offered_qos``: the publishers'
         profiles (rosbag2's v9 dicts), looked up at the topic's first message. A type

@@ -26,24 +26,23 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from mm_interfaces.msg import SensorData
 from mm_interfaces.srv import GetSamples
-from mm_pc.monitor.bag_format import (
+from mm_pc.monitor.io.bag_format import (
     SENSOR_DATA_QOS,
     TF_STATIC_QOS,
     bag_files,
     live_topics,
     recording_target,
 )
-from mm_pc.monitor.model.session import MonitorSession
-from mm_pc.monitor.recording import (
+from mm_pc.monitor.io.mcap_reader import read_replies, read_samples
+from mm_pc.monitor.io.mcap_writer import McapRecorder
+from mm_pc.monitor.io.schemas import (
     LEGACY_POLLS_TYPE,
     META_TOPIC,
     REPLY_POLLS_TOPIC,
     SENSOR_TOPIC,
-    McapRecorder,
-    read_replies,
-    read_samples,
     ros2msg_definition,
 )
+from mm_pc.monitor.model.session import MonitorSession
 
 ROOT = Path(__file__).resolve().parents[2]
 DEVS = ("/dev/spidev1.0", "/dev/spidev1.1")
@@ -276,7 +275,7 @@ def write_legacy(path: Path, replies) -> None:
     GetSamples_Response on /mm_monitor/reply_polls/<device>."""
     from std_msgs.msg import Float64MultiArray
 
-    from mm_pc.monitor.recording import _serialize_reading
+    from mm_pc.monitor.io.cdr import serialize_reading
 
     qos = {"offered_qos_profiles": ""}
     with open(path, "wb") as f:
@@ -299,7 +298,7 @@ def write_legacy(path: Path, replies) -> None:
             data = [rep.received_s, rep.rtt_s, 1.0]
             w.add_message(meta, t, serialize_message(Float64MultiArray(data=data)), t, seq)
             for r in rep.readings:
-                w.add_message(sensor, t, _serialize_reading(r), r.stamp_ns, seq)
+                w.add_message(sensor, t, serialize_reading(r), r.stamp_ns, seq)
             for dev, res in rep.polls.items():
                 if res is None:
                     continue

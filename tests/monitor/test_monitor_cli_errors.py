@@ -13,8 +13,8 @@ pytest.importorskip("rclpy")
 pytest.importorskip("PySide6")
 
 from mm_beagle.tools.harness import isolated_ros_env
+from mm_pc.monitor.io.mcap_writer import McapRecorder
 from mm_pc.monitor.model.sim_feed import sim_replies
-from mm_pc.monitor.recording import McapRecorder
 
 REPLAY_S = 2.0
 DEEP = "[" * 5000 + "]" * 5000 + "\n"

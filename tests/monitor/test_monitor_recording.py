@@ -20,21 +20,14 @@ from mm_interfaces.msg import SensorData
 from mm_interfaces.srv import GetSamples
 from mm_pc.core.geometry import DEFAULT_MOUNTS, SensorMount
 from mm_pc.monitor.context import MonitorConfig, MonitorContext
+from mm_pc.monitor.io.mcap_reader import read_replies, read_samples
+from mm_pc.monitor.io.mcap_writer import McapRecorder
+from mm_pc.monitor.io.schemas import META_TOPIC, POLLS_TYPE, SENSOR_TOPIC, ros2msg_definition
 from mm_pc.monitor.main_window import MainWindow
 from mm_pc.monitor.model.readings import Reading, Reply
 from mm_pc.monitor.model.session import MonitorSession
 from mm_pc.monitor.model.sim_feed import sim_replies
-from mm_pc.monitor.recording import (
-    META_TOPIC,
-    SENSOR_TOPIC,
-    McapRecorder,
-    read_replies,
-    read_samples,
-    ros2msg_definition,
-    start_recording,
-    stop_recording,
-    toggle_recording,
-)
+from mm_pc.monitor.recording import start_recording, stop_recording, toggle_recording
 from mm_pc.monitor.replay import Replayer, parse_speed, start_replay
 from mm_pc.monitor.ros_bridge import RosBridge
 
@@ -684,21 +677,21 @@ def test_recordings_made_before_the_node_identity_still_decode():
 
     from mm_interfaces.msg import SensorData
     from mm_interfaces.srv import GetSamples
-    from mm_pc.monitor import recording
+    from mm_pc.monitor.io import cdr
 
     new = serialize_message(SensorData(id="/dev/spidev1.0", seq=42, y_total_disp=0.5,
                                        instance_id=99))  # fmt: skip
-    assert recording._deserialize_appended(new, SensorData).instance_id == 99
+    assert cdr.deserialize_appended(new, SensorData).instance_id == 99
     before_id = new[: new.rfind((99).to_bytes(8, "little"))]  # the layout before issue 13
-    old = recording._deserialize_appended(before_id, SensorData)
+    old = cdr.deserialize_appended(before_id, SensorData)
     assert (old.id, old.seq, old.y_total_disp, old.instance_id) == ("/dev/spidev1.0", 42, 0.5, 0)
     res = serialize_message(GetSamples.Response(success=True, first_seq=3, next_seq=4, dx=[5],
                                                 flags=[1, 2, 9], instance_id=7))  # fmt: skip
-    assert recording._deserialize_appended(res, GetSamples.Response).instance_id == 7
+    assert cdr.deserialize_appended(res, GetSamples.Response).instance_id == 7
     # the old layout ended with the flags (not 8-aligned): no padding, no instance_id
     old_bytes = res[: res.rfind(bytes([1, 2, 9])) + 3]
     assert len(res) - len(old_bytes) > 8
-    old = recording._deserialize_appended(old_bytes, GetSamples.Response)
+    old = cdr.deserialize_appended(old_bytes, GetSamples.Response)
     assert (old.first_seq, list(old.dx), list(old.flags), old.instance_id) == (3, [5], [1, 2, 9], 0)
 
 
@@ -707,34 +700,34 @@ def test_recordings_made_before_the_chip_fields_still_decode():
     from rclpy.serialization import serialize_message
 
     from mm_interfaces.msg import SensorData, SensorPolls
-    from mm_pc.monitor import recording
+    from mm_pc.monitor.io import cdr
 
     new = serialize_message(SensorData(id="/dev/spidev1.0", seq=7, instance_id=99, chip="pmw3360",
                                        quality=40, low_quality_events=2))  # fmt: skip
-    got = recording._deserialize_appended(new, SensorData)
+    got = cdr.deserialize_appended(new, SensorData)
     assert (got.chip, got.quality, got.low_quality_events) == ("pmw3360", 40, 2)
     # the old layout ended with instance_id: cut the appended fields off
     before = serialize_message(SensorData(id="/dev/spidev1.0", seq=7, instance_id=99))
     old_bytes = before[: before.rfind((99).to_bytes(8, "little")) + 8]
-    old = recording._deserialize_appended(old_bytes, SensorData)
+    old = cdr.deserialize_appended(old_bytes, SensorData)
     assert (old.seq, old.instance_id, old.chip, old.quality) == (7, 99, "", 0)
     polls = serialize_message(SensorPolls(first_seq=1, next_seq=3, dx=[4, 5], flags=[2, 34],
                                           quality=[50, 3]))  # fmt: skip
-    got = recording._decode_polls(recording.POLLS_TYPE, polls)
+    got = cdr.decode_polls(POLLS_TYPE, polls)
     assert list(got.quality) == [50, 3] and list(got.flags) == [2, 34]
     old_polls = polls[: polls.rfind(bytes([2, 34])) + 2]
-    got = recording._decode_polls(recording.POLLS_TYPE, old_polls)
+    got = cdr.decode_polls(POLLS_TYPE, old_polls)
     assert (list(got.dx), list(got.flags), list(got.quality)) == ([4, 5], [2, 34], [])
 
 
 def test_an_old_recording_reads_as_a_pln2033_without_a_quality_figure():
     """The zero-filled quality of a reply from before issue 15 is no SQUAL 0."""
-    from mm_pc.monitor import recording
+    from mm_pc.monitor.io import cdr
     from mm_pc.monitor.model.chips import chip_title, quality_figure
 
     before = serialize_message(SensorData(id="/dev/spidev1.0", seq=7, instance_id=99))
     old_bytes = before[: before.rfind((99).to_bytes(8, "little")) + 8]
-    r = Reading.from_msg(recording._deserialize_appended(old_bytes, SensorData))
+    r = Reading.from_msg(cdr.deserialize_appended(old_bytes, SensorData))
     assert (r.chip, r.quality, r.low_quality_events) == ("", -1, 0)
     assert chip_title(r.chip) == "Philips PLN2033" and math.isnan(quality_figure(r.chip, 0))
     new = SensorData(id="/dev/spidev1.0", seq=7, chip="pmw3360", quality=0)

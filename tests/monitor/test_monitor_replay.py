@@ -15,10 +15,10 @@ pytest.importorskip("PySide6")
 from PySide6.QtWidgets import QMessageBox
 
 from mm_pc.monitor.context import MonitorConfig, MonitorContext
+from mm_pc.monitor.io.mcap_writer import McapRecorder
 from mm_pc.monitor.main_window import MainWindow
 from mm_pc.monitor.model.session import MonitorSession
 from mm_pc.monitor.model.sim_feed import sim_replies
-from mm_pc.monitor.recording import McapRecorder
 from mm_pc.monitor.replay import (
     leave_replay,
     load_in_background,

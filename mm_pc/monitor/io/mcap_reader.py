@@ -1,0 +1,143 @@
+"""Read a monitor recording back: the replies exactly as received, and the fetched polls.
+
+An MCAP file or a rosbag2 folder (:func:`.bag_format.bag_files`); layout in
+:mod:`mm_pc.monitor.io`. Errors are ValueErrors saying what is wrong with the file.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from mm_pc.monitor.io.bag_format import bag_files
+from mm_pc.monitor.io.cdr import decode_polls, deserialize_appended, ros_types
+from mm_pc.monitor.io.schemas import (
+    META_TOPIC,
+    META_TYPE,
+    POLL_TYPES,
+    REPLY_POLLS_TOPIC,
+    SAMPLES_TOPIC,
+    SENSOR_TOPIC,
+    SENSOR_TYPE,
+)
+from mm_pc.monitor.model.readings import Reading, Reply
+
+__all__ = ["open_messages", "read_replies", "read_samples"]
+
+
+def open_messages(path: str | Path):
+    """((schema, channel, message) of every message, {topic: schema name}) of a file or a
+    rosbag2 folder; ValueError saying what is wrong with one that cannot be read."""
+    path = Path(path)
+    if not path.exists():
+        raise ValueError(f"no recording at {path} (file not found)")
+    messages, types = [], {}
+    for file in bag_files(path):
+        m, t = _open_file(file)
+        messages += m
+        for k, v in t.items():
+            types.setdefault(k, v)
+    return messages, types
+
+
+def _open_file(path: Path):
+    from mcap.reader import make_reader
+
+    if not path.is_file():
+        raise ValueError(f"no recording at {path} (file not found)")
+    try:
+        with open(path, "rb") as f:
+            if f.read(8) != b"\x89MCAP0\r\n":
+                raise ValueError(f"{path} is not an MCAP file (it does not start with MCAP magic)")
+            f.seek(0)
+            reader = make_reader(f, validate_crcs=True)
+            messages = list(reader.iter_messages(log_time_order=False))
+            summary = reader.get_summary()
+    except ValueError:
+        raise
+    except Exception as e:  # the mcap reader raises many kinds on a damaged file
+        raise ValueError(
+            f"{path} is a damaged or incomplete MCAP file ({type(e).__name__}: {e}); "
+            "a recording cut short can be repaired with `mcap recover`"
+        ) from None
+    types = {c.topic: (s.name if s else "") for s, c, _ in messages}
+    if summary is not None:  # channels without messages (an empty recording)
+        for c in summary.channels.values():
+            schema = summary.schemas.get(c.schema_id)
+            types.setdefault(c.topic, schema.name if schema else "")
+    return messages, types
+
+
+def read_replies(path: str | Path) -> list[Reply]:
+    """The replies recorded in ``path`` (by :class:`McapRecorder`, or any MCAP file with
+    ``mm_interfaces/msg/SensorData`` messages), in recorded order.
+
+    With the ``/mm_monitor/reply_meta`` channel, messages are grouped by their
+    sequence number and ``received_s``/``rtt_s`` are exact; without it, the
+    SensorData messages with the same ``log_time`` form one reply
+    (``received_s`` = log_time in s, ``rtt_s`` = 0). Raises ValueError for a
+    missing, non-MCAP or damaged file, or one without sensor data.
+    """
+    ros = ros_types()
+    deserialize_message, SensorData = ros.deserialize, ros.SensorData  # noqa: N806
+    Float64MultiArray = ros.Float64MultiArray  # noqa: N806
+    messages, types = open_messages(path)
+    meta = [m for s, c, m in messages if c.topic == META_TOPIC and s and s.name == META_TYPE]
+    # a monitor recording's replies are on SENSOR_TOPIC (the live topic's SensorData is
+    # another stream); a foreign bag's SensorData on any topic
+    sensor = [
+        (c, m) for s, c, m in messages
+        if s is not None and s.name == SENSOR_TYPE and (not meta or c.topic == SENSOR_TOPIC)
+    ]  # fmt: skip
+    if SENSOR_TYPE not in types.values():
+        topics = sorted(types)
+        raise ValueError(
+            f"{path} holds no {SENSOR_TYPE} messages (topics: {', '.join(topics) or 'none'})"
+        )
+    try:
+        readings = [
+            (m.sequence, m.log_time, Reading.from_msg(deserialize_appended(m.data, SensorData)))
+            for c, m in sensor
+            if c.message_encoding == "cdr"
+        ]
+        metas = {}
+        for m in meta:
+            values = list(deserialize_message(m.data, Float64MultiArray).data)
+            fetched = len(values) > 2 and values[2] == 1.0
+            metas[m.sequence] = (m.log_time, float(values[0]), float(values[1]), fetched)
+        polls: dict[int, dict[str, object]] = {}
+        for s, c, m in messages:
+            if c.topic.startswith(REPLY_POLLS_TOPIC + "/") and s is not None:
+                device = c.metadata.get("device", c.topic)
+                polls.setdefault(m.sequence, {})[device] = decode_polls(s.name, m.data)
+    except Exception as e:  # deserialisation of foreign bytes can fail in many ways
+        raise ValueError(
+            f"{path}: a message could not be decoded ({type(e).__name__}: {e})"
+        ) from None
+    if metas:
+        groups: dict[int, list[Reading]] = {k: [] for k in metas}
+        for seq, _, r in readings:
+            groups.setdefault(seq, []).append(r)
+        out = []
+        for seq in sorted(groups):  # the reply number: recorded order
+            _, received, rtt, fetched = metas.get(seq, (0, math.nan, 0.0, False))
+            got = None
+            if fetched:  # a device without a message: its fetch had failed
+                got = {r.id: polls.get(seq, {}).get(r.id) for r in groups[seq]}
+            out.append(Reply(tuple(groups[seq]), received_s=received, rtt_s=rtt, polls=got))
+        return out
+    by_time: dict[int, list[Reading]] = {}
+    for _, log_time, r in readings:
+        by_time.setdefault(log_time, []).append(r)
+    return [Reply(tuple(v), received_s=t / 1e9) for t, v in sorted(by_time.items())]
+
+
+def read_samples(path: str | Path) -> list[tuple[str, object]]:
+    """(device, SensorPolls or old GetSamples response) of every recorded single-poll fetch
+    on ``/mm_monitor/samples/*``, in order."""
+    out = []
+    for s, c, m in open_messages(path)[0]:
+        if s is not None and s.name in POLL_TYPES and c.topic.startswith(SAMPLES_TOPIC + "/"):
+            device = c.metadata.get("device", c.topic)
+            out.append((m.log_time, device, decode_polls(s.name, m.data)))
+    return [(d, r) for _, d, r in sorted(out, key=lambda x: x[0])]
