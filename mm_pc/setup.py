@@ -54,7 +54,7 @@ def ros_package_setup(name: str, with_pln2033: bool = False) -> None:
     if with_pln2033:
         packages += ["pln2033", *(f"pln2033.{p}" for p in find_packages("../pln2033"))]
         package_dir["pln2033"] = "../pln2033"
-        package_data["pln2033"] = ["*.yaml"]
+        package_data["pln2033.pln2033"] = ["*.yaml"]
     setup(
         name=name,
         version=re.search(r'^version = "([^"]+)"', _section("project"), re.M).group(1),

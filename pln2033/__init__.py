@@ -1,13 +1,15 @@
-"""The sensor drivers (no ROS): the PLN2033 here, other chips in subpackages, one interface.
+"""The driver library for every chip the robot polls (no ROS): one interface, one registry.
 
-:mod:`pln2033.sensor` is the interface every driver offers, :mod:`pln2033.chips` the
-registry the poller picks drivers from, :mod:`pln2033.emulated` the motion model every
-register-level emulator shares.
+The package keeps the name of its first chip; each chip family lives in a subpackage
+(:mod:`pln2033.pln2033`, :mod:`pln2033.pmw33xx`, :mod:`pln2033.pmw3901`, :mod:`pln2033.otos`),
+each with a driver and a register-level emulator. The root holds what they share:
+:mod:`pln2033.sensor` the interface every driver offers, :mod:`pln2033.chips` the registry
+the poller picks drivers from, :mod:`pln2033.bus` and :mod:`pln2033.i2c` the buses,
+:mod:`pln2033.emulated` the motion model every emulator shares, :mod:`pln2033.errors` the
+errors (base :class:`SensorError`). Importing the package loads no chip's driver.
 """
 
 from .bus import SpiBus, SpidevBus
-from .driver import INCH_M, PLN2033, Motion, read_patch_file
-from .emulator import EmulatedPLN2033
 from .errors import (
     DeviceNotFoundError,
     DevicePermissionError,
@@ -21,26 +23,21 @@ from .errors import (
     SensorNotRespondingError,
     SpiError,
 )
-from .regmap import REGISTER_NAMES, RegisterMap
-from .sensor import QUALITY_NONE, ChipInfo, CpiRange, SensorDriver
+from .sensor import INCH_M, QUALITY_NONE, ChipInfo, CpiRange, Motion, SensorDriver
 
 __all__ = [
     "INCH_M",
-    "PLN2033",
     "QUALITY_NONE",
-    "REGISTER_NAMES",
     "ChipInfo",
     "CpiRange",
     "DeviceNotFoundError",
     "DevicePermissionError",
-    "EmulatedPLN2033",
     "FirmwareError",
     "InvalidCpiError",
     "Motion",
     "PatchError",
     "Pln2033Error",
     "ProductIdError",
-    "RegisterMap",
     "RegisterMapError",
     "SensorDriver",
     "SensorError",
@@ -48,5 +45,4 @@ __all__ = [
     "SpiBus",
     "SpiError",
     "SpidevBus",
-    "read_patch_file",
 ]

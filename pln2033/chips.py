@@ -28,7 +28,9 @@ class ChipSpec:
 
 CHIPS: dict[str, ChipSpec] = {
     "pln2033": ChipSpec(
-        "pln2033.driver:INFO", "pln2033.driver:PLN2033", "pln2033.emulator:EmulatedPLN2033"
+        "pln2033.pln2033.driver:INFO",
+        "pln2033.pln2033.driver:PLN2033",
+        "pln2033.pln2033.emulator:EmulatedPLN2033",
     ),
     "pmw3360": ChipSpec(
         "pln2033.pmw33xx.driver:PMW3360_INFO",

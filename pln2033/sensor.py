@@ -1,7 +1,7 @@
 """The interface every sensor driver offers: what the poller, the agent and the node call.
 
-No ROS here. A chip family lives in a subpackage (``pmw33xx``, ``pmw3901``, ``otos``;
-the PLN2033 at the package root) and registers itself in :mod:`pln2033.chips`.
+No ROS here. Each chip family lives in a subpackage (``pln2033``, ``pmw33xx``, ``pmw3901``,
+``otos``) and registers itself in :mod:`pln2033.chips`.
 docs/sensors.md says which source each chip's register facts come from.
 """
 

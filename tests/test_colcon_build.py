@@ -105,7 +105,7 @@ def test_installed_tree_has_what_ros2_run_and_launch_look_for(colcon_install, pk
     assert (site / pkg / "__init__.py").is_file()
     assert not (site / pkg / "setup.py").exists()  # the build file is not a module
     assert (site / pkg / "config").is_dir()
-    assert (site / "pln2033" / "default_regmap.yaml").is_file() == (pkg == "mm_pc")
+    assert (site / "pln2033" / "pln2033" / "default_regmap.yaml").is_file() == (pkg == "mm_pc")
 
 
 def _in_colcon_env(install: Path, script: str, cwd: Path) -> subprocess.CompletedProcess:

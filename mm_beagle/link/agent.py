@@ -166,8 +166,8 @@ class AgentLink:
 
         A peer names a file; it never sends a path elsewhere or the code itself."""
         from mm_beagle.poller.patches import PatchPathError, resolve_patch_file
-        from pln2033 import read_patch_file
         from pln2033.errors import PatchError
+        from pln2033.pln2033 import read_patch_file
 
         if "words" in msg:
             raise link.LinkError(

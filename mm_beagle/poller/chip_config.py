@@ -215,7 +215,7 @@ def read_firmware(info: ChipInfo, path: str) -> list[int] | None:
         from pln2033.pmw33xx.driver import read_srom_file
 
         return read_srom_file(path)
-    from pln2033 import read_patch_file
+    from pln2033.pln2033 import read_patch_file
 
     return read_patch_file(path)
 
@@ -223,8 +223,7 @@ def read_firmware(info: ChipInfo, path: str) -> list[int] | None:
 def chip_info_for(chip: str, register_map: str = "") -> ChipInfo:
     """The ChipInfo of ``chip``; the PLN2033's follows the register map in force."""
     if chip == registry.DEFAULT_CHIP and register_map:
-        from pln2033 import RegisterMap
-        from pln2033.driver import pln2033_info
+        from pln2033.pln2033 import RegisterMap, pln2033_info
 
         return pln2033_info(RegisterMap.load(register_map))
     return registry.chip_info(chip)

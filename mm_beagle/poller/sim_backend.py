@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from pln2033 import RegisterMap
+from pln2033.pln2033 import RegisterMap
 
 
 @dataclass

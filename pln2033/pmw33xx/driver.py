@@ -25,7 +25,6 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..driver import read_firmware_bytes
 from ..errors import (
     FirmwareError,
     InvalidCpiError,
@@ -34,6 +33,7 @@ from ..errors import (
     SensorNotRespondingError,
     SpiError,
 )
+from ..firmware import read_firmware_bytes
 from ..sensor import INCH_M, ChipInfo, CpiRange, Motion
 from . import regs as R  # noqa: N812 (the register facts, short: R.T_SRAD_US)
 

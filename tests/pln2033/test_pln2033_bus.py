@@ -16,16 +16,15 @@ import pytest
 import spidev
 
 from pln2033 import (
-    PLN2033,
     DeviceNotFoundError,
     DevicePermissionError,
-    EmulatedPLN2033,
     SensorNotRespondingError,
     SpiBus,
     SpidevBus,
     SpiError,
 )
 from pln2033.bus import DEFAULT_SPEED_HZ, parse_device
+from pln2033.pln2033 import PLN2033, EmulatedPLN2033
 
 
 def test_spidev_is_installed():

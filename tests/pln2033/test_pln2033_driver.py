@@ -17,18 +17,20 @@ from hypothesis import strategies as st
 
 from pln2033 import (
     INCH_M,
-    PLN2033,
-    REGISTER_NAMES,
-    EmulatedPLN2033,
     InvalidCpiError,
     PatchError,
     Pln2033Error,
-    RegisterMap,
     SensorNotRespondingError,
     SpiError,
-    read_patch_file,
 )
 from pln2033.motion import ConstantVelocity, Stationary
+from pln2033.pln2033 import (
+    PLN2033,
+    REGISTER_NAMES,
+    EmulatedPLN2033,
+    RegisterMap,
+    read_patch_file,
+)
 
 ALLOWED = "allowed: 100..6400 in steps of 100"
 ALLOWED_CPI = list(range(100, 6401, 100))

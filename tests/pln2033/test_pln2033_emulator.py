@@ -14,15 +14,9 @@ from fakes import FakeClock
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pln2033 import (
-    INCH_M,
-    PLN2033,
-    EmulatedPLN2033,
-    RegisterMap,
-    SensorNotRespondingError,
-    SpiError,
-)
+from pln2033 import INCH_M, SensorNotRespondingError, SpiError
 from pln2033.motion import ConstantVelocity, Stationary
+from pln2033.pln2033 import PLN2033, EmulatedPLN2033, RegisterMap
 
 MAP = RegisterMap.default()
 

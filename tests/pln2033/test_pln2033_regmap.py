@@ -15,15 +15,9 @@ import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pln2033 import (
-    INCH_M,
-    PLN2033,
-    REGISTER_NAMES,
-    EmulatedPLN2033,
-    RegisterMap,
-    RegisterMapError,
-)
+from pln2033 import INCH_M, RegisterMapError
 from pln2033.motion import ConstantVelocity
+from pln2033.pln2033 import PLN2033, REGISTER_NAMES, EmulatedPLN2033, RegisterMap
 
 
 class FakeClock:
@@ -288,7 +282,7 @@ def test_every_key_of_the_default_file_is_overridable(tmp_path):
     """Writing the default file back as an override reproduces the defaults."""
     import importlib.resources
 
-    text = importlib.resources.files("pln2033").joinpath("default_regmap.yaml").read_text()
+    text = importlib.resources.files("pln2033.pln2033").joinpath("default_regmap.yaml").read_text()
     data = yaml.safe_load(text)
     path = tmp_path / "copy.yaml"
     path.write_text(yaml.safe_dump(data))

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import pytest
 
-from pln2033 import PLN2033, EmulatedPLN2033, RegisterMap, SensorDriver
+from pln2033 import SensorDriver
 from pln2033.chips import CHIPS, check_chips, chip_info, make_driver, make_emulator
 from pln2033.emulated import CountingCore, wrap
 from pln2033.motion import ConstantVelocity
+from pln2033.pln2033 import PLN2033, EmulatedPLN2033, RegisterMap
 from pln2033.sensor import INCH_M, ChipInfo, CpiRange, Motion
 
 

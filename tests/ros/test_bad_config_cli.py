@@ -18,7 +18,8 @@ pytest.importorskip("rclpy")
 from mm_beagle.tools.harness import isolated_ros_env
 from mm_pc.core.calibration import Calibration
 from mm_pc.ros.spin import params_file_problems
-from pln2033.regmap import RegisterMap, RegisterMapError
+from pln2033 import RegisterMapError
+from pln2033.pln2033 import RegisterMap
 
 NODES = {
     "mm-beagle": "mm_beagle.node.node",

@@ -34,7 +34,7 @@ from PySide6.QtWidgets import (
 from mm_pc.monitor.model.chips import chip_key, chip_title
 from mm_pc.monitor.widgets.style import ERROR_STYLE
 from pln2033.chips import DEFAULT_CHIP
-from pln2033.regmap import REGISTER_NAMES, RegisterMap
+from pln2033.pln2033.regmap import REGISTER_NAMES, RegisterMap
 
 __all__ = ["FIELDS", "RegistersView", "decode_status", "register_dump", "status_bits"]
 

@@ -30,8 +30,8 @@ from PySide6.QtWidgets import (
 
 from mm_pc.monitor.model.chips import chip_key, chip_title, cpi_range
 from mm_pc.monitor.widgets.style import ERROR_STYLE
-from pln2033 import RegisterMap
 from pln2033.chips import DEFAULT_CHIP
+from pln2033.pln2033 import RegisterMap
 from pln2033.sensor import CpiRange
 
 __all__ = ["CPI_MAX", "CPI_MIN", "CPI_STEP", "ResolutionPanel", "validate_cpi"]

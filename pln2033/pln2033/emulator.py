@@ -1,7 +1,7 @@
 """A register-level PLN2033 emulator behind spidev's ``xfer2`` bytes.
 
 It implements the frame format and register semantics of a
-:class:`~pln2033.regmap.RegisterMap` (the same data the driver reads), so the
+:class:`~pln2033.pln2033.regmap.RegisterMap` (the same data the driver reads), so the
 real driver code runs unchanged against it. A motion source gives the true
 sensor-frame displacement over time; the emulator turns it into counts at the
 current CPI (keeping the fraction, so counts follow the true position within
@@ -20,8 +20,8 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Sequence
 
-from .emulated import FAULT_MODES, CountingCore, EmulatorStats
-from .motion import MotionSource
+from ..emulated import FAULT_MODES, CountingCore, EmulatorStats
+from ..motion import MotionSource
 from .regmap import RegisterMap
 
 __all__ = ["FAULT_MODES", "EmulatedPLN2033", "EmulatorStats"]

@@ -1,7 +1,7 @@
 """The PLN2033 driver: registers, displacement, CPI, power, reset, patch code.
 
 No ROS here. The driver talks to any :class:`~pln2033.bus.SpiBus`; it speaks
-the frame format of a :class:`~pln2033.regmap.RegisterMap`.
+the frame format of a :class:`~pln2033.pln2033.regmap.RegisterMap`.
 
 Counter semantics (what the emulator implements and the node relies on):
 reading the status register latches the sensor's X/Y counters into the
@@ -14,20 +14,20 @@ caller -- :meth:`PLN2033.read_all_registers` does, so no count is lost.
 
 from __future__ import annotations
 
-import re
 from collections.abc import Sequence
 from pathlib import Path
 
-from .bus import SpiBus
-from .errors import (
+from ..bus import SpiBus
+from ..errors import (
     InvalidCpiError,
     PatchError,
     Pln2033Error,
     SensorNotRespondingError,
     SpiError,
 )
+from ..firmware import read_firmware_bytes
+from ..sensor import INCH_M, ChipInfo, CpiRange, Motion
 from .regmap import REGISTER_NAMES, RegisterMap
-from .sensor import INCH_M, ChipInfo, CpiRange, Motion
 
 __all__ = [
     "INCH_M",
@@ -35,7 +35,6 @@ __all__ = [
     "PLN2033",
     "Motion",
     "pln2033_info",
-    "read_firmware_bytes",
     "read_patch_file",
 ]
 
@@ -295,49 +294,6 @@ class PLN2033:
         self.power_up()
         self.set_cpi(cpi)
         self.read_motion()  # start from clean counters
-
-
-_HEX_TOKEN = re.compile(r"(?:0x)?([0-9a-fA-F]{1,2})\b")
-# Control characters no hex text file holds: a file with any is raw binary,
-# even when all its bytes are below 0x80 (and so decode as ASCII).
-_BINARY_CHARS = re.compile(r"[\x00-\x08\x0e-\x1f\x7f]")
-
-
-def read_firmware_bytes(
-    path: str | Path, what: str = "patch file", error: type[Exception] = PatchError
-) -> bytes:
-    """The bytes of a firmware file the user supplies (PLN2033 patch code, PixArt SROM).
-
-    Two formats: a text file of bytes in hex (``0x12, 0x34 ...``; ``//`` and ``#``
-    comments allowed), or a raw binary file. Problems raise ``error`` naming ``what``.
-    """
-    p = Path(path)
-    try:
-        raw = p.read_bytes()
-    except OSError as exc:
-        raise error(f"cannot read {what} {p}: {exc.strerror or exc}") from exc
-    try:
-        text = raw.decode("ascii")
-    except UnicodeDecodeError:
-        text = None
-    if text is None or _BINARY_CHARS.search(text):
-        data = raw
-    else:
-        lines = [re.split(r"//|#", line, maxsplit=1)[0] for line in text.splitlines()]
-        body = " ".join(lines)
-        tokens = [t for t in re.split(r"[\s,;{}]+", body) if t]
-        if not tokens:
-            raise error(f"{what} {p} has no bytes")
-        data_list = []
-        for tok in tokens:
-            m = _HEX_TOKEN.fullmatch(tok)
-            if not m:
-                raise error(f"{what} {p}: '{tok}' is not a hex byte (like 0x1f)")
-            data_list.append(int(m.group(1), 16))
-        data = bytes(data_list)
-    if not data:
-        raise error(f"{what} {p} is empty")
-    return data
 
 
 def read_patch_file(path: str | Path) -> list[int]:

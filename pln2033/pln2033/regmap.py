@@ -16,7 +16,7 @@ from typing import Any
 
 import yaml
 
-from .errors import RegisterMapError
+from ..errors import RegisterMapError
 
 #: The 13 registers in the order of the seed (and of SensorSettings.msg).
 REGISTER_NAMES: tuple[str, ...] = (
