@@ -39,7 +39,6 @@ from pln2033 import INCH_M, Motion, Pln2033Error
 from pln2033 import chips as registry
 from pln2033.errors import FirmwareError, InvalidCpiError
 from pln2033.pln2033 import PLN2033, RegisterMap
-from pln2033.pln2033 import PLN2033, RegisterMap
 from pln2033.sensor import QUALITY_NONE, ChipInfo
 
 ERRORS_BEFORE_DOWN = 3  # consecutive failed polls before a sensor is declared down
