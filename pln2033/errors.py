@@ -1,17 +1,18 @@
 """Typed errors of the sensor drivers (every chip), each with a message that says what to do.
 
-The names keep the PLN2033's prefix for the base class (the first driver); ``SensorError``
-is the same class under a name that fits every chip.
+:class:`SensorError` is the base of every error the drivers raise; the chip-specific ones
+(:class:`PatchError`, :class:`RegisterMapError` of the PLN2033, the OTOS's and PMW3901's
+setting errors) derive from it, so a caller catches one class for every chip.
 """
 
 from __future__ import annotations
 
 
-class Pln2033Error(Exception):
+class SensorError(Exception):
     """Base class of every error this package raises."""
 
 
-class SpiError(Pln2033Error):
+class SpiError(SensorError):
     """An SPI transfer failed (the kernel returned an error)."""
 
 
@@ -23,10 +24,7 @@ class DevicePermissionError(SpiError):
     """The spidev device file exists but this user may not open it."""
 
 
-SensorError = Pln2033Error
-
-
-class SensorNotRespondingError(Pln2033Error):
+class SensorNotRespondingError(SensorError):
     """The transfer worked but no sensor answered sensibly."""
 
 
@@ -34,11 +32,11 @@ class ProductIdError(SensorNotRespondingError):
     """A chip answered with another product id than the driver expects."""
 
 
-class InvalidCpiError(Pln2033Error, ValueError):
+class InvalidCpiError(SensorError, ValueError):
     """A resolution outside what the sensor's encoding supports."""
 
 
-class FirmwareError(Pln2033Error):
+class FirmwareError(SensorError):
     """Firmware (patch code, SROM) failed to read, upload or verify, or the chip takes none."""
 
 
@@ -46,5 +44,5 @@ class PatchError(FirmwareError):
     """The PLN2033's vendor patch code could not be read, loaded or verified."""
 
 
-class RegisterMapError(Pln2033Error, ValueError):
+class RegisterMapError(SensorError, ValueError):
     """A register map (YAML override) is malformed."""

@@ -16,7 +16,7 @@ from typing import Any, Protocol, runtime_checkable
 from .errors import (
     DeviceNotFoundError,
     DevicePermissionError,
-    Pln2033Error,
+    SensorError,
     SensorNotRespondingError,
 )
 
@@ -36,7 +36,7 @@ PERMISSION_HINT = (
 )
 
 
-class I2cError(Pln2033Error):
+class I2cError(SensorError):
     """An I2C transfer failed (the kernel returned an error)."""
 
 

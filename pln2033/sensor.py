@@ -105,7 +105,7 @@ class ChipInfo:
 
 @runtime_checkable
 class SensorDriver(Protocol):
-    """One sensor on one bus address. Every method raises a :class:`~pln2033.errors.Pln2033Error`
+    """One sensor on one bus address. Every method raises a :class:`~pln2033.errors.SensorError`
     subclass whose message says what to do."""
 
     info: ChipInfo

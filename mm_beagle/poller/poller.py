@@ -35,7 +35,7 @@ from mm_beagle.poller import shared_state as ss
 from mm_beagle.poller.lift_gap import LiftGapEstimator
 from mm_beagle.poller.patches import resolve_patch_file
 from mm_beagle.poller.sim_backend import SimConfig
-from pln2033 import INCH_M, Motion, Pln2033Error
+from pln2033 import INCH_M, Motion, SensorError
 from pln2033 import chips as registry
 from pln2033.errors import FirmwareError, InvalidCpiError
 from pln2033.pln2033 import PLN2033, RegisterMap
@@ -181,7 +181,7 @@ class Channel:
                     self.poll = self._poll_with_pose  # type: ignore[method-assign]
 
     def _poll_generic(self, stamp_ns: int) -> None:
-        """One motion read of a chip other than the PLN2033, recorded. Raises Pln2033Error."""
+        """One motion read of a chip other than the PLN2033, recorded. Raises SensorError."""
         self.record(stamp_ns, self._read())
 
     def _poll_with_pose(self, stamp_ns: int) -> None:
@@ -211,7 +211,7 @@ class Channel:
         ints[ss.I_VERSION] += 1  # even: consistent
 
     def poll(self, stamp_ns: int) -> None:
-        """One motion burst, recorded: the 1 kHz hot path. Raises Pln2033Error.
+        """One motion burst, recorded: the 1 kHz hot path. Raises SensorError.
 
         The common poll (no lift, no overflow, no lift gap open or waiting for
         its after-window) is recorded here with as few Python operations as
@@ -478,7 +478,7 @@ class Poller:
             driver.initialise(ch.cpi_wanted, self.firmware.get(ch.chip))  # type: ignore[attr-defined]
             ch.set_cpi_cache(*driver.get_cpi())  # type: ignore[attr-defined]
             driver.read_motion()  # type: ignore[attr-defined]  # start-up counts are dropped
-        except (Pln2033Error, ValueError, OSError) as exc:
+        except (SensorError, ValueError, OSError) as exc:
             self.mark_down(ch, now, f"start-up failed: {exc}")
             return
         ch.attach(driver)
@@ -525,7 +525,7 @@ class Poller:
             return
         try:
             ch.poll(stamp_ns)
-        except Pln2033Error as exc:
+        except SensorError as exc:
             self.poll_failed(ch, stamp_ns, now, exc)
             return
         ch.consecutive_errors = 0
@@ -549,7 +549,7 @@ class Poller:
             return
         try:
             ch.set_cpi_cache(*ch.driver.get_cpi())
-        except Pln2033Error:
+        except SensorError:
             self.mark_down(ch, time.monotonic(), "CPI unknown after a failed command")
 
     def check_health(self, ch: Channel, now: float) -> None:
@@ -562,7 +562,7 @@ class Poller:
             return
         try:
             x, y = ch.driver.get_cpi()
-        except Pln2033Error:
+        except SensorError:
             return  # the polls count SPI errors; they decide about "down"
         if (x, y) != (ch.cpi_x, ch.cpi_y):
             self.mark_down(ch, now, f"the sensor reset itself (CPI reads {x}/{y}, set {ch.cpi_x})")
@@ -622,7 +622,7 @@ class Poller:
                 return ("ok", len(words))
         except InvalidCpiError as exc:
             return ("invalid", str(exc))
-        except Pln2033Error as exc:
+        except SensorError as exc:
             ch.ints[ss.I_SPI_ERRORS] += 1
             self._resync_cpi(ch)
             return ("error", f"sensor {ch.device}: {exc}")
@@ -699,7 +699,7 @@ class Poller:
                 if ch.ok:
                     try:
                         ch.poll(stamp)
-                    except Pln2033Error as exc:
+                    except SensorError as exc:
                         failed(ch, stamp, t / 1e9, exc)
                 else:
                     poll(ch, stamp, t / 1e9)

@@ -33,8 +33,8 @@ from typing import NamedTuple
 from ..errors import (
     FirmwareError,
     InvalidCpiError,
-    Pln2033Error,
     ProductIdError,
+    SensorError,
     SensorNotRespondingError,
 )
 from ..i2c import I2cBus, I2cError
@@ -69,7 +69,7 @@ OTOS_INFO = ChipInfo(
 )
 
 
-class InvalidSettingError(Pln2033Error, ValueError):
+class InvalidSettingError(SensorError, ValueError):
     """A setting (scalar, offset, calibration samples) outside what the chip accepts."""
 
 
@@ -275,7 +275,7 @@ class OTOS:
         got = self._await(regs.SCALAR_LINEAR, want, self._settle_s())
         if got != want:
             dec = regs.decode_scalar
-            raise Pln2033Error(
+            raise SensorError(
                 f"{self.name}: scalars read back {dec(got[0])}/{dec(got[1])} (bytes "
                 f"{got.hex()}), wrote {dec(want[0])}/{dec(want[1])}; check the I2C wiring "
                 "and retry"

@@ -21,7 +21,7 @@ from ..bus import SpiBus
 from ..errors import (
     InvalidCpiError,
     PatchError,
-    Pln2033Error,
+    SensorError,
     SensorNotRespondingError,
     SpiError,
 )
@@ -202,7 +202,7 @@ class PLN2033:
 
     def _verify_cpi(self, axis: str, wanted: int, got: int) -> None:
         if got != wanted:
-            raise Pln2033Error(f"{self.name}: {axis} resolution reads back {got} CPI, set {wanted}")
+            raise SensorError(f"{self.name}: {axis} resolution reads back {got} CPI, set {wanted}")
 
     # --- power, reset, presence ------------------------------------------------------
 

@@ -28,8 +28,8 @@ from pathlib import Path
 from ..errors import (
     FirmwareError,
     InvalidCpiError,
-    Pln2033Error,
     ProductIdError,
+    SensorError,
     SensorNotRespondingError,
     SpiError,
 )
@@ -297,7 +297,7 @@ class PMW33xx:
         self.write_registers(list(zip(enc.registers, data, strict=True)))
         got = self.get_cpi()
         if got != (cpi, cpi):
-            raise Pln2033Error(
+            raise SensorError(
                 f"{self.name}: the resolution reads back {got[0]}/{got[1]} CPI (x/y) after "
                 f"setting {cpi}: the {self.info.title} did not take it; check the wiring, and "
                 "for a PMW3389 the resolution encoding (driver option resolution_offset)"

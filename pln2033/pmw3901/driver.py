@@ -26,7 +26,7 @@ import time
 from collections.abc import Callable, Sequence
 
 from ..bus import SpiBus
-from ..errors import FirmwareError, InvalidCpiError, Pln2033Error, ProductIdError, SpiError
+from ..errors import FirmwareError, InvalidCpiError, ProductIdError, SensorError, SpiError
 from ..sensor import ChipInfo, CpiRange, Motion
 from . import regs
 from .flow_scale import BITCRAZE_PMW3901, OPTICAL_FLOW_ROS_PAA5100, FlowOptics
@@ -61,7 +61,7 @@ REGISTER_NAMES = (
 )
 
 
-class InvalidHeightError(Pln2033Error, ValueError):
+class InvalidHeightError(SensorError, ValueError):
     """A ``height_m`` outside the chip's working range (the optical-flow scale needs it)."""
 
 

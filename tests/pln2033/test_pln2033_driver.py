@@ -19,7 +19,7 @@ from pln2033 import (
     INCH_M,
     InvalidCpiError,
     PatchError,
-    Pln2033Error,
+    SensorError,
     SensorNotRespondingError,
     SpiError,
 )
@@ -402,7 +402,7 @@ def test_cpi_that_does_not_stick_is_reported():
     emu = EmulatedPLN2033(clock=clock)  # the chip knows only up to 6400 CPI
     wide = RegisterMap.from_dict({"cpi": {"max": 12800}})
     drv = PLN2033(emu, regmap=wide, name="rear")
-    with pytest.raises(Pln2033Error) as info:
+    with pytest.raises(SensorError) as info:
         drv.set_x_cpi(12800)
     assert str(info.value) == "rear: X resolution reads back 1000 CPI, set 12800"
     assert emu.cpi_x == 1000
