@@ -17,8 +17,9 @@ The agent (:mod:`mm_beagle.link.agent`) serves under ``mm/<name>/``:
 Batch frame, little-endian: header ``<4sBBHQQ`` (magic, version, sensor blocks,
 reserved, boot id, batch number), the poller-wide counters (N_GLOBAL int64), then
 per block ``<BxxxIQ`` (sensor index, poll count, first seq), the sensor's int64
-and float64 fields and its polls as six arrays (stamp q, dx h, dy h, status H,
-cpi H, flags B). The arrays are the shared-state ring's own bytes, so neither
+and float64 fields and its polls as one array per ring field
+(:data:`mm_beagle.poller.ring_layout.RING`: stamp q, dx h, dy h, status H, cpi H,
+flags B, quality h). The arrays are the shared-state ring's own bytes, so neither
 side touches single polls in Python. No numpy here: the agent runs without it.
 """
 
@@ -33,6 +34,7 @@ import struct
 from dataclasses import dataclass
 from pathlib import Path
 
+from mm_beagle.poller import ring_layout
 from mm_beagle.poller import shared_state as ss
 
 MAGIC = b"MMB1"
@@ -43,9 +45,8 @@ BLOCK = struct.Struct("<BxxxIQ")
 GLOB_BYTES = 8 * ss.N_GLOBAL
 INTS_BYTES = 8 * ss.N_INT
 FLOATS_BYTES = 8 * ss.N_FLOAT
-POLL_BYTES = 8 + 2 + 2 + 2 + 2 + 1 + 2  # one poll across the seven ring fields
-ARRAY_ITEM = (8, 2, 2, 2, 2, 1, 2)  # bytes per poll, in SharedState.RING_FIELDS order
-assert len(ARRAY_ITEM) == len(ss.SharedState.RING_FIELDS) and sum(ARRAY_ITEM) == POLL_BYTES
+POLL_BYTES = ring_layout.POLL_BYTES  # one poll across the ring fields
+ARRAY_ITEM = ring_layout.ITEM_BYTES  # bytes per poll, in SharedState.RING_FIELDS order
 
 DEFAULT_PORT = 7447
 DEFAULT_ENDPOINT = f"tcp/127.0.0.1:{DEFAULT_PORT}"

@@ -30,7 +30,7 @@ import zlib
 import numpy as np
 
 from mm_beagle.link import link
-from mm_beagle.poller import chip_config
+from mm_beagle.poller import chip_config, ring_layout
 from mm_beagle.poller import shared_state as ss
 from mm_beagle.poller.poller import PollerConfig
 from mm_beagle.poller.poller_client import PollerError
@@ -45,7 +45,7 @@ CLOCK_LEAK = 1e-4  # the clock offset estimate may rise this much per second (10
 # instead of at once, which put a poll's stamp before its predecessor's (steps of several ms
 # under load, against 1 ms between polls).
 CLOCK_SLEW = 0.05
-RING_DTYPES = ("<i8", "<i2", "<i2", "<u2", "<u2", "u1", "<i2")
+RING_DTYPES = ring_layout.WIRE_DTYPES  # a batch block's arrays, in RING_FIELDS order
 
 
 class RemoteAgent:

@@ -17,6 +17,8 @@ import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from mm_beagle.poller import ring_layout
+
 # the bits of each poll's ring_flags, defined once in the lowest layer (re-exported here)
 from mm_pc.core.poll_flags import FLAG_COMMAND_READ as FLAG_COMMAND_READ
 from mm_pc.core.poll_flags import FLAG_LIFT as FLAG_LIFT
@@ -177,29 +179,20 @@ class SharedState:
     ``glob``, ``hist``, ``ring_*``), made on first use.
     """
 
-    # (name, struct code, item size, per sensor?, length)
+    # (name, struct code, item size, per sensor?, length); the rings: see ring_layout
     _LAYOUT = (
         ("ints", "q", 8, True, N_INT),
         ("floats", "d", 8, True, N_FLOAT),
         ("glob", "q", 8, False, N_GLOBAL),
         ("hist", "q", 8, False, HIST_BINS),
-        ("ring_stamp", "q", 8, True, 0),
-        ("ring_dx", "h", 2, True, 0),
-        ("ring_dy", "h", 2, True, 0),
-        ("ring_status", "H", 2, True, 0),
-        ("ring_cpi", "H", 2, True, 0),
-        ("ring_flags", "B", 1, True, 0),
-        ("ring_quality", "h", 2, True, 0),
+        *(
+            (attr, f.code, size, True, 0)
+            for attr, f, size in zip(
+                ring_layout.ATTRS, ring_layout.RING, ring_layout.ITEM_BYTES, strict=True
+            )
+        ),
     )
-    RING_FIELDS = (
-        "ring_stamp",
-        "ring_dx",
-        "ring_dy",
-        "ring_status",
-        "ring_cpi",
-        "ring_flags",
-        "ring_quality",
-    )
+    RING_FIELDS = ring_layout.ATTRS
 
     def __init__(self, buffer: object, n_sensors: int, ring_size: int) -> None:
         self.n_sensors = n_sensors
@@ -259,7 +252,7 @@ class SharedState:
     @staticmethod
     def size(n_sensors: int, ring_size: int) -> int:
         """Bytes needed for the layout (with alignment slack)."""
-        per_ring = 8 + 2 + 2 + 2 + 2 + 1 + 2
+        per_ring = ring_layout.POLL_BYTES
         return (
             8 * n_sensors * (N_INT + N_FLOAT)
             + 8 * (N_GLOBAL + HIST_BINS)
@@ -305,13 +298,8 @@ class SharedState:
         end = min(seq_now, first + limit)
         idx = np.arange(first, end, dtype=np.int64) % n
         arrays = {
-            "stamp_ns": self.ring_stamp[i][idx],
-            "dx": self.ring_dx[i][idx],
-            "dy": self.ring_dy[i][idx],
-            "status": self.ring_status[i][idx],
-            "cpi": self.ring_cpi[i][idx],
-            "flags": self.ring_flags[i][idx],
-            "quality": self.ring_quality[i][idx],
+            name: getattr(self, attr)[i][idx]
+            for name, attr in zip(ring_layout.NAMES, ring_layout.ATTRS, strict=True)
         }
         # Slots the poller overwrote while we copied are not trustworthy.
         oldest_valid = self.snapshot(i).seq - n
@@ -340,6 +328,6 @@ class SharedState:
 
 # The poller's hot path (poller.Channel.poll) writes these by literal index.
 assert (I_VERSION, I_SEQ, I_X_TOTAL, I_Y_TOTAL, I_STAMP_NS) == (0, 1, 2, 3, 10)
-_RINGS = tuple(f[0] for f in SharedState._LAYOUT if f[0].startswith("ring_"))
-assert _RINGS == SharedState.RING_FIELDS
+# ... and unpacks the ring fields in this order (poller.Channel.poll/record)
+assert ring_layout.NAMES == ("stamp_ns", "dx", "dy", "status", "cpi", "flags", "quality")
 assert (F_X_TOTAL_M, F_Y_TOTAL_M, FLAG_MOTION) == (0, 1, 2)

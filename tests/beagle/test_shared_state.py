@@ -65,6 +65,7 @@ def test_layout_fits_the_size_it_asks_for(n, ring):
         state.ring_status,
         state.ring_cpi,
         state.ring_flags,
+        state.ring_quality,
     ]
     for a in arrays:
         a.fill(0)
@@ -73,6 +74,37 @@ def test_layout_fits_the_size_it_asks_for(n, ring):
         assert sum(int(b.reshape(-1)[-1]) for b in arrays) == 1, k
         assert sum(int(np.count_nonzero(b)) for b in arrays) == 1, k
         a.reshape(-1)[-1] = 0
+
+
+def test_ring_record_is_defined_once_and_every_derivation_agrees():
+    """ring_layout.RING is the record; the shared state's arrays, the link's item sizes
+    and the remote's dtypes are derived from it and agree field by field."""
+    from mm_beagle.link import link, remote
+    from mm_beagle.poller import ring_layout
+
+    state = ss.SharedState(bytearray(ss.SharedState.size(2, 8)), 2, 8)
+    assert ss.SharedState.RING_FIELDS == ring_layout.ATTRS
+    assert ring_layout.ATTRS == (
+        "ring_stamp", "ring_dx", "ring_dy", "ring_status", "ring_cpi", "ring_flags",
+        "ring_quality",
+    )  # fmt: skip
+    arrays = [getattr(state, attr) for attr in ss.SharedState.RING_FIELDS]
+    wire = [np.dtype(dt) for dt in remote.RING_DTYPES]
+    assert [a.dtype.itemsize for a in arrays] == list(link.ARRAY_ITEM) == [w.itemsize for w in wire]
+    assert [a.dtype.kind for a in arrays] == [w.kind for w in wire] == list("iiiuuui")
+    assert sum(link.ARRAY_ITEM) == link.POLL_BYTES == 19
+    assert all(w.byteorder in ("<", "|", "=") for w in wire)  # the frame is little-endian
+    # samples() hands back the fields under ring_layout's names, in its order
+    ch = channel(state, 0)
+    ch.record(5, motion(3, -4))
+    _first, _end, _dropped, got = state.samples(0, 0, 0)
+    assert tuple(got) == ring_layout.NAMES
+    assert [got[k].dtype for k in ring_layout.NAMES] == [a.dtype for a in arrays]
+    assert (int(got["stamp_ns"][0]), int(got["dx"][0]), int(got["dy"][0])) == (5, 3, -4)
+    # a block of the link decodes into the same arrays the ring holds
+    raw = tuple(state.ring_bytes(attr, 0) for attr in ss.SharedState.RING_FIELDS)
+    for field_bytes, w, a in zip(raw, wire, arrays, strict=True):
+        assert np.array_equal(np.frombuffer(field_bytes, w), a[0])
 
 
 def test_two_views_of_one_buffer_see_each_other():
