@@ -1,5 +1,2 @@
-"""Mouse Monitor Beagle: the sensor node (1 kHz poller + ROS 2 services)."""
-
-from mm_pc import prerequisites
-
-prerequisites.install()  # started without ROS or an extra: a message and exit 2
+"""Mouse Monitor Beagle: the sensor side. poller/ (the 1 kHz poller, no ROS), link/ (the zenoh
+board link), node/ (the mm-beagle ROS 2 node), tools/ (harness, benches, mm-watch, demo)."""

@@ -1,5 +1,2 @@
-"""Mouse Monitor PC: pure math (no Qt, no ROS) and, later, the Qt monitor."""
-
-from . import prerequisites
-
-prerequisites.install()  # started without ROS or an extra: a message and exit 2
+"""Mouse Monitor PC: core/ (pure math), sim/ (ground truth), ros/ (the nodes' rclpy adapters),
+monitor/ (the Qt monitor), bench/ (mm-bench)."""

@@ -5,8 +5,9 @@ no traceback.
 own names (the ros-jazzy-* wheels ./compile uses exist for x86_64 only), and the message
 packages mm_interfaces/tf2_msgs are built by ./compile. Likewise mm-monitor needs the
 ``monitor`` extra (PySide6, pyqtgraph, mcap). A node module imports rclpy at its top, so
-the error comes before any ``main`` could catch it; this hook, installed when ``mm_pc`` or
-``mm_beagle`` is imported, turns exactly that uncaught error (a missing module of ROS or
+the error comes before any ``main`` could catch it; this hook, installed by each console
+script's launcher (``mm_pc.commands``, ``mm_beagle.commands``) before it imports its program,
+turns exactly that uncaught error (a missing module of ROS or
 of an extra) into a message and exit status 2. Anything else goes to the previous hook,
 and code that imports such a module inside ``try`` still gets its ImportError.
 
@@ -230,17 +231,12 @@ def message(program: str, missing: str) -> str | None:
 
 
 def _program() -> str:
-    """The command the user typed: the console script, or for ``python -m M`` the script
-    whose entry point is M (else M itself)."""
+    """The command the user typed: the console script (``sys.argv[0]``), else the module
+    run with ``python -m``."""
     spec = getattr(sys.modules.get("__main__"), "__spec__", None)
     if spec is None:  # a console script, or python -c
         name = os.path.basename(sys.argv[0]) if sys.argv and sys.argv[0] else ""
         return name if name and name != "-c" else "mouse monitor"
-    from importlib.metadata import entry_points
-
-    for ep in entry_points(group="console_scripts"):
-        if ep.value.partition(":")[0] == spec.name:
-            return ep.name
     return spec.name
 
 
@@ -284,6 +280,7 @@ def _hook(previous):
 
 
 def install() -> None:
-    """Install the hook once (both packages call this on import)."""
+    """Install the hook once (the console scripts' launchers call this; importing a package
+    of ours does not)."""
     if not getattr(sys.excepthook, "mm_prerequisites", False):
         sys.excepthook = _hook(sys.excepthook)

@@ -130,3 +130,22 @@ class FakeRing:
             flags=np.where(self.lifted[sl, i], 1, 2) | np.where(self.low_quality[sl, i], 32, 0),
             quality=() if self.quality is None else self.quality[sl, i],
         )
+
+
+def console_script(name: str, folder) -> str:
+    """Write ``folder/name``: the script pip generates for the console script ``name`` of
+    pyproject's ``[project.scripts]`` (so a test starts a program exactly as a user's shell
+    does, even without the venv's bin/). Returns its path, to run with ``sys.executable``."""
+    from pathlib import Path
+
+    import tomllib
+
+    root = Path(__file__).resolve().parents[1]
+    scripts = tomllib.loads((root / "pyproject.toml").read_text())["project"]["scripts"]
+    module, _, func = scripts[name].partition(":")
+    path = Path(folder) / name
+    path.write_text(
+        f"import sys\nfrom {module} import {func}\n"
+        f"if __name__ == '__main__':\n    sys.exit({func}())\n"
+    )
+    return str(path)

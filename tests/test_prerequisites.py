@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from fakes import console_script
 
 from mm_pc import prerequisites
 
@@ -31,17 +32,9 @@ def _run(args: list[str], tmp_path: Path, block: list[str]) -> subprocess.Comple
     )
 
 
-@pytest.mark.parametrize(
-    ("module", "command"),
-    [
-        ("mm_beagle.node.node", "mm-beagle"),
-        ("mm_pc.ros.odometry_node", "mm-odometry"),
-        ("mm_pc.ros.fusion_node", "mm-fusion"),
-        ("mm_pc.ros.field_sim_node", "mm-field-sim"),
-    ],
-)
-def test_node_without_ros_exits_2_with_the_way_to_get_it(tmp_path, module, command):
-    out = _run(["-m", module], tmp_path, BLOCKED)
+@pytest.mark.parametrize("command", ["mm-beagle", "mm-odometry", "mm-fusion", "mm-field-sim"])
+def test_node_without_ros_exits_2_with_the_way_to_get_it(tmp_path, command):
+    out = _run([console_script(command, tmp_path)], tmp_path, BLOCKED)
     assert out.returncode == 2, out.stderr
     assert "Traceback" not in out.stderr
     assert out.stderr.startswith(f"{command}: needs ROS 2 Jazzy")
@@ -49,20 +42,19 @@ def test_node_without_ros_exits_2_with_the_way_to_get_it(tmp_path, module, comma
 
 
 def test_watch_without_ros_fails_the_same_way_from_inside_main(tmp_path):
-    out = _run(["-c", "import sys; from mm_beagle.tools.watch import main; sys.exit(main([]))"],
-               tmp_path, BLOCKED)  # fmt: skip
+    out = _run([console_script("mm-watch", tmp_path)], tmp_path, BLOCKED)
     assert out.returncode == 2, out.stderr
     assert "rclpy is missing" in out.stderr and "Traceback" not in out.stderr
 
 
 def test_missing_message_package_built_here_names_compile(tmp_path):
-    out = _run(["-m", "mm_pc.ros.odometry_node"], tmp_path, ["mm_interfaces"])
+    out = _run([console_script("mm-odometry", tmp_path)], tmp_path, ["mm_interfaces"])
     assert out.returncode == 2, out.stderr
     assert "the message package mm_interfaces, which ./compile builds" in out.stderr
 
 
 def test_other_missing_modules_keep_their_traceback(tmp_path):
-    out = _run(["-m", "mm_pc.ros.fusion_node"], tmp_path, ["numpy"])
+    out = _run([console_script("mm-fusion", tmp_path)], tmp_path, ["numpy"])
     assert out.returncode == 1
     assert "Traceback" in out.stderr and "numpy" in out.stderr
 
@@ -70,11 +62,23 @@ def test_other_missing_modules_keep_their_traceback(tmp_path):
 def test_without_any_site_packages(tmp_path):
     env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": str(ROOT), "HOME": str(tmp_path)}
     out = subprocess.run(
-        [sys.executable, "-S", "-m", "mm_beagle.node.node"], cwd=tmp_path, env=env,
+        [sys.executable, "-S", console_script("mm-beagle", tmp_path)], cwd=tmp_path, env=env,
         capture_output=True, text=True, timeout=60,
     )  # fmt: skip
     assert out.returncode == 2, out.stderr
     assert "needs ROS 2 Jazzy (rclpy is missing)" in out.stderr
+
+
+def test_importing_a_package_installs_no_hook(tmp_path):
+    """A notebook's ``import mm_pc.core.odometry`` leaves sys.excepthook alone; the console
+    scripts' launchers install it."""
+    code = (
+        "import sys\nbefore = sys.excepthook\nimport mm_pc.core.odometry, mm_beagle, pln2033\n"
+        "assert sys.excepthook is before\nfrom mm_pc.commands import mm_odometry\n"
+        "print('ok')\n"
+    )
+    out = _run(["-c", code], tmp_path, [])
+    assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr
 
 
 def test_ros_module_names():
@@ -86,7 +90,7 @@ def test_ros_module_names():
 
 
 def test_monitor_without_the_monitor_extra_names_it(tmp_path):
-    out = _run(["-m", "mm_pc.monitor.app", "--headless", "--duration", "1"], tmp_path,
+    out = _run([console_script("mm-monitor", tmp_path), "--headless", "--duration", "1"], tmp_path,
                ["PySide6", "shiboken6"])  # fmt: skip
     assert out.returncode == 2, out.stderr
     assert out.stderr.startswith("mm-monitor: needs PySide6, from the 'monitor' extra")
@@ -102,7 +106,8 @@ def test_ctrl_c_wrapped_by_a_class_body_is_still_a_clean_stop(tmp_path):
     """SIGINT while a dataclass is being built (a node still importing) reaches the hook as
     a RuntimeError caused by the KeyboardInterrupt: a stop, exit 0, no traceback."""
     code = (
-        "import mm_pc\n"
+        "from mm_pc import prerequisites\n"
+        "prerequisites.install()\n"
         "try:\n"
         "    raise KeyboardInterrupt\n"
         "except KeyboardInterrupt as e:\n"
@@ -111,7 +116,8 @@ def test_ctrl_c_wrapped_by_a_class_body_is_still_a_clean_stop(tmp_path):
     out = _run(["-c", code], tmp_path, [])
     assert out.returncode == 0, out.stderr
     assert "stopped by Ctrl-C" in out.stderr and "Traceback" not in out.stderr
-    other = _run(["-c", "import mm_pc\nraise RuntimeError('boom')"], tmp_path, [])
+    code = "from mm_pc import prerequisites\nprerequisites.install()\nraise RuntimeError('boom')"
+    other = _run(["-c", code], tmp_path, [])
     assert other.returncode == 1 and "RuntimeError: boom" in other.stderr  # not a Ctrl-C
 
 
@@ -151,8 +157,8 @@ def test_ldd_not_found_lines_are_the_missing_libraries():
     assert prerequisites.unresolved([], ldd) == ["libEGL.so.1"]
 
 
-@pytest.mark.parametrize("module", ["mm_pc.monitor.app", "mm_pc.bench.cli"])
-def test_monitor_whose_qt_cannot_load_a_library_names_the_package(tmp_path, module):
+@pytest.mark.parametrize("command", ["mm-monitor", "mm-bench"])
+def test_monitor_whose_qt_cannot_load_a_library_names_the_package(tmp_path, command):
     """PySide6 importing on a bare Debian: the loader's ImportError becomes the apt-get line."""
     fake = tmp_path / "PySide6"
     fake.mkdir()
@@ -160,8 +166,8 @@ def test_monitor_whose_qt_cannot_load_a_library_names_the_package(tmp_path, modu
         "raise ImportError('libEGL.so.1: cannot open shared object file: No such file or "
         "directory')\n"
     )
-    args = ["--headless", "--duration", "1"] if module.endswith("app") else ["gui", "--frames", "1"]
-    out = _run(["-m", module, *args], tmp_path, [])
+    args = ["gui", "--frames", "1"] if command == "mm-bench" else ["--headless", "--duration", "1"]
+    out = _run([console_script(command, tmp_path), *args], tmp_path, [])
     assert out.returncode == 2, out.stderr
     assert "Traceback" not in out.stderr
     assert "the system library libEGL.so.1 is missing" in out.stderr

@@ -11,7 +11,7 @@ import sys
 import time
 
 import pytest
-from fakes import scaled
+from fakes import console_script, scaled
 
 pytest.importorskip("rclpy")
 
@@ -110,10 +110,13 @@ def test_register_map_errors_name_the_file(tmp_path):
 @pytest.mark.parametrize("prog", ["mm-beagle", "mm-odometry"])
 def test_ctrl_c_during_start_up_is_a_clean_stop(prog, tmp_path):
     """SIGINT 0.3 s after start lands while rclpy is being imported: no traceback, exit 0."""
+    (bin_dir := tmp_path / "bin").mkdir()
+    (cwd := tmp_path / "cwd").mkdir()
+    script = console_script(prog, bin_dir)  # as a user's shell starts it
     proc = subprocess.Popen(
-        [sys.executable, "-m", NODES[prog], "--ros-args", "-p", "backend:=sim"]
-        if prog == "mm-beagle" else [sys.executable, "-m", NODES[prog]],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=tmp_path,
+        [sys.executable, script, "--ros-args", "-p", "backend:=sim"]
+        if prog == "mm-beagle" else [sys.executable, script],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=cwd,
         env=isolated_ros_env(),
     )  # fmt: skip
     try:
@@ -122,7 +125,7 @@ def test_ctrl_c_during_start_up_is_a_clean_stop(prog, tmp_path):
         out, _ = proc.communicate(timeout=scaled(60))
         assert proc.returncode == 0, out
         assert "Traceback" not in out and "KeyboardInterrupt" not in out, out
-        assert list(tmp_path.iterdir()) == []
+        assert list(cwd.iterdir()) == []
     finally:
         if proc.poll() is None:
             proc.kill()
