@@ -42,7 +42,7 @@ from mm_pc.monitor.widgets.calibration_wizard import (
 from mm_pc.monitor.widgets.debug_view import DebugView
 from mm_pc.monitor.widgets.filter_dialog import FilterDialog
 from mm_pc.monitor.widgets.geometry_dialog import GeometryDialog
-from mm_pc.monitor.widgets.health_view import LEVEL_COLOURS, BucketMax, HealthView, bucket_max
+from mm_pc.monitor.widgets.health_view import LEVEL_COLOURS, HealthView
 from mm_pc.sim.robot import guided_calibration_steps, with_mount_yaw
 
 D0, D1 = DEFAULT_DEVICES
@@ -587,32 +587,6 @@ def test_health_view_shows_diagnostics_residual_and_counters(qtbot, ctx, screens
     assert h.version == version
 
 
-def test_bucket_max_reads_only_new_rows_and_keeps_every_peak():
-    rng = np.random.default_rng(3)
-    n = 50_000
-    table = rng.random((n, 3))
-    table[:, 0] = np.arange(n) * 0.01
-    table[rng.random(n) < 0.3, 2] = np.nan
-    table[12_345, 2] = 7.0  # one peak among NaN and noise
-    cache = BucketMax(max_points=500)
-    end = 0
-    for chunk in rng.integers(1, 4000, 60):
-        end = min(n, end + int(chunk))
-        t, y = table[:end, 0], table[:end, 2]
-        cache.update(t, y)
-        bt, by = cache.points()
-        assert len(bt) <= 501
-        step = cache.step
-        starts = np.arange(0, end, step)
-        assert np.array_equal(bt, t[starts])
-        assert np.array_equal(by, np.fmax.reduceat(y, starts), equal_nan=True)
-    assert end == n and np.nanmax(by) == 7.0
-    cache.update(table[:10, 0], table[:10, 2])  # shorter: the history was cleared
-    assert np.array_equal(cache.points()[1], table[:10, 2], equal_nan=True)
-    t, y = bucket_max(table[:, 0], table[:, 2], 100)
-    assert len(t) == 100 and np.nanmax(y) == 7.0
-
-
 def test_health_view_thins_a_long_history(qtbot, ctx, feed):
     ctx.session.configure_odometry(method="two-sensor")
     feed(ctx, sim_replies("figure_eight", 100, seconds=1))
@@ -633,7 +607,7 @@ def test_health_view_thins_a_long_history(qtbot, ctx, feed):
         h.append(rows[-1])
         view._last_plot = 0.0
         view.refresh()
-        assert cache.rows_read <= 2 * cache.step  # the new row and its partial bucket only
+        assert cache.rows_read <= 2 * cache.size  # the new row and its partial bucket only
     view.residual_plot.setXRange(544.0, 545.0, padding=0)  # zoom in: every row again
     view._last_plot = 0.0
     view.refresh()

@@ -7,7 +7,6 @@ the register and resolution tests marked ``ros`` talk to one real mm-beagle
 
 from __future__ import annotations
 
-import csv
 import re
 import time
 from types import SimpleNamespace
@@ -19,17 +18,13 @@ from PySide6.QtCore import QItemSelectionModel, QObject, Qt, Signal
 from PySide6.QtGui import QGuiApplication, QImage
 
 from mm_pc.monitor.context import MonitorContext
+from mm_pc.monitor.model.csv_export import COLUMNS
+from mm_pc.monitor.model.peak_decimator import bucket_size
 from mm_pc.monitor.model.readings import Reading, Reply
 from mm_pc.monitor.model.session import MonitorSession, sensor_columns
 from mm_pc.monitor.model.sim_feed import DEFAULT_DEVICES
-from mm_pc.monitor.widgets.data_list import (
-    COLUMNS,
-    CSV_HEADER,
-    DataListView,
-    HistoryTableModel,
-    export_csv,
-)
-from mm_pc.monitor.widgets.graphs_view import GraphsView, PeakCache, bucket_size
+from mm_pc.monitor.widgets.data_list import DataListView, HistoryTableModel
+from mm_pc.monitor.widgets.graphs_view import GraphsView
 from mm_pc.monitor.widgets.log_dialog import HEADER, LogDialog, format_entry
 from mm_pc.monitor.widgets.registers_view import FIELDS, RegistersView, decode_status, status_bits
 from mm_pc.monitor.widgets.resolution_panel import ResolutionPanel, validate_cpi
@@ -263,22 +258,6 @@ def test_graph_cost_does_not_grow_with_history_or_window(qtbot, make_ctx):
         assert np.percentile(times, 95) < 0.03, (seconds, np.percentile(times, 95))
 
 
-def test_peak_cache_incremental_equals_fresh():
-    rng = np.random.default_rng(3)
-    t = np.arange(50_000) / 100.0
-    y = rng.normal(size=50_000)
-    cache = PeakCache()
-    for n in (20_000, 20_001, 20_064, 31_000, 50_000):
-        i0 = n - 9000
-        got = cache.window(t[:n], y[:n], i0, 8)
-        want = reference_peaks(t[:n], y[:n], i0, 8)
-        np.testing.assert_array_equal(got[0], want[0])
-        np.testing.assert_array_equal(got[1], want[1])
-    assert bucket_size(4000) == 1 and bucket_size(4001) == 4 and bucket_size(360_000) == 256
-    _x, v = cache.window(t, y, 100, 1)  # size 1: the rows themselves
-    np.testing.assert_array_equal(v, y[100:])
-
-
 @pytest.mark.screenshot
 def test_graphs_screenshot(qtbot, screenshot, make_ctx):
     ctx = make_ctx(30.0)
@@ -390,31 +369,8 @@ def test_data_list_ctrl_c_copies_the_selected_rows(qtbot, make_ctx):
         assert float(cells[0]) == pytest.approx(model.value(r, 0), abs=5e-4)
 
 
-def test_export_csv_round_trip(tmp_path, make_ctx):
-    ctx = make_ctx(5.0)
-    hist = ctx.session.history
-    path = tmp_path / "s1.csv"
-    assert export_csv(hist, 1, path) == len(hist)
-    with open(path, newline="") as fh:
-        assert next(csv.reader(fh)) == list(CSV_HEADER)
-    data = np.loadtxt(path, delimiter=",", skiprows=1)
-    assert data.shape == (len(hist), 11)
-    np.testing.assert_array_equal(data[:, 0], hist.column("t"))  # oldest first
-    np.testing.assert_allclose(data[:, 1], hist.column("s1_dx") * 1e3, rtol=1e-15)
-    np.testing.assert_allclose(data[:, 4], hist.column("s1_raw_dy") * 1e3, rtol=1e-15)
-    np.testing.assert_allclose(data[:, 6], hist.column("s1_vy") * 1e3, rtol=1e-15)
-    np.testing.assert_array_equal(data[:, 8], hist.column("s1_cpi"))
-    np.testing.assert_array_equal(data[:, 9], hist.column("s1_quality"))  # nan: no figure
-    np.testing.assert_array_equal(data[:, 10], hist.column("s1_lowq"))
-
-
-def test_export_csv_refuses_bad_input_and_shows_write_errors(qtbot, tmp_path, make_ctx):
+def test_export_shows_write_errors_beside_the_button(qtbot, tmp_path, make_ctx):
     ctx = make_ctx(1.0)
-    with pytest.raises(ValueError, match=r"no sensor 2 in the history; sensors: 0\.\.1"):
-        export_csv(ctx.session.history, 2, tmp_path / "x.csv")
-    with pytest.raises(ValueError, match="no data yet"):
-        export_csv(None, 0, tmp_path / "x.csv")
-    assert not (tmp_path / "x.csv").exists()
     view = DataListView(ctx)
     qtbot.addWidget(view)
     table = view.tables[0]

@@ -10,7 +10,8 @@ axis names its one unit. Only the rows inside the window are handed to the curve
 with a binary search on t), so a redraw costs the same with a minute or an
 hour of history; a window of more than 4000 rows is drawn as the minimum
 and maximum of 1000-2000 buckets (spikes stay visible), kept from frame to
-frame so only newly completed buckets are computed.
+frame so only newly completed buckets are computed
+(:class:`~mm_pc.monitor.model.peak_decimator.PeakDecimator`).
 The axes are not moved with every frame: the time axis runs ``X_LEAD``
 (10 %) of the window ahead of the newest row and moves on only when the data
 reach its end (so the curves hold the window and up to the lead more), and
@@ -36,9 +37,10 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from mm_pc.monitor.model.peak_decimator import PeakDecimator, bucket_size
 from mm_pc.monitor.model.session import sensor_columns
 
-__all__ = ["AXIS_NAMES", "DEFAULT_WINDOW_S", "PLOTS", "GraphsView", "PeakCache", "bucket_size"]
+__all__ = ["AXIS_NAMES", "DEFAULT_WINDOW_S", "PLOTS", "GraphsView"]
 
 DEFAULT_WINDOW_S = 10
 MAX_WINDOW_S = 3600
@@ -50,8 +52,6 @@ PLOTS = (
 #: the axes' names in the legend line (sensor frame)
 AXIS_NAMES = {"x": "X (sensor right)", "y": "Y (sensor forward)"}
 AXIS_COLOURS = {"x": "#d62728", "y": "#1f77b4"}
-#: windows longer than 2 * MAX_BUCKETS rows are drawn min/max-decimated (a few px per bucket)
-MAX_BUCKETS = 2000
 #: the time axis runs this fraction of the window ahead of the newest row and moves only
 #: when the data reach its end (its labels are drawn again then, not with every frame)
 X_LEAD = 0.1
@@ -59,61 +59,6 @@ X_LEAD = 0.1
 #: changed only when the data leave it or fill less than Y_SHRINK of it
 Y_PAD = 0.1
 Y_SHRINK = 0.4
-
-
-def bucket_size(rows: int, buckets: int = MAX_BUCKETS) -> int:
-    """Rows per min/max bucket for a window of ``rows`` (1 = draw every row).
-
-    A power of two, so it changes only when the window's length doubles or
-    halves (finished buckets can then be kept from frame to frame)."""
-    if rows <= 2 * buckets:
-        return 1
-    return 1 << (-(-rows // buckets) - 1).bit_length()
-
-
-class PeakCache:
-    """Minimum and maximum of one column over buckets of ``size`` history rows.
-
-    Buckets are aligned to absolute row numbers ``[b * size, (b + 1) * size)``;
-    the history only grows, so a finished bucket never changes and each
-    refresh computes just the buckets completed since the previous one.
-    Call :meth:`clear` when rows were dropped or the history was cleared.
-    """
-
-    def __init__(self) -> None:
-        self.clear()
-
-    def clear(self) -> None:
-        self.size = 0
-        self.start = 0  # bucket number of mins[0]
-        self.mins = np.empty(0)
-        self.maxs = np.empty(0)
-
-    def window(
-        self, t: np.ndarray, col: np.ndarray, i0: int, size: int
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """(t, value) points for rows ``i0..len(t)``: whole buckets as their minimum then
-        maximum (both at the bucket's first t), the partial ones at either end as they are."""
-        n = len(t)
-        b0, b1 = -(-i0 // size), n // size
-        if size == 1 or b1 <= b0:
-            return t[i0:n], col[i0:n]
-        if size != self.size or not self.start <= b0 <= self.start + len(self.mins):
-            self.size, self.start = size, b0
-            self.mins = self.maxs = np.empty(0)
-        end = self.start + len(self.mins)
-        if b1 > end:
-            block = col[end * size : b1 * size].reshape(-1, size)
-            self.mins = np.concatenate((self.mins[b0 - self.start :], block.min(axis=1)))
-            self.maxs = np.concatenate((self.maxs[b0 - self.start :], block.max(axis=1)))
-            self.start = b0
-        lo, hi = b0 - self.start, b1 - self.start
-        peaks = np.empty(2 * (hi - lo))
-        peaks[0::2] = self.mins[lo:hi]
-        peaks[1::2] = self.maxs[lo:hi]
-        head, tail = slice(i0, b0 * size), slice(b1 * size, n)
-        out_t = np.concatenate((t[head], np.repeat(t[b0 * size : b1 * size : size], 2), t[tail]))
-        return out_t, np.concatenate((col[head], peaks, col[tail]))
 
 
 def legend_html() -> str:
@@ -134,7 +79,7 @@ class GraphsView(QWidget):
         #: (sensor index, plot key, "x" | "y") -> PlotDataItem
         self.curves: dict[tuple[int, str, str], pg.PlotDataItem] = {}
         self.plots: dict[tuple[int, str], pg.PlotItem] = {}
-        self._peaks: dict[str, PeakCache] = {}  # history column -> its bucket min/max
+        self._peaks: dict[str, PeakDecimator] = {}  # history column -> its bucket min/max
         self._rows_of: tuple = (None, 0)  # (history, dropped_rows) the caches belong to
         self._len = 0
         self._x_range: tuple[float, float] | None = None  # time range shown (s)
@@ -281,7 +226,7 @@ class GraphsView(QWidget):
             for key, _title, fields, _unit in PLOTS:
                 lo, hi = np.inf, -np.inf
                 for axis, field in zip(("x", "y"), fields, strict=True):
-                    cache = self._peaks.setdefault(names[field], PeakCache())
+                    cache = self._peaks.setdefault(names[field], PeakDecimator())
                     x, y = cache.window(t, hist.column(names[field]), rows.start, size)
                     y = y * 1e3
                     self.curves[(k, key, axis)].setData(x, y)

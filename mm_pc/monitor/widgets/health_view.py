@@ -19,7 +19,8 @@
 compared) and redraws the curves at most ``PLOT_HZ`` times a second. An hour
 at 100 Hz is 360 000 rows, far more than the plot has pixels, so the curves
 show at most ``MAX_POINTS`` points of the visible time range, each the
-*largest* value of its bucket of rows (:class:`BucketMax`): a residual peak
+*largest* value of its bucket of rows
+(:class:`~mm_pc.monitor.model.peak_decimator.PeakDecimator`): a residual peak
 or a single lift is never hidden by the thinning. While the plot follows the
 data, only the rows added since the last redraw are read (a full column of
 an hour's history is ~2.5 ms to read, the table being row-major). The plots
@@ -46,8 +47,9 @@ from PySide6.QtWidgets import (
 
 from mm_pc.monitor.context import MonitorContext
 from mm_pc.monitor.model.chips import chip_key, chip_title, quality_label, quality_threshold
+from mm_pc.monitor.model.peak_decimator import PeakDecimator, bucket_peak
 
-__all__ = ["DIAG_COLUMNS", "LEVEL_COLOURS", "BucketMax", "HealthView", "bucket_max"]
+__all__ = ["DIAG_COLUMNS", "LEVEL_COLOURS", "HealthView"]
 
 #: (column title, /diagnostics key, tooltip): plain words, each title with its one unit
 DIAG_COLUMNS = (
@@ -123,7 +125,7 @@ class HealthView(QWidget):
         self._last_plot = 0.0
         self._stats_key: tuple = ()
         self.bridge_stats = None
-        self._caches: dict[str, BucketMax] = {}
+        self._caches: dict[str, PeakDecimator] = {}
         self._hist_key: tuple = ()
 
         # one row per quantity, one column per sensor: twelve quantities side by side did
@@ -279,23 +281,19 @@ class HealthView(QWidget):
     ) -> tuple[np.ndarray, np.ndarray]:
         """The column ``name`` for the plot's time range, thinned to MAX_POINTS (each point
         the largest of its bucket; ``lowest``: the smallest, so a dip is never hidden)."""
-        sign = -1.0 if lowest else 1.0
-        y_all = sign * hist.column(name) if lowest else hist.column(name)
-        cache = self._caches.setdefault(f"-{name}" if lowest else name, BucketMax())
-        cache.update(t_all, y_all)
+        y_all = hist.column(name)
+        cache = self._caches.setdefault(name, PeakDecimator())
+        t, y = cache.thinned(t_all, y_all, MAX_POINTS, lowest)
         vb = self.residual_plot.getViewBox()
         if vb.autoRangeEnabled()[0] or len(t_all) == 0:
-            t, y = cache.points()
-            return t, sign * y
+            return t, y
         x0, x1 = vb.viewRange()[0]
         lo, hi = np.searchsorted(t_all, [x0, x1])
         lo, hi = max(int(lo) - 1, 0), min(int(hi) + 1, len(t_all))
         if hi - lo <= ZOOM_ROWS:
-            t, y = bucket_max(t_all[lo:hi], y_all[lo:hi])
-            return t, sign * y
-        t, y = cache.points()
+            return bucket_peak(t_all[lo:hi], y_all[lo:hi], MAX_POINTS, lowest)
         keep = (t >= t_all[lo]) & (t <= t_all[hi - 1])
-        return t[keep], sign * y[keep]
+        return t[keep], y[keep]
 
     def _draw(self, hist, method: str) -> None:
         key = (id(hist), hist.dropped_rows)
@@ -425,71 +423,6 @@ class HealthView(QWidget):
         x, y = self.residual_curve.getOriginalDataset()
         return (np.asarray(x) if x is not None else np.empty(0),
                 np.asarray(y) / 1e3 if y is not None else np.empty(0))
-
-
-def bucket_max(
-    t: np.ndarray, y: np.ndarray, max_points: int = MAX_POINTS
-) -> tuple[np.ndarray, np.ndarray]:
-    """At most ``max_points`` points: each bucket of rows as (its first t, its largest y).
-
-    NaN is ignored within a bucket (a bucket of only NaN stays NaN).
-    """
-    n = len(t)
-    if n <= max_points:
-        return t, y
-    idx = np.arange(0, n, -(-n // max_points))
-    return t[idx], np.fmax.reduceat(y, idx)
-
-
-class BucketMax:
-    """:func:`bucket_max` of a growing column, reading only the rows added since the last call.
-
-    Buckets are ``step`` rows long, aligned to row 0; when there are more than
-    ``max_points`` complete buckets, neighbours merge (``step`` doubles). The
-    rows after the last complete bucket form one partial bucket, recomputed on
-    every call. Call :meth:`update` with the full columns (append-only; a
-    shorter column starts over).
-    """
-
-    def __init__(self, max_points: int = MAX_POINTS) -> None:
-        self.max_points = max_points
-        self._reset()
-
-    def _reset(self) -> None:
-        self.step = 1
-        self._done = 0  # rows covered by complete buckets
-        self._t = np.empty(0)
-        self._y = np.empty(0)
-        self._tail: tuple[np.ndarray, np.ndarray] = (np.empty(0), np.empty(0))
-        self.rows_read = 0
-
-    def update(self, t: np.ndarray, y: np.ndarray) -> None:
-        n = len(t)
-        if n < self._done:
-            self._reset()
-        #: rows read by this call (the new rows and the partial bucket)
-        self.rows_read = n - self._done
-        k = (n - self._done) // self.step
-        if k:
-            end = self._done + k * self.step
-            block = y[self._done : end].reshape(k, self.step)
-            self._y = np.concatenate([self._y, np.fmax.reduce(block, axis=1)])
-            self._t = np.concatenate([self._t, t[self._done : end : self.step]])
-            self._done = end
-            while len(self._y) > self.max_points:
-                m = len(self._y) // 2
-                self._y = np.fmax(self._y[0 : 2 * m : 2], self._y[1 : 2 * m : 2])
-                self._t = self._t[0 : 2 * m : 2]
-                self.step *= 2
-                self._done = m * self.step
-        if n > self._done:
-            self._tail = (t[self._done : self._done + 1], np.fmax.reduce(y[self._done : n])[None])
-        else:
-            self._tail = (np.empty(0), np.empty(0))
-
-    def points(self) -> tuple[np.ndarray, np.ndarray]:
-        """(t, largest y) per bucket, oldest first."""
-        return np.concatenate([self._t, self._tail[0]]), np.concatenate([self._y, self._tail[1]])
 
 
 def _level(value) -> int:

@@ -1,0 +1,63 @@
+"""One sensor's rows of the history as a table: the columns (units in the names) and the
+CSV export of every row (no Qt; the Data list picks the file and shows the result).
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+from mm_pc.monitor.model.history import History
+from mm_pc.monitor.model.session import sensor_columns
+
+__all__ = ["COLUMNS", "CSV_HEADER", "column_name", "export_csv"]
+
+#: (header with unit, field: "t" or a sensor field, scale from SI, format)
+COLUMNS: tuple[tuple[str, str, float, str], ...] = (
+    ("t (s)", "t", 1.0, "{:.3f}"),
+    ("dX (mm)", "dx", 1e3, "{:.4f}"),
+    ("dY (mm)", "dy", 1e3, "{:.4f}"),
+    ("raw dX (mm)", "raw_dx", 1e3, "{:.4f}"),
+    ("raw dY (mm)", "raw_dy", 1e3, "{:.4f}"),
+    ("vX (mm/s)", "vx", 1e3, "{:.2f}"),
+    ("vY (mm/s)", "vy", 1e3, "{:.2f}"),
+    ("lifts", "lifts", 1.0, "{:.0f}"),
+    ("CPI", "cpi", 1.0, "{:.0f}"),
+    ("quality", "quality", 1.0, "{:.0f}"),  # the newest poll's figure; nan = the chip has none
+    ("low-q polls", "lowq", 1.0, "{:.0f}"),  # polls below the chip's threshold (taken as lifts)
+)
+#: CSV header names (units in the name; dX/dY processed = filtered and calibrated)
+CSV_HEADER = (
+    "t_s", "dx_mm", "dy_mm", "raw_dx_mm", "raw_dy_mm", "vx_mm_s", "vy_mm_s", "lifts", "cpi",
+    "quality", "low_quality_polls",
+)
+
+
+def column_name(sensor_index: int, field: str) -> str:
+    """The history column of ``field`` ("t" or a sensor field) of sensor ``sensor_index``."""
+    return field if field == "t" else sensor_columns(sensor_index)[field]
+
+
+def export_csv(history: History | None, sensor_index: int, path: str | Path) -> int:
+    """Write every row of one sensor to a CSV file, oldest first; returns the row count.
+
+    Columns (header line first): t_s, dx_mm, dy_mm (processed), raw_dx_mm,
+    raw_dy_mm, vx_mm_s, vy_mm_s, lifts, cpi, quality (nan: the chip has none),
+    low_quality_polls. Raises ValueError for no data or
+    a sensor the history does not have (no file written), OSError when the
+    file cannot be written.
+    """
+    if history is None:
+        raise ValueError("no data yet: nothing to export")
+    names = [column_name(sensor_index, f) for _h, f, _s, _f in COLUMNS]
+    missing = [n for n in names if n not in history.index]
+    if sensor_index < 0 or missing:
+        sensors = sum(1 for c in history.columns if c.endswith("_cpi"))
+        raise ValueError(f"no sensor {sensor_index!r} in the history; sensors: 0..{sensors - 1}")
+    cols = [history.column(n) * scale for n, (_h, _f, scale, _fmt) in zip(names, COLUMNS,
+                                                                          strict=True)]
+    with open(path, "w", newline="") as fh:
+        out = csv.writer(fh)
+        out.writerow(CSV_HEADER)
+        out.writerows(zip(*(c.tolist() for c in cols), strict=True))
+    return len(history)
