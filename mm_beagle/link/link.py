@@ -7,7 +7,9 @@ The agent (:mod:`mm_beagle.link.agent`) serves under ``mm/<name>/``:
   status    put, every second: JSON (state, errors, poll statistics, CPU, RSS,
             the period histogram zlib-compressed)
   events    put: JSON {"kind", "device", "text"} when a sensor comes up or goes down
-  cmd       queryable: JSON {"cmd": "settings"|"set_cpi"|"load_patch"|"info", ...}
+  cmd       queryable: JSON {"cmd": name, "sensor": device, <argument>: value}, the
+            commands of :data:`mm_beagle.poller.commands.COMMANDS`; the reply is JSON
+            {"status", "payload", "seq"}
   history_req  subscribed: JSON {"id": k, "sensor": i, "since": seq, "max": n}; the
             answer is put on ``history``: a batch frame numbered k, or JSON
             {"id": k, "status": "invalid", "payload": why}. (Pub/sub, not a query:

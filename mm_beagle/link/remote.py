@@ -30,7 +30,7 @@ import zlib
 import numpy as np
 
 from mm_beagle.link import link
-from mm_beagle.poller import chip_config, ring_layout
+from mm_beagle.poller import chip_config, commands, ring_layout
 from mm_beagle.poller import shared_state as ss
 from mm_beagle.poller.poller import PollerConfig
 from mm_beagle.poller.poller_client import PollerError
@@ -151,11 +151,7 @@ class RemoteAgent:
         problem = self.unavailable()
         if problem or self.session is None:
             raise PollerError(problem or f"agent at {self.endpoint} not connected")
-        msg: dict = {"cmd": kind, "sensor": self.cfg.devices[i]}
-        if kind == "set_cpi":
-            msg["cpi"] = args[0]
-        elif kind == "load_patch":  # a file in the agent's patch_dir, never the code
-            msg["file"] = str(args[0])
+        msg = commands.to_link(kind, self.cfg.devices[i], *args)  # load_patch: a file name
         reply = self._query(self.keys["cmd"], json.dumps(msg).encode(), timeout)
         if reply is None:
             raise PollerError(

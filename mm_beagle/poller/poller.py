@@ -27,10 +27,11 @@ import os
 import signal
 import time
 import traceback
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 
-from mm_beagle.poller import chip_config
+from mm_beagle.poller import chip_config, commands
 from mm_beagle.poller import shared_state as ss
 from mm_beagle.poller.lift_gap import LiftGapEstimator
 from mm_beagle.poller.patches import resolve_patch_file
@@ -570,63 +571,77 @@ class Poller:
 
     # --- commands from the node ---
 
-    def serve_command(self, msg: tuple) -> object:
+    def serve_command(self, msg: tuple) -> tuple[str, object]:
+        """One command from the node's pipe, ``(name, sensor index, *args)``
+        (:mod:`~mm_beagle.poller.commands`): ``(status, payload)``.
+
+        A malformed tuple (no sensor index, missing arguments) raises: the caller
+        answers "error" and logs the traceback."""
         kind = msg[0]
-        if kind == "stop":
-            self.running = False
-            return ("ok", None)
+        cmd = commands.COMMANDS.get(kind)
+        if cmd is not None and cmd.pipe and not cmd.sensor:
+            return self._serve(kind)(*msg[1:])
         ch = self.channels[msg[1]]
+        if cmd is None or not cmd.pipe:
+            return (commands.ERROR, commands.unknown_command(kind))
         if ch.driver is None:
-            return ("error", f"sensor {ch.device} is down ({ch.last_error}); retrying")
+            return (commands.ERROR, commands.sensor_down(ch.device, ch.last_error))
         try:
-            if kind == "settings":
-                motion, regs = ch.driver.read_all_registers()
-                ch.record(time.time_ns(), motion, ss.FLAG_COMMAND_READ)
-                cpi = ch.info.cpi
-                return (
-                    "ok",
-                    {
-                        "chip": ch.chip,
-                        "registers": regs,
-                        "cpi_x": ch.cpi_x,
-                        "cpi_y": ch.cpi_y,
-                        "cpi_range": [cpi.min, cpi.max, cpi.step],
-                        "lifted": motion.lifted,
-                        "motion": motion.moved,
-                    },
-                )
-            if kind == "set_cpi":
-                cpi = msg[2]
-                problem = ch.driver.cpi_problem(cpi)
-                if problem:
-                    return ("invalid", f"{ch.device} ({ch.chip}): {problem}")
-                # Drain the counters at the old CPI first, so every count keeps its scale.
-                ch.record(time.time_ns(), ch.driver.read_motion())
-                ch.driver.set_cpi(cpi)
-                ch.cpi_wanted = cpi
-                ch.set_cpi_cache(*ch.driver.get_cpi())
-                return ("ok", ch.cpi_y)
-            if kind == "load_patch":
-                words = msg[2]
-                if ch.info.firmware != "patch":
-                    return (
-                        "invalid",
-                        f"{ch.device} is a {ch.info.title}: it takes no PLN2033 patch code",
-                    )
-                try:
-                    ch.driver.check_patch(words)
-                except FirmwareError as exc:
-                    return ("invalid", str(exc))
-                ch.driver.load_patch(words)  # writes, verifies, enables
-                self.patch = list(words)  # re-initialisations load it too
-                return ("ok", len(words))
+            return self._serve(kind)(ch, *msg[2:])
         except InvalidCpiError as exc:
-            return ("invalid", str(exc))
+            return (commands.INVALID, str(exc))
         except SensorError as exc:
             ch.ints[ss.I_SPI_ERRORS] += 1
             self._resync_cpi(ch)
-            return ("error", f"sensor {ch.device}: {exc}")
-        return ("error", f"unknown command {kind!r}")
+            return (commands.ERROR, f"sensor {ch.device}: {exc}")
+
+    def _serve(self, kind: str) -> Callable[..., tuple[str, object]]:
+        """The handler of command ``kind``: the method ``_command_<kind>``."""
+        return getattr(self, f"_command_{kind}")
+
+    def _command_stop(self) -> tuple[str, object]:
+        self.running = False
+        return (commands.OK, None)
+
+    def _command_settings(self, ch: Channel) -> tuple[str, object]:
+        """The register dump; the counts its status read returns go into the totals."""
+        motion, regs = ch.driver.read_all_registers()
+        ch.record(time.time_ns(), motion, ss.FLAG_COMMAND_READ)
+        cpi = ch.info.cpi
+        return (
+            commands.OK,
+            {
+                "chip": ch.chip,
+                "registers": regs,
+                "cpi_x": ch.cpi_x,
+                "cpi_y": ch.cpi_y,
+                "cpi_range": [cpi.min, cpi.max, cpi.step],
+                "lifted": motion.lifted,
+                "motion": motion.moved,
+            },
+        )
+
+    def _command_set_cpi(self, ch: Channel, cpi: object) -> tuple[str, object]:
+        problem = ch.driver.cpi_problem(cpi)
+        if problem:
+            return (commands.INVALID, f"{ch.device} ({ch.chip}): {problem}")
+        # Drain the counters at the old CPI first, so every count keeps its scale.
+        ch.record(time.time_ns(), ch.driver.read_motion())
+        ch.driver.set_cpi(cpi)
+        ch.cpi_wanted = cpi
+        ch.set_cpi_cache(*ch.driver.get_cpi())
+        return (commands.OK, ch.cpi_y)
+
+    def _command_load_patch(self, ch: Channel, words: list[int]) -> tuple[str, object]:
+        if ch.info.firmware != "patch":
+            return (commands.INVALID, commands.takes_no_patch(ch.device, ch.info.title))
+        try:
+            ch.driver.check_patch(words)
+        except FirmwareError as exc:
+            return (commands.INVALID, str(exc))
+        ch.driver.load_patch(words)  # writes, verifies, enables
+        self.patch = list(words)  # re-initialisations load it too
+        return (commands.OK, len(words))
 
     def handle_commands(self) -> None:
         conn = self.commands
