@@ -97,6 +97,11 @@ class ChipInfo:
     max_speed_mps: float = 0.0  # the chip's tracking limit (m/s)
     firmware: str = ""  # "patch" | "srom" | "" = takes none
     source: str = ""  # where the register facts come from (one line; details in docs/sensors.md)
+    #: the fixed register dump of a chip whose dump has its own message fields (the PLN2033's
+    #: 13 in SensorSettings); () = the dump names its registers (register_names)
+    registers: tuple[str, ...] = ()
+    #: (what it means, mask) of each known bit of the chip's status register, for display
+    status_bits: tuple[tuple[str, int], ...] = ()
 
     def low_quality(self, quality: int) -> bool:
         """True for a read whose surface quality is below the chip's threshold."""

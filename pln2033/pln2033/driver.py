@@ -52,6 +52,15 @@ def pln2033_info(regmap: RegisterMap) -> ChipInfo:
         max_speed_mps=0.0,  # not published
         firmware="patch",
         source="assumed register map (no public datasheet): docs/pln2033.md",
+        registers=REGISTER_NAMES,
+        status_bits=(
+            ("motion", regmap.status_motion),
+            ("lift", regmap.status_lift),
+            ("overflow X", regmap.status_overflow_x),
+            ("overflow Y", regmap.status_overflow_y),
+            # a chip select with no sensor reads all ones
+            ("reserved (no sensor answering?)", regmap.status_reserved),
+        ),
     )
 
 

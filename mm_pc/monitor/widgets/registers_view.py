@@ -4,9 +4,10 @@
 answers arrive as bridge signals and fill one column per sensor (hex), and
 below the table the decoded status of each sensor: lift and motion as the
 node decoded them, the status register's bits 15..0, the names of the bits
-that are set (by the default register map, an assumption documented in
-docs/pln2033.md), the resolution and the time of the read. Errors of a read
-are shown in red under the button.
+that are set (by the chip registry's status bits: the PLN2033's are the
+default register map's, an assumption documented in docs/pln2033.md), the
+resolution and the time of the read. Errors of a read are shown in red under
+the button.
 
 Other chips (issue 15): a ``SensorSettings`` that names its chip and carries its own
 register dump (``register_names`` / ``register_values``) is shown by those names; the
@@ -31,15 +32,14 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from mm_pc.monitor.model.chips import chip_key, chip_title
+from mm_pc.monitor.model.chips import chip_key, chip_title, info_of
 from mm_pc.monitor.widgets.style import ERROR_STYLE
-from pln2033.chips import DEFAULT_CHIP
-from pln2033.pln2033.regmap import REGISTER_NAMES, RegisterMap
+from pln2033.chips import DEFAULT_CHIP, chip_info
 
 __all__ = ["FIELDS", "RegistersView", "decode_status", "register_dump", "status_bits"]
 
 #: SensorSettings field names, in the seed's order
-FIELDS: tuple[str, ...] = tuple(f"{name}_register" for name in REGISTER_NAMES)
+FIELDS: tuple[str, ...] = tuple(f"{name}_register" for name in chip_info(DEFAULT_CHIP).registers)
 NO_LOSS_TIP = (
     "Reading the registers does not lose counts: the node folds the displacement it reads "
     "with the status register into its sums before replying."
@@ -52,16 +52,11 @@ def status_bits(value: int) -> str:
     return " ".join(bits[i : i + 4] for i in range(0, 16, 4))
 
 
-def decode_status(value: int, regmap: RegisterMap | None = None) -> list[str]:
-    """Names of the status bits set in ``value`` (by ``regmap``, default: the assumed map)."""
-    m = regmap or RegisterMap.default()
-    named = (
-        ("motion", m.status_motion),
-        ("lift", m.status_lift),
-        ("overflow X", m.status_overflow_x),
-        ("overflow Y", m.status_overflow_y),
-        ("reserved (no sensor answering?)", m.status_reserved),
-    )
+def decode_status(value: int, chip: str = "") -> list[str]:
+    """Names of the status bits set in ``value``, by the registry's ``ChipInfo.status_bits``
+    of ``chip`` ('' = the PLN2033; none for a chip not known here)."""
+    info = info_of(chip)
+    named = info.status_bits if info is not None else ()
     return [name for name, mask in named if value & mask]
 
 
@@ -233,7 +228,7 @@ class RegistersView(QWidget):
                 f"read at {time.strftime('%H:%M:%S', time.localtime(stamp))}",
             ))  # fmt: skip
         status = int(msg.status_register)
-        names = ", ".join(decode_status(status, self._regmap)) or "none"
+        names = ", ".join(decode_status(status, chip)) or "none"
         yes = {True: "yes", False: "no"}
         return "\n".join(
             (

@@ -1,8 +1,8 @@
 """Resolution (CPI) of each sensor: set it on the node and show what the node read back.
 
-The typed value is checked here first, by the default register map
-(:meth:`pln2033.RegisterMap.cpi_problem`: 100..6400 in steps of 100, the range the
-seed names; a node with its own map may allow less and says so); a refused value is
+The typed value is checked here first, by the chip's range (for a PLN2033 the registry's,
+:func:`pln2033.chips.chip_info`: 100..6400 in steps of 100, the range the seed names;
+a node with its own register map may allow less and says so); a refused value is
 explained next to its field and never sent. An accepted value goes to the node's
 ``set_resolution``; its answer (the CPI read back from the sensor, or the node's reason
 for refusing) appears next to the field when the bridge reports it. The CPI in force is
@@ -30,8 +30,7 @@ from PySide6.QtWidgets import (
 
 from mm_pc.monitor.model.chips import chip_key, chip_title, cpi_range
 from mm_pc.monitor.widgets.style import ERROR_STYLE
-from pln2033.chips import DEFAULT_CHIP
-from pln2033.pln2033 import RegisterMap
+from pln2033.chips import DEFAULT_CHIP, chip_info
 from pln2033.sensor import CpiRange
 
 __all__ = ["CPI_MAX", "CPI_MIN", "CPI_STEP", "ResolutionPanel", "validate_cpi"]
@@ -39,9 +38,8 @@ __all__ = ["CPI_MAX", "CPI_MIN", "CPI_STEP", "ResolutionPanel", "validate_cpi"]
 #: how often (ms) the panel looks for a new CPI in the history
 REFRESH_MS = 200
 
-_REGMAP = RegisterMap.default()
-_ALLOWED_CPI = _REGMAP.allowed_cpi
-CPI_MIN, CPI_MAX, CPI_STEP = _ALLOWED_CPI.start, _ALLOWED_CPI.stop - 1, _ALLOWED_CPI.step
+_DEFAULT_CPI = chip_info(DEFAULT_CHIP).cpi  # an old node names no chip: a PLN2033
+CPI_MIN, CPI_MAX, CPI_STEP = _DEFAULT_CPI.min, _DEFAULT_CPI.max, _DEFAULT_CPI.step
 ALLOWED = f"allowed: {CPI_MIN}..{CPI_MAX} in steps of {CPI_STEP}"
 RED = ERROR_STYLE
 #: chips whose resolution follows their height (the optical-flow sensors)
@@ -67,20 +65,19 @@ def fixed_tip(chip: str, cpi: int | None = None) -> str:
 def validate_cpi(value, allowed: CpiRange | None = None, chip: str = "") -> int:
     """The CPI in ``value`` (text or number); ValueError saying what is allowed otherwise.
 
-    ``allowed``: the chip's range (default: the PLN2033's, by the default register map);
+    ``allowed``: the chip's range (default: the registry's range of ``chip``; '' = an old
+    node: a PLN2033; a chip not known here has none, and only the node checks the range);
     ``chip``: its name, for the message."""
     text = str(value).strip()
-    what = ALLOWED if allowed is None else f"{chip_title(chip)} allows {allowed.describe()}"
+    if allowed is None:
+        allowed = cpi_range(chip)
+    title = chip_title(chip)
+    what = f"{title} allows {allowed.describe()}" if allowed else "the node checks the range"
     try:
         cpi = int(text)
     except ValueError:
         raise ValueError(f"CPI must be a whole number, got {text!r} ({what})") from None
-    if allowed is not None:
-        problem = allowed.problem(cpi, chip_title(chip))
-        if problem:
-            raise ValueError(problem)
-        return cpi
-    problem = _REGMAP.cpi_problem(cpi)
+    problem = allowed.problem(cpi, title) if allowed is not None else None
     if problem:
         raise ValueError(problem)
     return cpi
@@ -114,9 +111,8 @@ class _SensorRow:
         self.online = True
 
     def allowed(self) -> CpiRange | None:
-        """The range to check against (None: the PLN2033 register map's)."""
-        if self.settings_range is None and chip_key(self.chip) == DEFAULT_CHIP:
-            return None
+        """The range to check against: the node's word, else the registry's (None: a chip not
+        known here)."""
         return self.settings_range or cpi_range(self.chip)
 
     def fixed(self) -> bool:
@@ -138,7 +134,7 @@ class _SensorRow:
             return
         if allowed is not None:
             self.edit.setPlaceholderText(f"{allowed.min}..{allowed.max}")
-            self.edit.setToolTip(f"counts per inch of both axes, {title} allows "
+            self.edit.setToolTip(f"counts per inch of both axes, {chip_title(self.chip)} allows "
                                  f"{allowed.describe()} (Enter sets)")
         self.edit.setEnabled(self.online)
         self.set_button.setEnabled(self.online)
