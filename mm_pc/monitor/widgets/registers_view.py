@@ -77,7 +77,6 @@ class RegistersView(QWidget):
     def __init__(self, ctx, parent=None) -> None:
         super().__init__(parent)
         self.ctx = ctx
-        self._regmap = RegisterMap.default()
         self.devices: list[str] = []
         #: device -> (SensorSettings, local time of the answer)
         self.settings: dict[str, tuple[object, float]] = {}
