@@ -145,9 +145,6 @@ class Channel:
         self.last_error = ""
         self.gap = LiftGapEstimator()  # in counts
         self.gap_m = LiftGapEstimator()  # in metres: right across a CPI change
-        self.sim_stats = None  # the emulator's ground truth, sim backend only
-        self.sim_base = (0, 0, 0, 0)
-        self.sim_ratio = 1.0  # driver counts per emulator count (1: the chip's own counter)
         # the hot path's view of the driver (see attach)
         self._xfer = None
         self._tx: list[int] = []
@@ -248,8 +245,6 @@ class Channel:
         self.seq = seq = seq + 1
         ints[1] = seq  # I_SEQ
         ints[10] = stamp_ns  # I_STAMP_NS
-        if self.sim_stats is not None:
-            self._sim_truth()
         ints[0] += 1  # even: consistent
 
     def record(self, stamp_ns: int, m: Motion | None, extra_flags: int = 0) -> None:
@@ -305,24 +300,7 @@ class Channel:
         self.seq += 1
         ints[ss.I_SEQ] = self.seq
         ints[ss.I_STAMP_NS] = stamp_ns
-        if self.sim_stats is not None:
-            self._sim_truth()
         ints[ss.I_VERSION] += 1  # even: consistent
-
-    def _sim_truth(self) -> None:
-        """The emulator's ground truth since initialisation (sim backend only), in the
-        driver's counts (the OTOS's emulator counts at the PAA5160's 20 000 CPI, its driver
-        reports 1000 CPI: ``sim_ratio``)."""
-        ints, stats, base, k = self.ints, self.sim_stats, self.sim_base, self.sim_ratio
-        gen_x, gen_y = stats.counted_x - base[0], stats.counted_y - base[1]
-        lost_x = stats.lift_cleared_x + round(stats.lift_motion_x) - base[2]
-        lost_y = stats.lift_cleared_y + round(stats.lift_motion_y) - base[3]
-        if k != 1.0:
-            gen_x, gen_y, lost_x, lost_y = (round(v * k) for v in (gen_x, gen_y, lost_x, lost_y))
-        ints[ss.I_GEN_X] = gen_x
-        ints[ss.I_GEN_Y] = gen_y
-        ints[ss.I_LIFT_LOST_X] = lost_x
-        ints[ss.I_LIFT_LOST_Y] = lost_y
 
     def _update_lift_gap(self, dx: int, dy: int, lifted: bool) -> None:
         """Feed one poll to the estimators; add their estimate when it is complete."""
@@ -403,8 +381,13 @@ class Poller:
         self.chips, self.notes = chip_config.check_board_config(
             cfg.devices, cfg.chips, cfg.chip_options, cfg.cpi, cfg.register_map
         )
+        channel_class = Channel
+        if cfg.backend == "sim":  # its channels also keep the emulator's ground truth
+            from mm_beagle.poller.sim_channel import SimChannel
+
+            channel_class = SimChannel
         self.channels = [
-            Channel(i, d, state, cfg.ring_size, chip, self._info(chip))
+            channel_class(i, d, state, cfg.ring_size, chip, self._info(chip))
             for i, (d, chip) in enumerate(zip(cfg.devices, self.chips, strict=True))
         ]
         # firmware per chip type: the PLN2033's patch, the PMW33xx's SROM
@@ -484,25 +467,6 @@ class Poller:
             return
         ch.attach(driver)
         ch.consecutive_errors = 0
-        stats = getattr(ch.bus, "stats", None)
-        if stats is not None and ch.sim_stats is None:
-            # Counts before the first initialisation were discarded on purpose.
-            ch.sim_stats = stats
-            emulated_cpi = getattr(ch.bus, "cpi_y", 0) or ch.cpi_y
-            ratio = ch.cpi_y / emulated_cpi if emulated_cpi else 1.0
-            ch.sim_ratio = 1.0 if abs(ratio - 1.0) < 0.01 else ratio
-            k = ch.sim_ratio
-            ints = ch.ints  # non-zero only after a restart: the truth carries on too
-            ch.sim_base = (
-                stats.counted_x - round(ints[ss.I_GEN_X] / k),
-                stats.counted_y - round(ints[ss.I_GEN_Y] / k),
-                stats.lift_cleared_x
-                + round(stats.lift_motion_x)
-                - round(ints[ss.I_LIFT_LOST_X] / k),
-                stats.lift_cleared_y
-                + round(stats.lift_motion_y)
-                - round(ints[ss.I_LIFT_LOST_Y] / k),
-            )
         ch.ints[ss.I_REINITS] += 1
         ch.ints[ss.I_STATE] = ss.STATE_UP
         self.emit("up", ch.device, f"{ch.info.title} initialised at {ch.cpi_x} CPI")

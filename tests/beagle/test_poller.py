@@ -21,6 +21,7 @@ from mm_beagle.poller import poller as poller_mod
 from mm_beagle.poller import shared_state as ss
 from mm_beagle.poller.poller import ERRORS_BEFORE_DOWN, Poller, PollerConfig
 from mm_beagle.poller.sim_backend import SimConfig, parse_fail_windows
+from mm_beagle.poller.sim_channel import SimChannel, truth_of
 from pln2033 import INCH_M, SpiError
 from pln2033.motion import ConstantVelocity, SampledPath
 from pln2033.pln2033 import PLN2033, EmulatedPLN2033, RegisterMap
@@ -219,7 +220,7 @@ def test_conservation_over_20000_polls_with_lifts_settings_reads_and_a_cpi_chang
         cpi=1600,
     )
     new_cpi = [3200, 800]
-    base = [ch.sim_base for ch in rig.channels]
+    base = [truth_of(ch).base for ch in rig.channels]
     at_change = None
     settings_reads = [0, 0]
     for k in range(1, 20_001):
@@ -890,6 +891,22 @@ def test_poller_module_imports_no_ros():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "[]"
+
+
+def test_simulator_bookkeeping_stays_out_of_the_production_channel():
+    """Only the sim backend's channels keep the emulator's ground truth; a spidev poller's
+    Channel has no trace of it, and its hot path writes no truth fields."""
+    cfg = PollerConfig(devices=DEVICES, backend="spidev", ring_size=16)
+    state = ss.SharedState(bytearray(ss.SharedState.size(2, 16)), 2, 16)
+    chans = Poller(cfg, state, None, None).channels
+    assert [type(ch) for ch in chans] == [poller_mod.Channel] * 2
+    assert [truth_of(ch) for ch in chans] == [None, None]
+    assert not any(hasattr(ch, name) for ch in chans for name in ("truth", "sim_stats"))
+    rig = Rig([{"motion": ConstantVelocity(0.0, TEN_PER_MS)}], cpi=1000)
+    assert isinstance(rig.channels[0], SimChannel)
+    rig.run(5)
+    t = rig.snap(0)
+    assert (t.y_total, t.gen_y) == (50, 50) and truth_of(rig.channels[0]).ratio == 1.0
 
 
 def test_spidev_path_imports_no_numpy():

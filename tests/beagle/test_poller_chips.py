@@ -17,6 +17,7 @@ from mm_beagle.poller import chip_config
 from mm_beagle.poller import shared_state as ss
 from mm_beagle.poller.poller import Poller, PollerConfig
 from mm_beagle.poller.sim_backend import SimConfig
+from mm_beagle.poller.sim_channel import truth_of
 from pln2033 import chips as registry
 from pln2033.motion import ConstantVelocity
 
@@ -96,7 +97,7 @@ def test_mixed_chips_poll_every_count_with_quality(chip):
         assert stats.protocol_errors == 0
         # every count that entered the chip's counter is in the measured totals (the OTOS:
         # counts from its fused position, 0.305 mm per LSB = 12 counts: within that)
-        slack = 12 if rig.poller.channels[i].sim_ratio != 1.0 else 0
+        slack = 12 if truth_of(rig.poller.channels[i]).ratio != 1.0 else 0
         assert abs(t.x_total - t.gen_x) <= slack and abs(t.y_total - t.gen_y) <= slack
         assert t.y_total > 100
         # metres: within 2 % of the true path (optical flow: its scale model, exactly)
@@ -133,7 +134,7 @@ def test_low_quality_window_is_treated_like_a_lift(chip):
     assert t.low_quality_total == int(poor.sum())
     assert (arr["quality"][poor] < info.quality_threshold).all()
     assert not (arr["flags"] & ss.FLAG_LIFT).any()  # a low quality is not a lift bit
-    slack = 12 if rig.poller.channels[0].sim_ratio != 1.0 else 0
+    slack = 12 if truth_of(rig.poller.channels[0]).ratio != 1.0 else 0
     assert abs(t.x_total - t.gen_x) <= slack and abs(t.y_total - t.gen_y) <= slack
     lost = t.lift_lost_y  # counts the chip did not count in the window (ground truth)
     window_counts = 0.3 * 0.03 / (t.y_total_m / t.y_total)
