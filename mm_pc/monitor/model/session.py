@@ -51,19 +51,12 @@ from typing import NamedTuple
 import numpy as np
 
 from mm_pc.core.calibration import Calibration
-from mm_pc.core.calibration_fit import (
-    MIN_STRAIGHT_M,
-    STEP_KINDS,
-    CalibrationStep,
-    MountFit,
-    StepCheck,
-    check_step,
-    fit_mounts,
-)
+from mm_pc.core.calibration_fit import MIN_STRAIGHT_M, CalibrationStep, MountFit, StepCheck
 from mm_pc.core.filters import SensorMedianFilter
 from mm_pc.core.geometry import DEFAULT_MOUNTS, SensorMount
 from mm_pc.core.odometry import METHODS, Odometry, Pose2D, Sample
 from mm_pc.core.polls import PollBatch, PollTracker, SensorTotals, integrate_steps
+from mm_pc.monitor.model.calibration_run import CalibrationRun
 from mm_pc.monitor.model.chips import quality_figure
 from mm_pc.monitor.model.history import History
 from mm_pc.monitor.model.readings import Reading, Reply
@@ -228,9 +221,7 @@ class MonitorSession:
         self.filters: dict[str, SensorMedianFilter] = {}
         self._prev: dict[str, Reading] = {}
         self._t0_ns: int | None = None
-        self._cal_steps: list | None = None  # (CalibrationStep, StepCheck) while a run is open
-        self._cal_kind: str | None = None  # the step kind being recorded
-        self._cal_rec: list = []  # its raw per-interval displacements
+        self._cal_run: CalibrationRun | None = None  # the wizard's open run
         self.devices: tuple[str, ...] = ()
         self.history: History | None = None
         self.map_history: History | None = None
@@ -325,11 +316,8 @@ class MonitorSession:
 
     # -- calibration wizard ----------------------------------------------------------
     #
-    # A run is a sequence of steps (straight / spin, mm_pc.core.calibration_fit),
-    # each recorded between an explicit start_calibration_step and
-    # stop_calibration_step: the raw (unfiltered, uncalibrated) displacement of
-    # every interval is kept, nothing after Stop. While a run is open the pose
-    # stands still (no pose from uncalibrated data).
+    # The run's state is a CalibrationRun (model/calibration_run.py); the session
+    # feeds it the raw displacements and stands the pose still while it is open.
 
     @property
     def calibration(self) -> Calibration:
@@ -356,82 +344,65 @@ class MonitorSession:
         return self._calibration.mounts(self.devices, self._mounts)
 
     @property
+    def calibration_run(self) -> CalibrationRun | None:
+        """The open calibration run (None: none; the wizard's steps and their checks)."""
+        return self._cal_run
+
+    @property
     def calibrating(self) -> bool:
         """True while a calibration run is open (the robot does not move on the map)."""
-        return self._cal_steps is not None
+        return self._cal_run is not None
 
     @property
     def recording_step(self) -> str | None:
         """The kind of the step being recorded, or None."""
-        return self._cal_kind
+        return None if self._cal_run is None else self._cal_run.kind
+
+    def _open_run(self) -> CalibrationRun:
+        if self._cal_run is None:
+            raise ValueError("no calibration run in progress; start one first")
+        return self._cal_run
+
+    def _step_mounts(self) -> tuple[SensorMount, ...]:
+        """The mounts of the sensors a step records (none before the first reply)."""
+        return self._mounts[: len(self.devices)]
 
     def start_calibration(self) -> None:
         """Open a run (no steps yet); the pose stops until finished or cancelled."""
-        self._cal_steps = []
-        self._cal_kind = None
-        self._cal_rec = []
+        self._cal_run = CalibrationRun()
 
     def start_calibration_step(self, kind: str) -> None:
         """Start recording a step ("straight" or "spin"); ValueError (nothing changed) if
         no run is open, a step is already recording, or the kind is unknown."""
-        if self._cal_steps is None:
-            raise ValueError("no calibration run in progress; start one first")
-        if self._cal_kind is not None:
-            raise ValueError(f"a {self._cal_kind} step is recording; stop it first")
-        if kind not in STEP_KINDS:
-            raise ValueError(f"step kind must be one of {STEP_KINDS}, got {kind!r}")
-        self._cal_kind = kind
-        self._cal_rec = []
-
-    def _record_calibration(self, raw: Sequence[tuple[float, float]]) -> None:
-        """One interval's raw displacements (m, mount order) while a step records."""
-        if self._cal_kind is not None:
-            self._cal_rec.append([tuple(p) for p in raw])
-
-    def _current_step(self) -> CalibrationStep | None:
-        if self._cal_kind is None or not self.devices:
-            return None
-        d = np.array(self._cal_rec, dtype=float).reshape(-1, len(self.devices), 2)
-        if d.shape[0] == 0:
-            d = np.zeros((1, len(self.devices), 2))
-        return CalibrationStep(self._cal_kind, d)
+        self._open_run().start_step(kind)
 
     def calibration_step_check(self) -> StepCheck | None:
         """The live residuals and pass/fail of the step being recorded (None: none)."""
-        step = self._current_step()
-        return None if step is None else check_step(step, self._mounts)
+        run = self._cal_run
+        return None if run is None else run.step_check(self._step_mounts())
 
     def stop_calibration_step(self) -> StepCheck:
         """Stop recording: the step is kept (passing or not) and its check returned.
 
         Nothing is recorded after this. ValueError if no step is recording.
         """
-        step = self._current_step()
-        if step is None:
+        if self._cal_run is None:
             raise ValueError("no calibration step is recording")
-        check = check_step(step, self._mounts)
-        self._cal_steps.append((step, check))
-        self._cal_kind = None
-        self._cal_rec = []
-        return check
+        return self._cal_run.stop_step(self._step_mounts())
 
     def discard_calibration_step(self, index: int = -1) -> None:
         """Drop a recorded step (default the last); ValueError if there is none."""
-        if not self._cal_steps:
+        if self._cal_run is None:
             raise ValueError("no recorded calibration step to discard")
-        del self._cal_steps[index]
+        self._cal_run.discard_step(index)
 
     def calibration_steps(self) -> list[tuple[CalibrationStep, StepCheck]]:
         """The recorded steps with their checks, in order."""
-        return list(self._cal_steps or [])
+        return [] if self._cal_run is None else list(self._cal_run.steps)
 
     def calibration_sums(self) -> dict[str, tuple[float, float]]:
         """Raw summed X, Y (m) per sensor of the step being recorded ({} if none)."""
-        step = self._current_step()
-        if step is None:
-            return {}
-        tot = step.totals
-        return {d: (float(tot[i, 0]), float(tot[i, 1])) for i, d in enumerate(self.devices)}
+        return {} if self._cal_run is None else self._cal_run.sums(self.devices)
 
     def compute_calibration(
         self,
@@ -448,26 +419,18 @@ class MonitorSession:
         :class:`CalibrationRefusedError` for a refused run) with what to do;
         nothing changes.
         """
-        if self._cal_steps is None:
-            raise ValueError("no calibration run in progress; start one first")
-        if self._cal_kind is not None:
-            raise ValueError(f"a {self._cal_kind} step is still recording; press Stop first")
-        steps = [s for s, _ in self._cal_steps]
-        return fit_mounts(
-            steps,
+        return self._open_run().fit(
             self.devices,
             self._mounts,
+            sensor=min(self._sensor, len(self.devices) - 1),
             true_distance=true_distance,
             spin_angle=spin_angle,
-            sensor=min(self._sensor, len(self.devices) - 1),
             min_distance=min_distance,
         )
 
     def finish_calibration(self, calibration: Calibration | None) -> None:
         """End the run; apply ``calibration`` if given (None = keep the old one)."""
-        self._cal_steps = None
-        self._cal_kind = None
-        self._cal_rec = []
+        self._cal_run = None
         if calibration is not None:
             self.calibration = calibration
 
@@ -583,8 +546,8 @@ class MonitorSession:
             raw.append((rx, ry))
             fx, fy = self.filters[r.id].push(rx, ry)
             processed.append(self.calibration.apply(r.id, fx, fy))
-        if self.calibrating:
-            self._record_calibration(raw)
+        if self._cal_run is not None:
+            self._cal_run.record(raw)
         self.stats.used += 1
         if reply.polls is not None:
             self._stash_polls(reply)
