@@ -14,6 +14,8 @@ import math
 import numpy as np
 
 from mm_pc.core.checks import finite, finite_array
+from pln2033.angles import TWO_PI
+from pln2033.angles import wrap_pi as _wrap_scalar
 
 __all__ = [
     "TWO_PI",
@@ -24,29 +26,22 @@ __all__ = [
     "yaw_to_quaternion",
 ]
 
-TWO_PI = 2.0 * math.pi
-
 
 def _like_input(value, result: np.ndarray):
     """A Python float for scalar input, the array otherwise."""
     return float(result) if np.ndim(value) == 0 else result
 
 
+_wrap_each = np.frompyfunc(_wrap_scalar, 1, 1)
+
+
 def wrap_pi(angle_rad):
-    """Angle(s) wrapped to (-pi, pi] (rad). ``fmod`` is exact, so a wrapped angle is kept."""
+    """Angle(s) wrapped to (-pi, pi] (rad): :func:`pln2033.angles.wrap_pi`, the one wrap (the
+    OTOS driver's too; why its range suits the chip: there), element-wise for an array."""
     if isinstance(angle_rad, (float, int)) and not isinstance(angle_rad, bool):
-        a = float(angle_rad)  # the hot path (innovations, increments): no numpy
-        if not math.isfinite(a):
-            raise ValueError(f"angle must be finite numbers (no NaN or inf), got {angle_rad!r}")
-        r = math.fmod(a, TWO_PI)
-        if r > math.pi:
-            return r - TWO_PI
-        return r + TWO_PI if r <= -math.pi else r
+        return _wrap_scalar(angle_rad)  # the hot path (innovations, increments): no numpy
     a = finite_array("angle", angle_rad)
-    r = np.fmod(a, TWO_PI)
-    r = np.where(r > math.pi, r - TWO_PI, r)
-    r = np.where(r <= -math.pi, r + TWO_PI, r)
-    return _like_input(angle_rad, r)
+    return _like_input(angle_rad, np.asarray(_wrap_each(a), dtype=float))
 
 
 def _wrap_2pi(angle: np.ndarray) -> np.ndarray:

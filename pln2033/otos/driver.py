@@ -30,6 +30,7 @@ import time
 from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
+from ..angles import wrap_pi
 from ..errors import (
     FirmwareError,
     InvalidCpiError,
@@ -260,7 +261,7 @@ class OTOS:
                 f"offset ({x}, {y}, {h}) is out of range: x and y within +-{limit:.3f} m "
                 "(int16 registers of 10 m / 32768), heading finite"
             )
-        return Pose(x, y, regs.wrap_pi(h))
+        return Pose(x, y, wrap_pi(h))
 
     def set_scalars(self, linear: float, angular: float) -> None:
         """Write the linear and angular scalars (0.872..1.127) and verify them by reading back.
@@ -448,7 +449,7 @@ class OTOS:
         if prev is None:
             return Motion(0, 0, status, False, False, False, quality)
         dxw, dyw = sx - prev[0], sy - prev[1]
-        hm = prev[2] + regs.wrap_pi(sh - prev[2]) / 2  # mid heading of the interval
+        hm = prev[2] + wrap_pi(sh - prev[2]) / 2  # mid heading of the interval
         c, s = math.cos(hm), math.sin(hm)
         scale = EFFECTIVE_CPI / INCH_M / self._chip_scalar
         fx = self._frac_x + (c * dxw + s * dyw) * scale

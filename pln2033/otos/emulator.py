@@ -29,6 +29,7 @@ from __future__ import annotations
 import math
 from typing import Any, Protocol
 
+from ..angles import wrap_pi
 from ..emulated import CountingCore
 from ..i2c import I2cError, I2cNoAckError
 from ..motion import MotionSource
@@ -211,7 +212,7 @@ class EmulatedOTOS(CountingCore):
         c, s = math.cos(hm), math.sin(hm)
         self.sx += c * ex - s * ey
         self.sy += s * ex + c * ey
-        self.sh = regs.wrap_pi(self.sh + dh)
+        self.sh = wrap_pi(self.sh + dh)
         hx, hy, hh = self._host_pose()
         prev = self._host_prev or (hx, hy, hh)
         self._host_prev = (hx, hy, hh)
@@ -304,7 +305,7 @@ class EmulatedOTOS(CountingCore):
         ox, oy, oh = self.offset
         c, s = math.cos(host[2]), math.sin(host[2])
         self.sx, self.sy = ox * c - oy * s + host[0], ox * s + oy * c + host[1]
-        self.sh = regs.wrap_pi(oh + host[2])
+        self.sh = wrap_pi(oh + host[2])
         self._host_prev = None
 
     # --- I2C ----------------------------------------------------------------------------------

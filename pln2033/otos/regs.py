@@ -164,7 +164,3 @@ def int16_bytes(value: int) -> tuple[int, int]:
     value &= 0xFFFF
     return value & 0xFF, value >> 8
 
-
-def wrap_pi(angle: float) -> float:
-    """``angle`` into [-pi, pi)."""
-    return (angle + math.pi) % (2 * math.pi) - math.pi

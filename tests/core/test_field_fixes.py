@@ -104,6 +104,10 @@ def test_compass_vectorised_matches_scalar(hs):
 def test_wrap_edges_stay_in_their_ranges():
     assert wrap_pi(-PI) == PI
     assert wrap_pi(PI) == PI
+    # arrays take the same wrap element by element (pln2033.angles.wrap_pi), edges included
+    edges = np.array([-PI, PI, 3 * PI, -3 * PI, -0.1, 0.0])
+    assert wrap_pi(edges).tolist() == [wrap_pi(float(a)) for a in edges]
+    assert wrap_pi(np.array(-PI)) == PI and wrap_pi(np.zeros(0)).shape == (0,)
     assert -PI < wrap_pi(-1e-300) <= PI
     assert 0.0 <= rep103_to_compass(PI / 2 + 1e-300) < 2 * PI
     assert rep103_to_compass(PI / 2 - 1e-17) < 2 * PI

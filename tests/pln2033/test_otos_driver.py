@@ -6,10 +6,12 @@ import math
 
 import pytest
 
+from pln2033.angles import wrap_pi
 from pln2033.chips import chip_info, make_driver, make_emulator
 from pln2033.errors import FirmwareError, InvalidCpiError, ProductIdError, SensorNotRespondingError
 from pln2033.motion import ConstantVelocity, Stationary
 from pln2033.otos import OTOS, OTOS_INFO, ConstantYawRate, EmulatedOTOS, InvalidSettingError, regs
+from pln2033.otos.driver import quantise_offset
 from pln2033.sensor import INCH_M, SensorDriver
 
 
@@ -140,6 +142,19 @@ def test_offset_out_of_range_is_refused():
         drv.set_offset(12.0, 0.0, 0.0)
     with pytest.raises(InvalidSettingError, match="three numbers"):
         OTOS(emu, offset=(1.0, 2.0))
+
+
+def test_a_heading_of_plus_and_minus_pi_reaches_the_chip_as_minus_pi():
+    # The one wrap (pln2033.angles) keeps +pi and maps -pi to +pi; the int16 heading register
+    # holds [-pi, pi), and +pi (32768 LSB) is written as 0x8000 = -pi, as the firmware wraps.
+    assert wrap_pi(math.pi) == math.pi and wrap_pi(-math.pi) == math.pi
+    for h in (math.pi, -math.pi):
+        _ft, emu, drv = make(record=True, offset=(0.0, 0.0, h))
+        drv.initialise(1000)
+        assert drv.offset.h == math.pi
+        assert writes(emu)[2] == (0x17, bytes([0x10, 0, 0, 0, 0, 0x00, 0x80]))
+        assert emu.offset[2] == -math.pi  # what the chip holds
+        assert quantise_offset(drv.offset).h == -math.pi
 
 
 def test_pose_burst_decodes_the_int16_units():
