@@ -140,7 +140,7 @@ def from_link(msg: dict, devices: Sequence[str]) -> tuple[Command, int | None, t
     index = None
     if cmd.sensor:
         device = msg.get("sensor")
-        if device not in devices:
+        if not isinstance(device, str) or device not in devices:
             raise CommandRefusedError(unknown_sensor(device, devices))
         index = list(devices).index(device)
     for key, why in cmd.forbidden.items():

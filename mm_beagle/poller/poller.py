@@ -30,6 +30,7 @@ import traceback
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
+from typing import TYPE_CHECKING, Protocol, cast
 
 from mm_beagle.poller import chip_config, commands
 from mm_beagle.poller import shared_state as ss
@@ -40,7 +41,10 @@ from pln2033 import INCH_M, Motion, SensorError
 from pln2033 import chips as registry
 from pln2033.errors import FirmwareError, InvalidCpiError
 from pln2033.pln2033 import PLN2033, RegisterMap
-from pln2033.sensor import QUALITY_NONE, ChipInfo
+from pln2033.sensor import QUALITY_NONE, ChipInfo, SensorDriver
+
+if TYPE_CHECKING:
+    from pln2033.bus import SpiBus
 
 ERRORS_BEFORE_DOWN = 3  # consecutive failed polls before a sensor is declared down
 HEALTH_CHECK_S = 1.0  # how often the CPI is read back to catch a chip that reset itself
@@ -94,7 +98,25 @@ def poller_config(values: dict, ring_size: int, sim: SimConfig) -> PollerConfig:
     return PollerConfig(**common, ring_size=ring_size, sim=sim)
 
 
-def _open_bus(dev: str, cfg: PollerConfig, info: ChipInfo) -> object:
+class Bus(Protocol):
+    """What the poller itself does with a device's bus (its driver does the rest)."""
+
+    def close(self) -> None: ...
+
+
+def _detached(_tx: list[int]) -> list[int]:
+    raise RuntimeError("the channel has no driver attached")
+
+
+def _detached_decode(_rx: list[int]) -> Motion:
+    raise RuntimeError("the channel has no driver attached")
+
+
+def _detached_read() -> Motion:
+    raise RuntimeError("the channel has no driver attached")
+
+
+def _open_bus(dev: str, cfg: PollerConfig, info: ChipInfo) -> Bus:
     """The real bus of one device, in its chip's SPI mode, clock capped to its maximum."""
     if info.bus == "i2c":  # /dev/i2c-N through smbus2's i2c_rdwr (the OTOS)
         from pln2033.i2c import Smbus2Bus
@@ -130,8 +152,8 @@ class Channel:
         # and this runs twice per 1 kHz poll (and the board's agent has no numpy).
         self.ints, self.floats, self.ring = state.sensor_views(index)
         self.n = ring_size
-        self.driver: PLN2033 | None = None
-        self.bus: object | None = None
+        self.driver: SensorDriver | None = None
+        self.bus: Bus | None = None
         self.cpi_x = self.cpi_y = 0
         self.scale_x = self.scale_y = 0.0  # metres per count at the CPI in force
         self.cpi_wanted = 0  # the CPI the chip should have: configured, then as commanded
@@ -146,7 +168,9 @@ class Channel:
         self.gap = LiftGapEstimator()  # in counts
         self.gap_m = LiftGapEstimator()  # in metres: right across a CPI change
         # the hot path's view of the driver (see attach)
-        self._xfer = None
+        self._xfer: Callable[[list[int]], list[int]] = _detached
+        self._decode: Callable[[list[int]], Motion] = _detached_decode
+        self._read: Callable[[], Motion] = _detached_read
         self._tx: list[int] = []
         self._unusual = 0xFFFF
         self._motion_bit = 0
@@ -158,25 +182,28 @@ class Channel:
             for k in range(len(ring_quality)):
                 ring_quality[k] = QUALITY_NONE
         else:
-            self.poll = self._poll_generic  # type: ignore[method-assign]
+            # bound once per channel, so the run loop's ch.poll() needs no branch per poll
+            self.poll = self._poll_generic  # type: ignore[method-assign]  # per-instance dispatch
         self._threshold = self.info.quality_threshold
 
-    def attach(self, driver: PLN2033 | None) -> None:
+    def attach(self, driver: SensorDriver | None) -> None:
         """Use ``driver`` for polls (None: the sensor is down)."""
         self.driver = driver
         self.ok = driver is not None
         if driver is not None:
-            if self.fast:
-                self._xfer = driver.bus.xfer2
-                self._tx = driver.motion_tx
-                self._unusual = driver.unusual_status_bits
-                self._motion_bit = driver.map.status_motion
+            if self.fast:  # the PLN2033's driver: its burst and its decoding, used directly
+                pln = cast(PLN2033, driver)
+                self._xfer = pln.bus.xfer2
+                self._decode = pln.decode_motion
+                self._tx = pln.motion_tx
+                self._unusual = pln.unusual_status_bits
+                self._motion_bit = pln.map.status_motion
             else:
                 self._read = driver.read_motion
                 self.info = driver.info  # the PMW3901's follows its height
                 self._threshold = self.info.quality_threshold
                 if hasattr(driver, "last_pose"):  # the OTOS: its on-chip pose too
-                    self.poll = self._poll_with_pose  # type: ignore[method-assign]
+                    self.poll = self._poll_with_pose  # type: ignore[method-assign]  # as above
 
     def _poll_generic(self, stamp_ns: int) -> None:
         """One motion read of a chip other than the PLN2033, recorded. Raises SensorError."""
@@ -185,7 +212,7 @@ class Channel:
     def _poll_with_pose(self, stamp_ns: int) -> None:
         """The OTOS: its motion read also brings the on-chip pose; both are stored."""
         m = self._read()
-        reading = self.driver.last_pose  # type: ignore[union-attr]
+        reading = getattr(self.driver, "last_pose", None)  # the OTOS's, of the read above
         if reading is not None:
             self.store_chip_pose(reading, stamp_ns)
         self.record(stamp_ns, m)
@@ -221,7 +248,7 @@ class Channel:
         rx = self._xfer(self._tx)
         status = (rx[1] << 8) | rx[2] if len(rx) == 9 else 0xFFFF
         if status & self._unusual or self.gap.busy:
-            self.record(stamp_ns, self.driver.decode_motion(rx))
+            self.record(stamp_ns, self._decode(rx))
             return
         dx = (((rx[4] << 8) | rx[5]) ^ 0x8000) - 0x8000  # signed 16 bit
         dy = (((rx[7] << 8) | rx[8]) ^ 0x8000) - 0x8000
@@ -404,7 +431,7 @@ class Poller:
                     self.notes.append(note)
         self.driver_extra: dict[str, object] = {}  # tests: e.g. sleep on a fake clock
         self.t0 = time.monotonic()
-        self.sim_buses = self._sim_buses() if cfg.backend == "sim" else {}
+        self.sim_buses: dict[str, Bus] = self._sim_buses() if cfg.backend == "sim" else {}
         self.running = True
         self.commands_seen = 0
 
@@ -424,17 +451,17 @@ class Poller:
     def patch(self, words: list[int] | None) -> None:
         self.firmware[registry.DEFAULT_CHIP] = words
 
-    def make_driver(self, ch: Channel) -> object:
+    def make_driver(self, ch: Channel) -> SensorDriver:
         """The driver of ``ch``'s chip on its bus, with the chip options it takes."""
-        if ch.fast:
-            return PLN2033(ch.bus, self.regmap, name=ch.device)  # type: ignore[arg-type]
+        if ch.fast:  # an SPI chip: its bus is one
+            return PLN2033(cast("SpiBus", ch.bus), self.regmap, name=ch.device)
         opts = {
             **self.cfg.device_options.get(ch.device, {}),
             **chip_config.options_for(ch.chip, {**self.cfg.chip_options, **self.driver_extra}),
         }
         return registry.make_driver(ch.chip, ch.bus, ch.device, **opts)
 
-    def _sim_buses(self) -> dict[str, object]:
+    def _sim_buses(self) -> dict[str, Bus]:
         from mm_beagle.poller.sim_backend import make_sim_buses
 
         return make_sim_buses(self.cfg, self.t0)
@@ -456,12 +483,12 @@ class Poller:
                 ch.bus = self.sim_buses.get(ch.device) or _open_bus(ch.device, self.cfg, ch.info)
             driver = self.make_driver(ch)
             if ch.info.cpi.fixed:
-                ch.cpi_wanted = driver.info.cpi.min  # type: ignore[attr-defined]
+                ch.cpi_wanted = driver.info.cpi.min
             else:
                 ch.cpi_wanted = ch.cpi_wanted or self.cfg.cpi
-            driver.initialise(ch.cpi_wanted, self.firmware.get(ch.chip))  # type: ignore[attr-defined]
-            ch.set_cpi_cache(*driver.get_cpi())  # type: ignore[attr-defined]
-            driver.read_motion()  # type: ignore[attr-defined]  # start-up counts are dropped
+            driver.initialise(ch.cpi_wanted, self.firmware.get(ch.chip))
+            ch.set_cpi_cache(*driver.get_cpi())
+            driver.read_motion()  # start-up counts are dropped
         except (SensorError, ValueError, OSError) as exc:
             self.mark_down(ch, now, f"start-up failed: {exc}")
             return
@@ -504,7 +531,7 @@ class Poller:
         ch.record(stamp_ns, None)
         if ch.consecutive_errors >= ERRORS_BEFORE_DOWN:
             if self.cfg.backend == "spidev" and ch.bus is not None:
-                ch.bus.close()  # type: ignore[attr-defined]
+                ch.bus.close()
                 ch.bus = None  # reopen the device on the next try
             self.mark_down(ch, now, f"{ch.consecutive_errors} polls failed: {exc}")
 
@@ -548,10 +575,11 @@ class Poller:
         ch = self.channels[msg[1]]
         if cmd is None or not cmd.pipe:
             return (commands.ERROR, commands.unknown_command(kind))
-        if ch.driver is None:
+        driver = ch.driver
+        if driver is None:
             return (commands.ERROR, commands.sensor_down(ch.device, ch.last_error))
         try:
-            return self._serve(kind)(ch, *msg[2:])
+            return self._serve(kind)(ch, driver, *msg[2:])
         except InvalidCpiError as exc:
             return (commands.INVALID, str(exc))
         except SensorError as exc:
@@ -567,9 +595,9 @@ class Poller:
         self.running = False
         return (commands.OK, None)
 
-    def _command_settings(self, ch: Channel) -> tuple[str, object]:
+    def _command_settings(self, ch: Channel, driver: SensorDriver) -> tuple[str, object]:
         """The register dump; the counts its status read returns go into the totals."""
-        motion, regs = ch.driver.read_all_registers()
+        motion, regs = driver.read_all_registers()
         ch.record(time.time_ns(), motion, ss.FLAG_COMMAND_READ)
         cpi = ch.info.cpi
         return (
@@ -585,25 +613,29 @@ class Poller:
             },
         )
 
-    def _command_set_cpi(self, ch: Channel, cpi: object) -> tuple[str, object]:
-        problem = ch.driver.cpi_problem(cpi)
-        if problem:
+    def _command_set_cpi(
+        self, ch: Channel, driver: SensorDriver, cpi: object
+    ) -> tuple[str, object]:
+        problem = driver.cpi_problem(cpi)
+        if problem or not isinstance(cpi, int):  # the chip's check refuses a non-integer
             return (commands.INVALID, f"{ch.device} ({ch.chip}): {problem}")
         # Drain the counters at the old CPI first, so every count keeps its scale.
-        ch.record(time.time_ns(), ch.driver.read_motion())
-        ch.driver.set_cpi(cpi)
+        ch.record(time.time_ns(), driver.read_motion())
+        driver.set_cpi(cpi)
         ch.cpi_wanted = cpi
-        ch.set_cpi_cache(*ch.driver.get_cpi())
+        ch.set_cpi_cache(*driver.get_cpi())
         return (commands.OK, ch.cpi_y)
 
-    def _command_load_patch(self, ch: Channel, words: list[int]) -> tuple[str, object]:
+    def _command_load_patch(
+        self, ch: Channel, driver: SensorDriver, words: list[int]
+    ) -> tuple[str, object]:
         if ch.info.firmware != "patch":
             return (commands.INVALID, commands.takes_no_patch(ch.device, ch.info.title))
         try:
-            ch.driver.check_patch(words)
+            driver.check_firmware(words)  # the PLN2033's firmware: its patch code
         except FirmwareError as exc:
             return (commands.INVALID, str(exc))
-        ch.driver.load_patch(words)  # writes, verifies, enables
+        driver.load_firmware(words)  # writes, verifies, enables
         self.patch = list(words)  # re-initialisations load it too
         return (commands.OK, len(words))
 

@@ -13,6 +13,7 @@ import sys
 import threading
 import time
 from multiprocessing.connection import Connection
+from typing import Any
 
 from mm_beagle.poller import shared_state as ss
 from mm_beagle.poller.poller import PollerConfig, run_poller
@@ -50,7 +51,7 @@ class PollerClient:
         )
         self._abandoned = 0  # commands that timed out; their late replies are dropped
         self._child_ends: tuple[Connection, Connection] = (child_cmd, child_events)
-        self._ps = None
+        self._ps: Any = None  # the poller's psutil.Process, made on first use
         self._cpu_last: tuple[float, float] | None = None
 
     def start(self) -> None:
@@ -161,7 +162,7 @@ def _main_hidden():
     saved = {k: main.__dict__[k] for k in ("__spec__", "__file__") if k in main.__dict__}
     try:
         if "__spec__" in saved:
-            main.__spec__ = None  # type: ignore[assignment]
+            main.__spec__ = None
         main.__dict__.pop("__file__", None)
         yield
     finally:

@@ -103,7 +103,7 @@ class ClientCursors:
         out = []
         for i in wanted:
             c = cursors[i]
-            if repeat[i]:
+            if repeat[i] and c.served is not None:  # (a repeat always has a served interval)
                 start, end = c.acked, c.served
             else:
                 start, end = (c.served if c.served is not None else c.acked), nows[i]

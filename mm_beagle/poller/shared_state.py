@@ -14,8 +14,8 @@ to be unlinked afterwards.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from dataclasses import dataclass, fields
+from typing import TYPE_CHECKING, Any
 
 from mm_beagle.poller import ring_layout
 
@@ -167,7 +167,8 @@ class Totals:
 
     @classmethod
     def zero(cls, stamp_ns: int = 0) -> Totals:
-        return cls(*([0] * 9), stamp_ns, *([0] * 8), *([0.0] * N_FLOAT))
+        values: dict[str, Any] = {f.name: 0.0 if f.type == "float" else 0 for f in fields(cls)}
+        return cls(**{**values, "stamp_ns": stamp_ns})
 
 
 class SharedState:
@@ -198,6 +199,8 @@ class SharedState:
         self.n_sensors = n_sensors
         self.ring_size = ring_size
         self.buffer = buffer
+        # a bytearray or a multiprocessing RawArray: both export the buffer protocol, which
+        # Python 3.11's typing cannot name (collections.abc.Buffer is 3.12)
         self.mem = memoryview(buffer).cast("B")  # type: ignore[arg-type]
         # name -> (offset, code, item size, rows, row length)
         self._where: dict[str, tuple[int, str, int, int, int]] = {}
@@ -216,12 +219,15 @@ class SharedState:
         self._floats_v = [self._view("floats", i) for i in range(n_sensors)]
         self._arrays: dict[str, object] = {}
 
-    def _view(self, name: str, row: int) -> memoryview:
+    def _view(self, name: str, row: int) -> memoryview[Any]:
         offset, code, size, _rows, cols = self._where[name]
         start = offset + row * cols * size
-        return self.mem[start : start + cols * size].cast(code)
+        # typeshed types cast() per literal format code; this one comes from _LAYOUT
+        return self.mem[start : start + cols * size].cast(code)  # type: ignore[call-overload]
 
-    def sensor_views(self, i: int) -> tuple[memoryview, memoryview, tuple[memoryview, ...]]:
+    def sensor_views(
+        self, i: int
+    ) -> tuple[memoryview[int], memoryview[float], tuple[memoryview[int], ...]]:
         """Sensor ``i``'s ints, floats and ring fields (RING_FIELDS order) as memoryviews."""
         return (
             self._view("ints", i),

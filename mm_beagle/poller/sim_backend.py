@@ -10,6 +10,7 @@ simulator); the spidev path never imports this module.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 from pln2033.pln2033 import RegisterMap
 
@@ -103,8 +104,9 @@ def sim_chips(cfg) -> list[str]:
         raise ValueError(f"'sim_chips': {exc}") from None
 
 
-def make_sim_buses(cfg, t0: float) -> dict[str, object]:
-    """One emulated sensor per device (its chip's emulator), driven by the simulator."""
+def make_sim_buses(cfg, t0: float) -> dict[str, Any]:
+    """One emulated sensor per device (its chip's emulator: a bus its driver talks to),
+    driven by the simulator."""
     import inspect
 
     import numpy as np
@@ -128,11 +130,11 @@ def make_sim_buses(cfg, t0: float) -> dict[str, object]:
     fails = parse_fail_windows(sim.fail_windows, cfg.devices)
     regmap = RegisterMap.load(cfg.register_map) if cfg.register_map else None
     chips = sim_chips(cfg)
-    buses: dict[str, object] = {}
+    buses: dict[str, Any] = {}
     for i, (dev, chip) in enumerate(zip(cfg.devices, chips, strict=True)):
         mount = mounts[i % len(mounts)]
         cx, cy = simulator.cumulative_sensor_path(v, w, simulator.DT, mount, vy)
-        path = SampledPath(cx, cy, simulator.DT, t_start=t0, loop=loop)
+        path = SampledPath(cx.tolist(), cy.tolist(), simulator.DT, t_start=t0, loop=loop)
         kwargs: dict[str, object] = dict(
             motion=path,
             lift_windows=_windows(sim.lift_rate, sim.lift_duration, sim.seed * 1000 + i, t0),
