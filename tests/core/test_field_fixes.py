@@ -21,7 +21,6 @@ from mm_pc.core.fixes.gps import (
     gps_fix_usable,
     wgs84_m_per_deg,
 )
-from mm_pc.core.fixes.nmea import nmea_checksum, parse_gga, parse_gll
 from mm_pc.core.fixes.perimeter import (
     PerimeterSegment,
     correct_at_wire,
@@ -41,11 +40,6 @@ angles = st.floats(min_value=-50.0, max_value=50.0, allow_nan=False)
 def circle_dist(a: float, b: float) -> float:
     """Smallest angle between two directions (rad)."""
     return abs((a - b + PI) % (2 * PI) - PI)
-
-
-def nmea(body: str) -> str:
-    """A sentence with a correct checksum (nmea_checksum is checked on known sentences)."""
-    return f"${body}*{nmea_checksum(body):02X}"
 
 
 # --- angle conversion --------------------------------------------------------------------------
@@ -503,102 +497,6 @@ def test_gps_correction_rejects_bad_input(kwargs, match):
     args.update(kwargs)
     with pytest.raises(ValueError, match=match):
         gps_correction(**args)
-
-
-# --- NMEA -----------------------------------------------------------------------------------
-
-GGA_EXAMPLE = "$GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*47"
-GLL_EXAMPLE = "$GPGLL,4916.45,N,12311.12,W,225444,A,*1D"
-
-
-def test_checksum_of_the_textbook_sentences():
-    assert nmea_checksum(GGA_EXAMPLE[1:-3]) == 0x47
-    assert nmea_checksum(GLL_EXAMPLE[1:-3]) == 0x1D
-
-
-def test_parse_gga_textbook_example():
-    fix = parse_gga(GGA_EXAMPLE + "\r\n")
-    assert fix.time_s == 12 * 3600 + 35 * 60 + 19
-    assert fix.lat == pytest.approx(48 + 7.038 / 60)  # 48.1173 deg N
-    assert fix.lon == pytest.approx(11 + 31.0 / 60)  # 11.51667 deg E
-    assert (fix.fix_type, fix.satellites, fix.hdop) == (1, 8, 0.9)
-    assert fix.altitude_m == 545.4
-    assert fix.talker == "GP"
-    assert fix.quality == GpsQuality(0.9, 8, 1)
-    assert gps_fix_usable(fix.quality)
-
-
-def test_parse_gga_south_west_other_talker_no_altitude():
-    fix = parse_gga(nmea("GNGGA,000001.50,3352.1200,S,15112.6000,W,2,12,1.2,,M,,M,,"))
-    assert fix.time_s == pytest.approx(1.5)
-    assert fix.lat == pytest.approx(-(33 + 52.12 / 60))
-    assert fix.lon == pytest.approx(-(151 + 12.6 / 60))
-    assert fix.altitude_m is None
-    assert fix.talker == "GN"
-
-
-def test_parse_gll_textbook_example_and_status():
-    fix = parse_gll(GLL_EXAMPLE)
-    assert fix.lat == pytest.approx(49 + 16.45 / 60)
-    assert fix.lon == pytest.approx(-(123 + 11.12 / 60))
-    assert fix.time_s == 22 * 3600 + 54 * 60 + 44
-    assert fix.valid and fix.mode is None
-    assert not parse_gll(nmea("GPGLL,4916.45,N,12311.12,W,225444,V,N")).valid
-    assert not parse_gll(nmea("GPGLL,4916.45,N,12311.12,W,225444,A,N")).valid
-    assert parse_gll(nmea("GPGLL,4916.45,N,12311.12,W,225444,A,D")).valid
-
-
-@pytest.mark.parametrize(
-    ("sentence", "match"),
-    [
-        (GGA_EXAMPLE[:-2] + "48", "checksum mismatch: sentence says 48, computed 47"),
-        (GGA_EXAMPLE.replace("4807", "4808"), "checksum mismatch"),
-        (GGA_EXAMPLE[:-3], r"no '\*hh' checksum"),
-        (GGA_EXAMPLE[1:], "must start with '\\$'"),
-        ("garbage", "must start with '\\$'"),
-        ("$GPGGA,1*zz", "two hex digits"),
-        ("", "must start with '\\$'"),
-        (GLL_EXAMPLE, "expected a GGA sentence"),
-        (nmea("GPGGA,,,,,,0,00,99.99,,,,,,"), "field 'time' is empty"),
-        (nmea("GPGGA,123519,,,,,0,00,99.99,,,,,,"), "field 'latitude' is empty"),
-        (nmea("GPGGA,123519,4807.038,N,01131.000,E,1,08,,545.4,M,46.9,M,,"), "'HDOP' is empty"),
-        (nmea("GPGGA,123519,4807.038,N,01131.000,E,1,08,abc,1,M,1,M,,"), "'HDOP' is not a number"),
-        (nmea("GPGGA,123519,4867.038,N,01131.000,E,1,08,0.9,1,M,1,M,,"), "minutes must be < 60"),
-        (nmea("GPGGA,123519,4807.038,X,01131.000,E,1,08,0.9,1,M,1,M,,"), "N or S"),
-        (nmea("GPGGA,123519,9107.038,N,01131.000,E,1,08,0.9,1,M,1,M,,"), "<= 90 deg"),
-        (nmea("GPGGA,253519,4807.038,N,01131.000,E,1,08,0.9,1,M,1,M,,"), "time out of range"),
-        (nmea("GPGGA,123519,4807.038,N,1131.000,E,1,08,0.9,1,M,1,M,,"), "dddmm.mmmm"),
-        (nmea("GPGGA,123519,4807.038,N,01131.000,E,9,08,0.9,1,M,1,M,,"), "fix type must be in"),
-        (nmea("GPGGA,123519,4807.038,N,01131.000,E,1,08"), "at least 9 fields"),
-        ("$GPGGA,12351\u00e9*00", "must be ASCII"),
-    ],
-)
-def test_parse_gga_rejects(sentence, match):
-    with pytest.raises(ValueError, match=match):
-        parse_gga(sentence)
-
-
-@pytest.mark.parametrize(
-    ("sentence", "match"),
-    [
-        (nmea("GPGLL,,,,,225444,V,N"), "field 'latitude' is empty"),
-        (nmea("GPGLL,4916.45,N,12311.12,W,225444,,"), "field 'status' is empty"),
-        (nmea("GPGLL,4916.45,N,12311.12,W,225444,X"), "status must be A .* or V"),
-        (nmea("GPGLL,4916.45,N,12311.12,W"), "at least 6 fields"),
-        (GGA_EXAMPLE, "expected a GLL sentence"),
-    ],
-)
-def test_parse_gll_rejects(sentence, match):
-    with pytest.raises(ValueError, match=match):
-        parse_gll(sentence)
-
-
-def test_nmea_to_plot_metres_end_to_end():
-    fix = parse_gga(GGA_EXAMPLE)
-    grid = LocalGrid(48.1172, 11.5166, m_per_deg_lat=111_000.0, m_per_deg_lon=74_000.0)
-    x, y = grid.to_local(fix.lat, fix.lon)
-    # dlat = 0.0001 deg -> 11.1 m; dlon = 11.516667 - 11.5166 = 0.0000667 deg -> 4.93 m.
-    assert (x, y) == pytest.approx((74_000 * (11 + 31 / 60 - 11.5166), 11.1), abs=1e-6)
 
 
 # --- perimeter wire ----------------------------------------------------------------------------

@@ -1,1 +1,1 @@
-"""Absolute fixes for fusion: wheels, GPS, NMEA, the perimeter wire."""
+"""Absolute fixes for fusion: wheels, GPS, the perimeter wire."""
