@@ -526,6 +526,7 @@ class RemoteAgent:
         most ``CLOCK_SLEW`` of the agent time since sensor i's last poll, so each
         mapped stamp stays after the one before it.
         """
+        # only called once an offset exists (sync: _apply checks it)
         target = int(self._offset_ns)  # type: ignore[arg-type]
         prev = self._stamp_off[i]
         if prev is None or target >= prev:
