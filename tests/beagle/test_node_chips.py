@@ -8,7 +8,6 @@ named in the skip of the test that needs them).
 
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 import time
@@ -20,11 +19,7 @@ rclpy = pytest.importorskip("rclpy")
 
 from mm_beagle.poller import chip_config  # noqa: E402
 from mm_beagle.tools.harness import (  # noqa: E402
-    BeagleClient,
     agent_command,
-    agent_process,
-    beagle_process,
-    free_port,
     isolated_ros_env,
     node_command,
 )
@@ -38,47 +33,15 @@ FLAG_LOW_QUALITY = 32
 NS = "/chips/mm_beagle"
 
 
-@pytest.fixture(scope="module")
-def client():
-    c = BeagleClient("mm_chips_client", namespace=NS)
-    yield c
-    c.close()
-
-
-@pytest.fixture(scope="module", params=["sim", "remote"])
-def node(request, client, tmp_path_factory):
-    logs = tmp_path_factory.mktemp("chips")
-    log = logs / "mm_beagle.log"
-    sim = {"sim_trajectory": "straight", "sim_low_quality_rate": 5.0, "sim_speed": 0.2}
-    common = {"devices": DEVICES, "chips": CHIPS, "chip_options": ["pmw3901.height_m=0.1"]}
-    env = dict(os.environ)
-    if request.param == "sim":
-        params = {"backend": "sim", **common, **sim}
-        with beagle_process(params, env=env, log_path=str(log), namespace="/chips"):
-            assert client.wait(scaled(60)), f"services did not come up; log:\n{log.read_text()}"
-            yield request.param, log
-        return
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    agent_opts = {
-        "backend": "sim",
-        "listen": [endpoint],
-        "devices": DEVICES,
-        "chips": ",".join(CHIPS),
-        "chip_options": ["pmw3901.height_m=0.1"],
-        "sim_trajectory": "straight",
-        "sim_low_quality_rate": 5.0,
-    }
-    with (
-        agent_process(agent_opts, log_path=str(logs / "agent.log")),
-        beagle_process(
-            {"backend": "remote", "agent": endpoint, **common},
-            env=env,
-            log_path=str(log),
-            namespace="/chips",
-        ),
-    ):
-        assert client.wait(scaled(60)), f"services did not come up; log:\n{log.read_text()}"
-        yield request.param, log
+#: the module's node (tests/beagle/conftest.py ``node``): every chip, poor-surface windows
+_SENSORS = {"devices": DEVICES, "chips": CHIPS, "chip_options": ["pmw3901.height_m=0.1"]}
+_POOR_SURFACE = {"sim_trajectory": "straight", "sim_low_quality_rate": 5.0}
+BEAGLE_NODE = {
+    "namespace": "/chips",
+    "sim": {**_SENSORS, **_POOR_SURFACE, "sim_speed": 0.2},
+    "agent": {**_SENSORS, "chips": ",".join(CHIPS), **_POOR_SURFACE},
+    "remote": _SENSORS,
+}
 
 
 def _wait_up(client):

@@ -24,9 +24,7 @@ from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 
 from mm_beagle.tools.harness import (  # noqa: E402
     BeagleClient,
-    agent_process,
     beagle_process,
-    free_port,
     node_command,
 )
 from mm_interfaces.msg import SensorData  # noqa: E402
@@ -37,45 +35,12 @@ BAD_CPIS = [0, 99, 150, 6401, 65535, 1234]
 pytestmark = pytest.mark.ros
 
 
-@pytest.fixture(scope="module")
-def client():
-    c = BeagleClient("mm_test_client")
-    yield c
-    c.close()
-
-
-@pytest.fixture(scope="module", params=["sim", "remote"])
-def node(request, client, tmp_path_factory):
-    """One node for the module: sensor 2 fails for its first 4 s, then comes up.
-
-    ``remote``: the same emulated sensors in an mm-beagle-agent process, the
-    node in backend:=remote on its link.
-    """
-    logs = tmp_path_factory.mktemp("node")
-    log = logs / "mm_beagle.log"
-    params = {"publish_rate": 20.0, "diagnostics_period": 0.5}
-    sim = {"sim_trajectory": "figure_eight", "sim_fail_windows": [f"{S1}@0-4"]}
-    if request.param == "sim":
-        with beagle_process(
-            {"backend": "sim", "retry_interval": 0.5, **sim, **params},
-            env=dict(os.environ),
-            log_path=str(log),
-        ) as proc:
-            assert client.wait(30), f"services did not come up; log:\n{log.read_text()}"
-            yield proc, log
-        return
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    agent_opts = {"backend": "sim", "retry_interval": 0.5, "listen": [endpoint], **sim}
-    with (
-        agent_process(agent_opts, log_path=str(logs / "agent.log")),
-        beagle_process(
-            {"backend": "remote", "agent": endpoint, **params},
-            env=dict(os.environ),
-            log_path=str(log),
-        ) as proc,
-    ):
-        assert client.wait(30), f"services did not come up; log:\n{log.read_text()}"
-        yield proc, log
+#: the module's node (tests/beagle/conftest.py ``node``): sensor 2 fails for its first
+#: 4 s, then comes up (``remote``: the same emulated sensors in an mm-beagle-agent)
+_BOARD = {"retry_interval": 0.5, "sim_trajectory": "figure_eight",
+          "sim_fail_windows": [f"{S1}@0-4"]}
+_NODE = {"publish_rate": 20.0, "diagnostics_period": 0.5}
+BEAGLE_NODE = {"sim": {**_BOARD, **_NODE}, "agent": _BOARD, "remote": _NODE}
 
 
 def totals(res, device):

@@ -19,18 +19,11 @@ from fakes import scaled, wait_until
 rclpy = pytest.importorskip("rclpy")
 
 from mm_beagle.poller.shared_state import BUSY_MESSAGE  # noqa: E402
-from mm_beagle.tools.harness import BeagleClient, beagle_process  # noqa: E402
+from mm_beagle.tools.harness import beagle_process  # noqa: E402
 
 S0, S1 = "/dev/spidev1.0", "/dev/spidev1.1"
 
 pytestmark = pytest.mark.ros
-
-
-@pytest.fixture(scope="module")
-def client():
-    c = BeagleClient("mm_stall_client")
-    yield c
-    c.close()
 
 
 def poller_pid(node_pid: int, timeout: float = 60.0) -> int:

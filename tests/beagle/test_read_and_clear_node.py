@@ -15,16 +15,9 @@ from fakes import scaled, wait_until
 rclpy = pytest.importorskip("rclpy")
 
 from mm_beagle.poller.read_and_clear import AckedReader  # noqa: E402
-from mm_beagle.tools.harness import BeagleClient, beagle_process  # noqa: E402
+from mm_beagle.tools.harness import beagle_process  # noqa: E402
 
 pytestmark = pytest.mark.ros
-
-
-@pytest.fixture(scope="module")
-def client():
-    c = BeagleClient("mm_test_rc_client")
-    yield c
-    c.close()
 
 
 @pytest.fixture(scope="module")
