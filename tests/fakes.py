@@ -15,12 +15,14 @@ def scaled(seconds: float) -> float:
 
 
 def wait_until(predicate, timeout: float = 10.0, what: str = "the condition",
-               interval: float = 0.02):
+               interval: float = 0.02, pump=None):
     """Call ``predicate`` until it returns something truthy and return that.
 
     ``timeout`` (s) is scaled by :data:`TIMEOUT_FACTOR`; on expiry an AssertionError
     names ``what`` and how long it waited, so a slow machine's failure says what did not
     happen rather than a bare ``assert False``. ``interval`` (s) is the pause between calls.
+    ``pump`` (no arguments), if given, runs before each pause: a Qt test passes
+    ``QApplication.processEvents`` so the GUI's signals and timers are served meanwhile.
     """
     limit = scaled(timeout)
     deadline = time.monotonic() + limit
@@ -30,17 +32,23 @@ def wait_until(predicate, timeout: float = 10.0, what: str = "the condition",
             return value
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out after {limit:.1f} s waiting for {what}")
+        if pump is not None:
+            pump()
         time.sleep(interval)
 
 
 class FakeClock:
-    """A manual clock: tests set ``t`` (seconds); the emulator calls it."""
+    """A manual clock: tests set ``t`` (seconds); the emulator calls it. Handed to a
+    driver as its ``sleep`` too, the driver's sleeps move it (one clock for both)."""
 
     def __init__(self, t: float = 0.0) -> None:
         self.t = t
 
     def __call__(self) -> float:
         return self.t
+
+    def sleep(self, dt: float) -> None:
+        self.t += dt
 
 
 class FakeRing:

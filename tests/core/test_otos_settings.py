@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import pytest
+from fakes import FakeClock
 
 from mm_pc.core.calibration import Calibration, SensorCalibration
 from mm_pc.core.geometry import SensorMount
@@ -12,18 +13,6 @@ from mm_pc.core.otos_settings import angular_scalar, linear_scalar, otos_setting
 from pln2033.chips import make_driver, make_emulator
 
 DEV = "/dev/i2c-2"
-
-
-class FakeTime:
-    """One clock for driver and emulator; the driver's sleeps move it."""
-
-    t = 0.0
-
-    def __call__(self) -> float:
-        return self.t
-
-    def sleep(self, dt: float) -> None:
-        self.t += dt
 
 
 def test_linear_scalar_is_the_geometric_mean_and_refuses_what_the_chip_cannot_take():
@@ -57,7 +46,7 @@ def test_settings_take_the_fitted_scale_position_and_yaw_into_the_otos_frame():
 def test_the_driver_writes_the_settings_at_every_start():
     cal = Calibration({DEV: SensorCalibration(scale_x=0.97, scale_y=0.97, x=0.0, y=0.0)})
     s = otos_settings(cal, DEV, SensorMount(0.0, 0.0, 0.0), angular=1.02)
-    ft = FakeTime()
+    ft = FakeClock()
     emu = make_emulator("otos", clock=ft)
     drv = make_driver("otos", emu, name=DEV, sleep=ft.sleep, clock=ft, **s.driver_options())
     drv.initialise(1000)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import pytest
+from fakes import FakeClock
 
 from pln2033.angles import wrap_pi
 from pln2033.chips import chip_info, make_driver, make_emulator
@@ -15,21 +16,8 @@ from pln2033.otos.driver import quantise_offset
 from pln2033.sensor import INCH_M, SensorDriver
 
 
-class FakeTime:
-    """One clock for driver and emulator; the driver's sleeps move it."""
-
-    def __init__(self) -> None:
-        self.t = 0.0
-
-    def __call__(self) -> float:
-        return self.t
-
-    def sleep(self, dt: float) -> None:
-        self.t += dt
-
-
 def make(motion=None, heading=None, record=False, **options):
-    ft = FakeTime()
+    ft = FakeClock()
     emu = EmulatedOTOS(motion=motion, clock=ft, heading_source=heading, record=record)
     drv = OTOS(emu, name="/dev/i2c-2", sleep=ft.sleep, clock=ft, **options)
     return ft, emu, drv
@@ -40,7 +28,7 @@ def writes(emu):
 
 
 def test_registry_builds_the_otos_and_it_is_a_sensor_driver():
-    emu = make_emulator("otos", clock=FakeTime())
+    emu = make_emulator("otos", clock=FakeClock())
     drv = make_driver("otos", emu, name="/dev/i2c-2")
     assert isinstance(drv, SensorDriver)
     info = chip_info("otos")
@@ -74,7 +62,7 @@ def test_bring_up_bytes_and_what_the_chip_holds_after_it():
 
 
 def test_wrong_product_id_says_what_was_read_expected_and_how_to_override():
-    ft = FakeTime()
+    ft = FakeClock()
     emu = EmulatedOTOS(clock=ft, product_id=0x42)
     drv = OTOS(emu, name="/dev/i2c-1", sleep=ft.sleep, clock=ft)
     with pytest.raises(ProductIdError) as e:
@@ -86,7 +74,7 @@ def test_wrong_product_id_says_what_was_read_expected_and_how_to_override():
 
 
 def test_missing_chip_at_the_address_is_a_no_ack_error():
-    ft = FakeTime()
+    ft = FakeClock()
     emu = EmulatedOTOS(clock=ft, address=0x18)
     with pytest.raises(SensorNotRespondingError, match=r"i2cdetect|acknowledges"):
         OTOS(emu, sleep=ft.sleep, clock=ft).initialise(1000)
@@ -219,7 +207,7 @@ def test_counts_survive_the_position_registers_wrapping_at_10_m():
 
 
 def test_a_lift_sets_the_tracking_warning_quality_zero():
-    ft = FakeTime()
+    ft = FakeClock()
     emu = EmulatedOTOS(motion=ConstantVelocity(0.0, 0.2), clock=ft, lift_windows=[(2.0, 2.5)])
     drv = OTOS(emu, sleep=ft.sleep, clock=ft, imu_samples=0)
     drv.initialise(1000)

@@ -32,13 +32,10 @@ BLOB = bytes((i * 7 + 3) & 0xFF for i in range(R.SROM_LENGTH))  # a stand-in, no
 def make(chip="pmw3360", motion=None, record=False, emu_kw=None, **drv_kw):
     clock = FakeClock()
 
-    def sleep(s: float) -> None:
-        clock.t += s
-
     emu = make_emulator(
         chip, motion=motion or Stationary(), clock=clock, record=record, **(emu_kw or {})
     )
-    drv = make_driver(chip, emu, name="/dev/spidev1.0", sleep=sleep, **drv_kw)
+    drv = make_driver(chip, emu, name="/dev/spidev1.0", sleep=clock.sleep, **drv_kw)
     return clock, emu, drv
 
 
@@ -369,18 +366,15 @@ def test_register_dump_hands_back_the_counts_it_cleared():
 def test_mixed_pmw3360_and_pmw3389_side_by_side():
     clock = FakeClock()
 
-    def sleep(s: float) -> None:
-        clock.t += s
-
     v = ConstantVelocity(0.25, 0.1)
     e60 = EmulatedPMW3360(motion=v, clock=clock)
     e89 = EmulatedPMW3389(motion=v, clock=clock)
-    d60 = make_driver("pmw3360", e60, name="/dev/spidev1.0", sleep=sleep)
-    d89 = make_driver("pmw3389", e89, name="/dev/spidev1.1", sleep=sleep)
+    d60 = make_driver("pmw3360", e60, name="/dev/spidev1.0", sleep=clock.sleep)
+    d89 = make_driver("pmw3389", e89, name="/dev/spidev1.1", sleep=clock.sleep)
     d60.initialise(1200)
     d89.initialise(2400)
     with pytest.raises(ProductIdError):  # a PMW3389 driver on the PMW3360's bus
-        PMW3389(e60, "/dev/spidev1.0", sleep=sleep).initialise(2400)
+        PMW3389(e60, "/dev/spidev1.0", sleep=clock.sleep).initialise(2400)
     d60.initialise(1200)
     d89.read_motion()  # what d89 counted while d60 started again
     s60 = s89 = 0

@@ -41,10 +41,7 @@ def rig(drv_cls=PMW3901, emu_cls=EmulatedPMW3901, motion=None, emu_kw=None, **dr
     clock = FakeClock()
     emu = emu_cls(motion=motion, clock=clock, **(emu_kw or {}))
 
-    def sleep(s: float) -> None:
-        clock.t += s
-
-    drv = drv_cls(emu, name="/dev/spidev1.0", sleep=sleep, **drv_kw)
+    drv = drv_cls(emu, name="/dev/spidev1.0", sleep=clock.sleep, **drv_kw)
     return clock, emu, drv
 
 
