@@ -90,7 +90,7 @@ class SpidevBus:
                 f"SPI speed {speed_hz} Hz is out of range ({MIN_SPEED_HZ}..{MAX_SPEED_HZ} Hz)"
             )
         try:
-            import spidev  # type: ignore[import-not-found]
+            import spidev
         except ImportError as exc:
             raise SpiError(
                 "the 'spidev' Python package is missing; install it with "

@@ -77,7 +77,7 @@ def parse_device(path: str) -> int:
 
 def _import_smbus2() -> Any:
     try:
-        import smbus2  # type: ignore[import-not-found]
+        import smbus2
     except ImportError as exc:
         raise I2cError(
             "the 'smbus2' Python package is missing; install it with "

@@ -127,11 +127,18 @@ class SensorCalibration:
                     raise ValueError(f"{attr} must be >= 0, got {v}")
                 object.__setattr__(self, attr, v)
 
+    @property
+    def scales(self) -> tuple[float, float]:
+        """(scale_x, scale_y): both set by ``__post_init__`` (None given means ``scale``)."""
+        sx, sy = self.scale_x, self.scale_y
+        return (self.scale if sx is None else sx), (self.scale if sy is None else sy)
+
     @cached_property
     def _m(self) -> tuple[float, float, float, float]:
         """The correction matrix R(offset) @ diag(scale_x, scale_y), row major, computed once."""
         c, s = math.cos(self.angle_offset), math.sin(self.angle_offset)
-        return c * self.scale_x, -s * self.scale_y, s * self.scale_x, c * self.scale_y
+        sx, sy = self.scales
+        return c * sx, -s * sy, s * sx, c * sy
 
     @classmethod
     def identity(cls) -> SensorCalibration:
@@ -146,7 +153,7 @@ class SensorCalibration:
     @property
     def position(self) -> tuple[float, float] | None:
         """The fitted base_link position (x, y) in m, or None."""
-        return None if self.x is None else (self.x, self.y)
+        return None if self.x is None or self.y is None else (self.x, self.y)
 
     def apply(self, dx, dy):
         """Correct raw sensor-frame displacement(s) (m, or counts: linear).
@@ -169,11 +176,12 @@ class SensorCalibration:
 
     def to_dict(self) -> dict[str, float]:
         """Plain dict with unit-suffixed keys (the version-2 YAML layout of one sensor)."""
+        sx, sy = self.scales
         out = {
             "angle_offset_rad": self.angle_offset,
             "distance_m": self.distance,
-            "scale_x": self.scale_x,
-            "scale_y": self.scale_y,
+            "scale_x": sx,
+            "scale_y": sy,
         }
         for key, attr in _OPTIONAL_KEYS.items():
             if getattr(self, attr) is not None:
@@ -420,6 +428,7 @@ class Calibration:
             )
         if required - keys:
             raise ValueError(f"calibration: missing key(s) {sorted(required - keys)}")
+        version_n: int = data["version"]  # one of READABLE_VERSIONS: checked above
         method = data.get("method") or ""
         date = data.get("date") or ""
         if not isinstance(date, str):
@@ -440,7 +449,7 @@ class Calibration:
             if not isinstance(sid, str) or not sid:
                 raise ValueError(f"calibration: sensor id must be a non-empty string, got {sid!r}")
             out[sid] = SensorCalibration.from_dict(
-                entry, where=f"calibration of {sid}", version=version
+                entry, where=f"calibration of {sid}", version=version_n
             )
         return out
 

@@ -290,7 +290,8 @@ def straight_run_calibration(
     if not straights:
         raise CalibrationRefusedError("no straight step recorded: press Start straight and push it")
     signs = _signs(straights, ())
-    total = sum(sg * s.totals for sg, s in zip(signs, straights, strict=True))
+    terms = [sg * s.totals for sg, s in zip(signs, straights, strict=True)]
+    total = sum(terms[1:], terms[0])
     td = None if true_distance is None else true_distance * len(straights)
     cal = Calibration(method="straight-run", date=datetime.now(UTC).isoformat(timespec="seconds"))
     for i, dev in enumerate(devices):
@@ -412,7 +413,7 @@ def fit_mounts(
     theta0 = np.concatenate([p0, a0, c0])
     n_str = len(i_str)
 
-    def residuals(theta: np.ndarray, sigma: float) -> np.ndarray:
+    def residuals(theta: np.ndarray, sigma: float) -> tuple[np.ndarray, int]:
         a = theta[5 * n : 5 * n + n_str]
         c = theta[5 * n + n_str :]
         out = []

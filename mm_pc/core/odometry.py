@@ -188,6 +188,10 @@ class _Method:
         """One sample in plain floats: (x, y, yaw, residual or None)."""
         raise NotImplementedError
 
+    def body_map(self, lifted=None) -> np.ndarray:  # pragma: no cover - abstract
+        """(3, 2n) linear map of one sample's counts (m) to (a, b, c); see Odometry.body_map."""
+        raise NotImplementedError
+
 
 def _no_slip_map(mounts, i: int) -> np.ndarray:
     """(3, 2n): equation (2) of sensor ``i`` as a linear map from all counts

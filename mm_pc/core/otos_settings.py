@@ -82,7 +82,7 @@ def otos_settings(
     ``calibration``: the fitted scales as the linear scalar, the fitted position (else the
     mount's) and yaw (mount yaw + the calibration's angle) as the offset."""
     cal = calibration.get(device)
-    lin = linear_scalar(cal.scale_x, cal.scale_y)
+    lin = linear_scalar(*cal.scales)
     x, y = cal.position if cal.position is not None else (mount.x, mount.y)
     # base_link (x forward, y left) -> the OTOS frame (x right, y forward)
     h = math.remainder(mount.yaw + cal.angle_offset, math.tau)

@@ -36,7 +36,7 @@ should set their own (parameters of mm-odometry).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import KW_ONLY, dataclass, field
 
 import numpy as np
@@ -89,7 +89,8 @@ class PoseUncertainty:
         _check("lever_m", self.lever_m, positive=True)
         self._sensor_noise: float | None = None
         self._mounts: np.ndarray | None = None  # (n, 2) base_link x, y
-        self._body_map = None  # lifted flags or None -> (3, 2n) counts-to-(a, b, c) map
+        #: lifted flags or None -> (3, 2n) counts-to-(a, b, c) map (set with _mounts)
+        self._body_map: Callable[[tuple[bool, ...] | None], np.ndarray] | None = None
         self.reset()
 
     @classmethod
@@ -151,10 +152,11 @@ class PoseUncertainty:
             if not math.isfinite(v):
                 raise ValueError(f"{name} must be a finite number, got {v}")
         yaw0 = self._yaw if heading is None else float(heading)
-        if self._mounts is None:
+        mounts, body_map = self._mounts, self._body_map
+        if mounts is None or body_map is None:
             q, delta = self._legacy_step(a, b, c, fill_var_m2)
         else:
-            q, delta = self._sensor_step(a, b, c, fill_var_m2, lifted)
+            q, delta = self._sensor_step(mounts, body_map, a, b, c, fill_var_m2, lifted)
         self.var_along += self.q_pos * abs(a)
         self.var_yaw += self.q_yaw_dist * abs(a) + self.q_yaw_turn * abs(c)
         phi = yaw0 + c / 2
@@ -183,12 +185,21 @@ class PoseUncertainty:
         delta = np.array([[0.0, a], [0.0, b], [a / self.lever_m, c]])
         return q, delta
 
-    def _sensor_step(self, a, b, c, fill_var, lifted) -> tuple[np.ndarray, np.ndarray]:
-        """Sensor noise per metre travelled, through the method's counts -> (a, b, c) map."""
-        mounts = self._mounts
+    def _sensor_step(
+        self,
+        mounts: np.ndarray,
+        body_map: Callable[[tuple[bool, ...] | None], np.ndarray],
+        a,
+        b,
+        c,
+        fill_var,
+        lifted,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Sensor noise per metre travelled, through the method's counts -> (a, b, c) map
+        (``mounts``: (n, 2) base_link x, y of the sensors, m)."""
         n = len(mounts)
         flags = None if lifted is None or not any(lifted) else tuple(bool(v) for v in lifted)
-        m_map = self._body_map(flags)
+        m_map = body_map(flags)
         # each sensor's ideal displacement in its frame: dX = -(b + c*px), dY = a - c*py
         meas = np.empty((n, 2))
         meas[:, 0] = -(b + c * mounts[:, 0])

@@ -93,7 +93,7 @@ class PoseReading(NamedTuple):
 
 def _pose_bytes(p: Pose) -> bytes:
     """A pose as the six register bytes the firmware takes (rounded to the LSB)."""
-    out = []
+    out: list[int] = []
     for v in (
         round(p.x / regs.POS_M_PER_LSB),
         round(p.y / regs.POS_M_PER_LSB),
@@ -177,7 +177,7 @@ class OTOS:
         self._motion_len = 1 + 12
         self._chip_offset_inv = invert_pose(quantise_offset(self.offset))
         self._chip_scalar = 1.0
-        self._prev: tuple[int, int, float] | None = None  # raw x, y and self heading
+        self._prev: tuple[float, float, float] | None = None  # sensor x, y (m), heading (rad)
         self._frac_x = self._frac_y = 0.0
         self._wraps_x = self._wraps_y = 0
         self._prev_raw_xy: tuple[int, int] | None = None

@@ -141,12 +141,12 @@ class EmulatedOTOS(CountingCore):
     def _start_calibration(self, start: float, samples: int) -> None:
         self._cal_start = start
         self._cal_samples = max(1, samples)
-        self._busy_until = start + self._cal_samples * _T
+        self._busy_until: float | None = start + self._cal_samples * _T
         self._cal_yaw_start: float | None = None  # set when the truth reaches ``start``
         self.mem[regs.IMU_CALIB] = samples
 
-    def _end_calibration(self) -> None:
-        t = self._busy_until
+    def _end_calibration(self, t: float) -> None:
+        """The blocking calibration ends at ``t`` (s, emulator clock)."""
         self._advance_truth(t)
         # the yaw during the calibration window counts as gyro offset (firmware: the mean)
         yaw_cal = self.true_yaw - (self._cal_yaw_start or self.true_yaw)
@@ -184,7 +184,7 @@ class EmulatedOTOS(CountingCore):
                     self.mem[regs.IMU_CALIB] = max(1, min(self._cal_samples, left))
                     self.advance(now)  # the PAA5160 keeps counting meanwhile
                     return
-                self._end_calibration()
+                self._end_calibration(self._busy_until)
             t_next = self._t_frame + _T
             # a write that waited for a blocking calibration is applied when it ends
             t_apply = math.inf if self._apply_at is None else max(self._apply_at, self._t_frame)
@@ -217,7 +217,7 @@ class EmulatedOTOS(CountingCore):
         prev = self._host_prev or (hx, hy, hh)
         self._host_prev = (hx, hy, hh)
         vx, vy, vh = (hx - prev[0]) / _T, (hy - prev[1]) / _T, dh / _T
-        out = []
+        out: list[int] = []
         for v in (
             hx / regs.POS_M_PER_LSB,
             hy / regs.POS_M_PER_LSB,

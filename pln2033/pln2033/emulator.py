@@ -200,9 +200,9 @@ class EmulatedPLN2033(CountingCore):
             else:
                 self.set_cpi_y(cpi)
         elif opcode == c["get_x_cpi"]:
-            self.regs[a["command_low"]] = m.encode_cpi(self.cpi_x)
+            self.regs[a["command_low"]] = m.encode_cpi(round(self.cpi_x))  # whole CPI here
         elif opcode == c["get_y_cpi"]:
-            self.regs[a["command_low"]] = m.encode_cpi(self.cpi_y)
+            self.regs[a["command_low"]] = m.encode_cpi(round(self.cpi_y))
 
     def _write_pointer(self, value: int) -> None:
         self._mem_ptr = value % self.map.memory_words

@@ -135,11 +135,12 @@ class EmulatedPMW33xx(CountingCore):
 
     @property
     def srom_id(self) -> int:
-        if not self.srom_running:
+        image = self.srom_image
+        if image is None or not self.srom_running:
             return 0
         if self.srom_intact:
             return self.srom_id_intact
-        return R.crc16_ccitt(self.srom_image) & 0xFF or 0x01
+        return R.crc16_ccitt(image) & 0xFF or 0x01
 
     def srom_crc(self) -> int:
         """What the CRC self test answers for the image in the chip."""

@@ -100,7 +100,7 @@ def perimeter_correction(
     seg = contact
     if not isinstance(seg, PerimeterSegment):
         try:
-            axis, value = contact
+            axis, value = seg
         except (TypeError, ValueError):
             raise ValueError(
                 f"contact must be a PerimeterSegment or an (axis, value) pair, got {contact!r}"

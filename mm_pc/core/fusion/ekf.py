@@ -145,6 +145,7 @@ def _beacon_rows(beacons) -> np.ndarray:
     """(n, 3) array of (x, y, height) from Beacon-like objects or (x, y[, h]) tuples."""
     rows = []
     for i, b in enumerate(beacons):
+        vals: tuple[object, ...]
         if hasattr(b, "x") and hasattr(b, "y"):
             vals = (b.x, b.y, getattr(b, "height", 0.0))
         else:

@@ -340,5 +340,6 @@ def inflate_for_correlation(fix: PositionInput, factor: float) -> PositionInput:
     A filter takes each fix as independent news; fixes every 0.5 s of an error that wanders
     over 30 s are not, and without this the filter believes it averaged the error away.
     """
-    cov = tuple(tuple(factor * v for v in row) for row in fix.cov)
+    (a, b), (c, d) = fix.cov
+    cov = ((factor * a, factor * b), (factor * c, factor * d))
     return replace(fix, cov=cov, gate_cov=fix.cov)

@@ -436,5 +436,7 @@ class FusionCore:
                 if wire is None:
                     return "unusable"
                 axis, value = wire.axis, wire.value
+            if value is None:
+                raise ValueError(f"wire contact {rec!r}: an axis needs its value (m)")
             return ekf.update_axis(axis, value, self.wire_var)
         raise ValueError(f"unknown input record {rec!r}")

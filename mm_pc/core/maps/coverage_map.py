@@ -86,7 +86,7 @@ _OUTSIDE = UpdateResult(None, False, True, ())
 # --- argument checks ---------------------------------------------------------------------
 
 
-def _check_cell_size(cell_size: float) -> float:
+def _check_cell_size(cell_size: float | np.ndarray) -> float:
     try:
         s = float(cell_size)
     except (TypeError, ValueError):
@@ -107,7 +107,7 @@ def _check_shape(shape: Sequence[int]) -> tuple[int, int]:
     return int(ny), int(nx)
 
 
-def _check_origin(origin: Sequence[float]) -> tuple[float, float]:
+def _check_origin(origin: Sequence[float] | np.ndarray) -> tuple[float, float]:
     try:
         x0, y0 = (float(v) for v in origin)
     except (TypeError, ValueError):

@@ -278,7 +278,7 @@ def best_three(beacons: Sequence[Beacon], near=None) -> tuple[int, int, int]:
     p = None if near is None else _point(near, "near")
     triples = np.array(list(itertools.combinations(range(len(xy)), 3)))
     min_angle = _min_interior_angles(xy[triples])
-    ok = ~_collinear(xy[triples])
+    ok = ~np.asarray(_collinear(xy[triples]))  # one flag per triple
     if not ok.any():
         raise TrilaterationError(
             f"all {len(xy)} beacons are collinear (or coincide); need three that span a triangle"
