@@ -187,10 +187,13 @@ class PollBatch:
                 raise ValueError(f"polls up to seq {a.next_seq}, the next from {b.first_seq}")
         parts = [parts[0], *(p for p in parts[1:] if len(p))]
         cpi = next((p.cpi for p in reversed(parts) if len(p)), parts[-1].cpi)
+        stamp_ns, dx, dy, flags = (
+            np.concatenate([getattr(p, f) for p in parts])
+            for f in ("stamp_ns", "dx", "dy", "flags")
+        )
         return cls(
             parts[0].first_seq, parts[-1].next_seq, sum(p.dropped for p in parts), cpi,
-            *(np.concatenate([getattr(p, f) for p in parts]) for f in ("stamp_ns", "dx", "dy",
-                                                                        "flags")),
+            stamp_ns, dx, dy, flags,
         )  # fmt: skip
 
 
@@ -402,12 +405,13 @@ class PollTracker:
         n = self.n
         if self._cursor is None or not items or self._pending_any():
             return None
-        lens, cpi = [], None
+        lens: list[int] = []
+        cpi: int | None = None
         cursor = list(self._cursor)
         for totals, polls in items:
             if len(totals) != n or len(polls) != n:
                 return None
-            k = None
+            k: int | None = None
             for i, (t, b) in enumerate(zip(totals, polls, strict=True)):
                 if (
                     b is None or t.seq <= cursor[i] or b.dropped or b.first_seq != cursor[i]
@@ -418,7 +422,11 @@ class PollTracker:
                     return None  # missing, or not the same ticks, or step() would object
                 k, cpi = len(b), b.cpi
                 cursor[i] = t.seq
+            if k is None:
+                return None  # no sensors
             lens.append(k)
+        if cpi is None:
+            return None  # no sensors
         cols = [[polls[i] for _, polls in items] for i in range(n)]
         stamps = [np.concatenate([b.stamp_ns for b in c]) for c in cols]
         first = stamps[0]
@@ -473,17 +481,20 @@ class PollTracker:
         return PollSteps(first, dt, d, counts, lifted, np.zeros(kk, bool)), ends
 
     def _why_not_usable(self, totals, polls) -> str:
+        cursor = self._cursor
+        if cursor is None:
+            raise ValueError("PollTracker: no baseline")  # step() checks it first
         for i, (t, b) in enumerate(zip(totals, polls, strict=True)):
-            want = t.seq - self._cursor[i]
+            want = t.seq - cursor[i]
             if want == 0:
                 continue
             if b is None:
-                return f"sensor {i}: no polls for seq {self._cursor[i]}..{t.seq}"
+                return f"sensor {i}: no polls for seq {cursor[i]}..{t.seq}"
             if b.instance_id and t.instance_id and b.instance_id != t.instance_id:
                 return f"sensor {i}: polls from another node run than the totals"
-            if b.dropped or b.first_seq != self._cursor[i]:
+            if b.dropped or b.first_seq != cursor[i]:
                 return (
-                    f"sensor {i}: {max(b.dropped, b.first_seq - self._cursor[i])} polls "
+                    f"sensor {i}: {max(b.dropped, b.first_seq - cursor[i])} polls "
                     "had left the node's ring buffer"
                 )
             if b.next_seq != t.seq:
@@ -552,10 +563,10 @@ class PollTracker:
     def _match_ticks(self, pend: list[_Pending]):
         """Polls paired by stamp: ticks present for every sensor (real polls, not command
         reads); each poll summed into the tick at or after it. (None, ...) when no tick."""
-        ticks = None
-        for p in pend:
-            s = p.stamp[(p.flags & FLAG_COMMAND_READ) == 0]
-            ticks = s if ticks is None else np.intersect1d(ticks, s, assume_unique=False)
+        real = [p.stamp[(p.flags & FLAG_COMMAND_READ) == 0] for p in pend]
+        ticks = real[0]
+        for s in real[1:]:
+            ticks = np.intersect1d(ticks, s, assume_unique=False)
         ticks = np.unique(ticks)
         if not len(ticks):
             return None, None, None, None, None
@@ -626,7 +637,7 @@ class PollTracker:
         """How many leading ticks can be made steps: up to the start of the first lift
         that closed fewer than LIFT_CONTEXT_POLLS ticks before the newest (or is open)."""
         k = len(lifted)
-        any_lift = lifted.any(axis=1)
+        any_lift = np.asarray(lifted.any(axis=1))
         late = np.flatnonzero(any_lift[max(0, k - LIFT_CONTEXT_POLLS) :])
         if not len(late):
             return k
