@@ -10,10 +10,12 @@ import time
 from pathlib import Path
 
 import pytest
-from fakes import scaled
+from fakes import wait_until
 
 pytest.importorskip("rclpy")
 pytest.importorskip("PySide6")
+
+from PySide6.QtWidgets import QApplication
 
 from mm_beagle.tools.harness import (
     BeagleClient,
@@ -28,6 +30,8 @@ from mm_pc.monitor.model.session import MonitorSession
 from mm_pc.monitor.ros_bridge import RosBridge
 
 pytestmark = pytest.mark.ros
+#: wait_until's pump: the window's signals and timers are served while a test waits
+PUMP = QApplication.processEvents
 ROOT = Path(__file__).resolve().parents[2]
 STRAIGHT = {
     "backend": "sim",
@@ -49,15 +53,10 @@ def make_window(qtbot, tmp_path, rate=50.0):
     return window, bridge
 
 
-def wait_until(qtbot, predicate, timeout=20.0):
-    """qtbot.waitUntil in seconds, scaled like fakes.wait_until (Qt's events run meanwhile)."""
-    qtbot.waitUntil(predicate, timeout=int(scaled(timeout) * 1000))
-
-
 def assert_run_counted(qtbot, session, timeout: float) -> None:
     """The STRAIGHT run ended at 0.6 m, and every count the node measured after the
     monitor's baseline reached the pose (the node's total from /diagnostics)."""
-    wait_until(qtbot, lambda: session.pose.x > 0.59, timeout)
+    wait_until(lambda: session.pose.x > 0.59, timeout, pump=PUMP)
     qtbot.wait(600)
     client = BeagleClient("mm_monitor_check")
     try:
@@ -75,20 +74,21 @@ def test_monitor_connects_counts_everything_and_survives_a_restart(qtbot, tmp_pa
         assert "waiting" in window.state_label.text()
         log = str(tmp_path / "beagle1.log")
         with beagle_process(STRAIGHT, env=dict(os.environ), log_path=log) as proc:
-            wait_until(qtbot, lambda: "connected to /mm_beagle" in window.state_label.text())
-            wait_until(qtbot, lambda: "ms" in window.rtt_label.text(), 5)
+            connected = "connected to /mm_beagle"
+            wait_until(lambda: connected in window.state_label.text(), 20, pump=PUMP)
+            wait_until(lambda: "ms" in window.rtt_label.text(), 5, pump=PUMP)
             # the run: 4 s still, 3 s at 0.2 m/s, then still; wait for it to end
             session = window.ctx.session
             assert_run_counted(qtbot, session, timeout=20)
             stop_process(proc)
-        wait_until(qtbot, lambda: "lost /mm_beagle" in window.state_label.text(), 15)
+        wait_until(lambda: "lost /mm_beagle" in window.state_label.text(), 15, pump=PUMP)
         pose_before = session.pose
         with beagle_process(STRAIGHT, env=dict(os.environ), log_path=str(tmp_path / "b2.log")):
-            wait_until(qtbot, lambda: bridge.state == "connected", 30)
-            wait_until(qtbot, lambda: session.stats.restarts >= 1, 10)
+            wait_until(lambda: bridge.state == "connected", 30, pump=PUMP)
+            wait_until(lambda: session.stats.restarts >= 1, 10, pump=PUMP)
             # no jump at the restart; the second run adds its own 0.6 m
             assert session.pose.x == pytest.approx(pose_before.x, abs=1e-9)
-            wait_until(qtbot, lambda: session.pose.x > pose_before.x + 0.59, 20)
+            wait_until(lambda: session.pose.x > pose_before.x + 0.59, 20, pump=PUMP)
         assert bridge.stats().dropped_requests >= 0
     finally:
         bridge.stop()
@@ -113,11 +113,11 @@ def test_monitor_through_the_agent_counts_everything_and_an_agent_restart_is_sea
             log_path=str(tmp_path / "node.log"),
         ):  # fmt: skip
             with agent_process(agent_opts, str(tmp_path / "agent1.log")):
-                wait_until(qtbot, lambda: bridge.state == "connected", 30)
+                wait_until(lambda: bridge.state == "connected", 30, pump=PUMP)
                 assert_run_counted(qtbot, session, timeout=25)
             pose_before = session.pose
             with agent_process(agent_opts, str(tmp_path / "agent2.log")):
-                wait_until(qtbot, lambda: session.pose.x > pose_before.x + 0.59, 30)
+                wait_until(lambda: session.pose.x > pose_before.x + 0.59, 30, pump=PUMP)
                 qtbot.wait(1000)  # the run's last centimetre
             assert session.stats.restarts == 0  # the node never went back
             assert session.pose.x == pytest.approx(pose_before.x + 0.6, abs=0.004)
@@ -150,7 +150,7 @@ def test_pause_stops_requests(qtbot, tmp_path):
     with beagle_process({"backend": "sim"}, env=dict(os.environ), log_path=str(tmp_path / "b.log")):
         window, bridge = make_window(qtbot, tmp_path, rate=50.0)
         try:
-            wait_until(qtbot, lambda: bridge.replies > 5)
+            wait_until(lambda: bridge.replies > 5, 20, pump=PUMP)
             window.pause_button.setChecked(True)
             qtbot.wait(300)
             n = bridge.requests
@@ -158,7 +158,7 @@ def test_pause_stops_requests(qtbot, tmp_path):
             assert bridge.requests == n
             assert window.pause_button.text() == "Resume polling"
             window.pause_button.setChecked(False)
-            wait_until(qtbot, lambda: bridge.requests > n + 5, 5)
+            wait_until(lambda: bridge.requests > n + 5, 5, pump=PUMP)
         finally:
             bridge.stop()
             window.close()
@@ -363,14 +363,14 @@ def test_wizard_calibrates_from_a_real_node_on_the_guided_run(qtbot, tmp_path):
 
     try:
         with beagle_process(params, env=dict(os.environ), log_path=str(tmp_path / "b.log")):
-            wait_until(qtbot, lambda: bool(ctx.session.devices), 30)
+            wait_until(lambda: bool(ctx.session.devices), 30, pump=PUMP)
             wiz = CalibrationWizard(ctx, window)
             qtbot.addWidget(wiz)
             wiz.show()
             wiz.next()
             assert wiz.drive_page.start(kinds.pop(0))  # in the start delay: standing
             ctx.reply_processed.connect(on_reply)
-            wait_until(qtbot, lambda: state["done"], 90)
+            wait_until(lambda: state["done"], 90, pump=PUMP)
             ctx.reply_processed.disconnect(on_reply)
         steps = ctx.session.calibration_steps()
         assert [s.kind for s, _ in steps] == ["straight"] * 2 + ["spin"] * 4

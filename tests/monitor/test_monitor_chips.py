@@ -197,11 +197,8 @@ def real_dump(chip: str):
 
     clock = FakeClock()
 
-    def sleep(s: float) -> None:
-        clock.t += s
-
     emu = make_emulator(chip, motion=ConstantVelocity(0.0, 0.1), clock=clock, seed=1)
-    drv = make_driver(chip, emu, name=DEFAULT_DEVICES[0], sleep=sleep)
+    drv = make_driver(chip, emu, name=DEFAULT_DEVICES[0], sleep=clock.sleep)
     drv.initialise(chip_info(chip).cpi_default)
     clock.t += 0.01
     _motion, regs = drv.read_all_registers()

@@ -11,6 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from fakes import wait_until
 
 pytest.importorskip("rclpy")
 pytest.importorskip("PySide6")
@@ -63,26 +64,17 @@ def live_window(qapp, beagle_node, tmp_path_factory):
         window.close()
 
 
-def wait(qapp, predicate, seconds: float) -> None:
-    """fakes.wait_until with Qt's events processed between the checks."""
-    from fakes import wait_until
-
-    def ready():
-        qapp.processEvents()
-        return predicate()
-
-    wait_until(ready, seconds, "the live window's data")
-
-
 @pytest.mark.screenshot
 def test_every_tab_screenshot_has_content(live_window, qapp, screenshot_dir):
     window = live_window
     session = window.ctx.session
     # about 8 s of the figure eight at 50 Hz
-    wait(qapp, lambda: session.history is not None and len(session.history) > 400, 40)
+    wait_until(lambda: session.history is not None and len(session.history) > 400, 40,
+               "8 s of history", pump=qapp.processEvents)
     assert window.views["Registers"].request_registers() == 2
     table = window.views["Registers"].table
-    wait(qapp, lambda: table.item(0, 0) is not None and "0x" in table.item(0, 0).text(), 10)
+    wait_until(lambda: table.item(0, 0) is not None and "0x" in table.item(0, 0).text(), 10,
+               "the registers table", pump=qapp.processEvents)
     for i in range(window.tabs.count()):
         title = window.tabs.tabText(i)
         window.tabs.setCurrentIndex(i)
@@ -106,7 +98,8 @@ WINDOW_SIZES = ((1024, 700), (1600, 1000))
 def test_whole_window_at_small_and_large_sizes(live_window, qapp, screenshot_dir, width, height):
     window = live_window
     session = window.ctx.session
-    wait(qapp, lambda: session.history is not None and len(session.history) > 200, 40)
+    wait_until(lambda: session.history is not None and len(session.history) > 200, 40,
+               "4 s of history", pump=qapp.processEvents)
     window.tabs.setCurrentIndex(0)
     window.resize(width, height)
     for _ in range(5):
