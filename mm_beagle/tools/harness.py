@@ -180,7 +180,7 @@ def free_port() -> int:
 
 def agent_command(options: dict[str, object]) -> list[str]:
     """The command line of mm-beagle-agent with ``--name value`` for each option."""
-    cmd = [sys.executable, "-m", "mm_beagle.link.agent"]
+    cmd = [sys.executable, "-m", "mm_beagle.link.agent_cli"]
     for name, value in options.items():
         flag = "--" + name.replace("_", "-")
         if isinstance(value, bool):

@@ -34,7 +34,7 @@ S0, S1 = "/dev/spidev1.0", "/dev/spidev1.1"
 
 def run_agent(*args: str, timeout: float = 30) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, "-m", "mm_beagle.link.agent", *args],
+        [sys.executable, "-m", "mm_beagle.link.agent_cli", *args],
         capture_output=True,
         text=True,
         timeout=timeout,

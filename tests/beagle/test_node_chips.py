@@ -260,7 +260,7 @@ def test_bad_chips_exit_2_from_the_agents_cli(options, expect, tmp_path):
 
 
 def test_agent_config_file_takes_chips(tmp_path):
-    from mm_beagle.link.agent import build_parser, config_from_args
+    from mm_beagle.link.agent_cli import build_parser, config_from_args
 
     f = tmp_path / "agent.yaml"
     f.write_text("chips: [pln2033, pmw3360]\nchip_options: ['pmw3360.check_crc=false']\n")

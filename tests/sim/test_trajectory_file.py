@@ -88,7 +88,7 @@ def test_unknown_names_list_the_choices():
     [
         lambda p: __import__("mm_beagle.tools.harness", fromlist=["x"]).node_command(
             {"backend": "sim", "sim_trajectory": f"file:{p}"}, "/bad_file"),
-        lambda p: [sys.executable, "-m", "mm_beagle.link.agent", "--backend", "sim",
+        lambda p: [sys.executable, "-m", "mm_beagle.link.agent_cli", "--backend", "sim",
                    "--sim-trajectory", f"file:{p}"],
         lambda p: [sys.executable, "-m", "mm_pc.monitor.app", "--headless", "--sim", f"file:{p}"],
     ],
