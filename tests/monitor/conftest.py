@@ -80,3 +80,29 @@ def _feed(ctx, replies=None, *, name="figure_eight", rate_hz=100.0, seconds=None
 def feed():
     """``feed(ctx, replies=None, *, name, rate_hz, seconds, start_ns)``: see :func:`_feed`."""
     return _feed
+
+
+@pytest.fixture
+def fake_bridge():
+    """A stand-in for RosBridge: the signals and request methods the views use; ``calls``
+    records the requests (``("settings", device)``, ``("resolution", device, cpi)``)."""
+    from PySide6.QtCore import QObject, Signal
+
+    class FakeBridge(QObject):
+        settings_received = Signal(str, object)
+        settings_failed = Signal(str, str)
+        resolution_done = Signal(str, bool, str, int)
+        diagnostics_received = Signal(object)
+        stats_updated = Signal(object)
+
+        def __init__(self) -> None:
+            super().__init__()
+            self.calls: list[tuple] = []
+
+        def request_settings(self, device: str) -> None:
+            self.calls.append(("settings", device))
+
+        def set_resolution(self, device: str, cpi: int) -> None:
+            self.calls.append(("resolution", device, cpi))
+
+    return FakeBridge()

@@ -15,7 +15,6 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from PySide6.QtCore import QObject, Signal
 
 from mm_pc.monitor.context import MonitorContext
 from mm_pc.monitor.model.chips import chip_title, cpi_range, quality_figure
@@ -26,24 +25,6 @@ from mm_pc.monitor.widgets.data_list import DataListView
 from mm_pc.monitor.widgets.health_view import DIAG_COLUMNS, HealthView
 from mm_pc.monitor.widgets.registers_view import FIELDS, RegistersView
 from mm_pc.monitor.widgets.resolution_panel import ResolutionPanel, validate_cpi
-
-
-class FakeBridge(QObject):
-    settings_received = Signal(str, object)
-    settings_failed = Signal(str, str)
-    resolution_done = Signal(str, bool, str, int)
-    diagnostics_received = Signal(object)
-    stats_updated = Signal(object)
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.calls: list[tuple] = []
-
-    def request_settings(self, device: str) -> None:
-        self.calls.append(("settings", device))
-
-    def set_resolution(self, device: str, cpi: int) -> None:
-        self.calls.append(("resolution", device, cpi))
 
 
 def quality_at(k: int) -> int:
@@ -85,8 +66,8 @@ def test_chip_facts_from_the_registry_and_an_old_node():
     assert cpi_range("pmw3360", settings).describe() == "200..8000 in steps of 200"
 
 
-def test_health_plots_quality_with_the_chips_threshold(qtbot):
-    bridge = FakeBridge()
+def test_health_plots_quality_with_the_chips_threshold(qtbot, fake_bridge):
+    bridge = fake_bridge
     ctx = make_ctx(("pmw3360", "pmw3389"), bridge)
     view = HealthView(ctx)
     qtbot.addWidget(view)
@@ -146,8 +127,8 @@ def test_data_tabs_name_each_sensors_chip(qtbot):
         f"{DEFAULT_DEVICES[0]} (PixArt PMW3360)", f"{DEFAULT_DEVICES[1]} (PixArt PAA5100JE-Q)"]
 
 
-def test_resolution_panel_uses_the_chips_own_range_and_disables_a_fixed_one(qtbot):
-    bridge = FakeBridge()
+def test_resolution_panel_uses_the_chips_own_range_and_disables_a_fixed_one(qtbot, fake_bridge):
+    bridge = fake_bridge
     ctx = make_ctx(("pmw3360", "pmw3901"), bridge, cpi=(1600, 104))
     panel = ResolutionPanel(ctx)
     qtbot.addWidget(panel)
@@ -205,8 +186,8 @@ def real_dump(chip: str):
     return tuple(regs), tuple(regs.values())
 
 
-def test_registers_view_shows_any_chips_dump_beside_a_pln2033(qtbot):
-    bridge = FakeBridge()
+def test_registers_view_shows_any_chips_dump_beside_a_pln2033(qtbot, fake_bridge):
+    bridge = fake_bridge
     ctx = MonitorContext(MonitorSession(devices=DEFAULT_DEVICES), bridge=bridge)
     view = RegistersView(ctx)
     qtbot.addWidget(view)
@@ -229,10 +210,10 @@ def test_registers_view_shows_any_chips_dump_beside_a_pln2033(qtbot):
 
 
 @pytest.mark.screenshot
-def test_quality_and_chip_screenshots(qtbot, screenshot):
+def test_quality_and_chip_screenshots(qtbot, screenshot, fake_bridge):
     """docs/images/health-quality.png: a PMW3360 and a PMW3389 with a SQUAL dip below the
     threshold; registers-pmw3360.png: a PMW3360's dump beside an old node's PLN2033."""
-    bridge = FakeBridge()
+    bridge = fake_bridge
     ctx = make_ctx(("pmw3360", "pmw3389"), bridge)
     view = HealthView(ctx)
     qtbot.addWidget(view)

@@ -14,7 +14,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 from fakes import wait_until
-from PySide6.QtCore import QItemSelectionModel, QObject, Qt, Signal
+from PySide6.QtCore import QItemSelectionModel, Qt
 from PySide6.QtGui import QGuiApplication, QImage
 
 from mm_pc.monitor.context import MonitorContext
@@ -66,24 +66,6 @@ def distinct_colours(img: QImage, step: int = 7) -> int:
         for x in range(0, img.width(), step):
             colours.add(img.pixel(x, y))
     return len(colours)
-
-
-class FakeBridge(QObject):
-    """The signals and request methods of RosBridge the views use; records the requests."""
-
-    settings_received = Signal(str, object)
-    settings_failed = Signal(str, str)
-    resolution_done = Signal(str, bool, str, int)
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.calls: list[tuple] = []
-
-    def request_settings(self, device: str) -> None:
-        self.calls.append(("settings", device))
-
-    def set_resolution(self, device: str, cpi: int) -> None:
-        self.calls.append(("resolution", device, cpi))
 
 
 # -- graphs ------------------------------------------------------------------------------
@@ -415,8 +397,8 @@ def test_status_decoding():
     assert decode_status(0) == []
 
 
-def test_registers_view_fills_from_the_bridge_signals(qtbot):
-    bridge = FakeBridge()
+def test_registers_view_fills_from_the_bridge_signals(qtbot, fake_bridge):
+    bridge = fake_bridge
     ctx = MonitorContext(MonitorSession(devices=DEFAULT_DEVICES), bridge=bridge)
     view = RegistersView(ctx)
     qtbot.addWidget(view)
@@ -486,8 +468,10 @@ def test_registers_and_resolution_disabled_offline(qtbot, make_ctx):
         ("1e3", r"CPI must be a whole number, got '1e3'"),
     ],
 )
-def test_resolution_refuses_bad_input_without_asking_the_node(qtbot, text, message, feed):
-    bridge = FakeBridge()
+def test_resolution_refuses_bad_input_without_asking_the_node(
+    qtbot, text, message, feed, fake_bridge
+):
+    bridge = fake_bridge
     ctx = MonitorContext(MonitorSession(), bridge=bridge)
     panel = ResolutionPanel(ctx)
     qtbot.addWidget(panel)
@@ -501,8 +485,8 @@ def test_resolution_refuses_bad_input_without_asking_the_node(qtbot, text, messa
         validate_cpi(text)
 
 
-def test_resolution_shows_the_answer_of_the_node(qtbot):
-    bridge = FakeBridge()
+def test_resolution_shows_the_answer_of_the_node(qtbot, fake_bridge):
+    bridge = fake_bridge
     ctx = MonitorContext(MonitorSession(devices=DEFAULT_DEVICES), bridge=bridge)
     panel = ResolutionPanel(ctx)
     qtbot.addWidget(panel)
