@@ -23,6 +23,7 @@ import time
 import zlib
 
 from mm_beagle.link import link
+from mm_beagle.poller import commands
 from mm_beagle.poller import shared_state as ss
 from mm_beagle.poller.poller import Poller, PollerConfig
 
@@ -109,7 +110,7 @@ class AgentLink:
             payload = query.payload.to_bytes() if query.payload is not None else b""
             try:
                 reply = answer(payload)
-            except link.LinkError as exc:
+            except (link.LinkError, commands.CommandRefusedError) as exc:  # nothing changed
                 reply = json.dumps({"status": "invalid", "payload": str(exc)}).encode()
             except Exception as exc:  # never let one request stop the polls
                 reply = json.dumps({"status": "error", "payload": f"agent failed: {exc!r}"})
@@ -117,55 +118,33 @@ class AgentLink:
             query.reply(query.key_expr, reply)
             query.drop()
 
-    def _sensor(self, msg: dict) -> int:
-        devices = self.poller.cfg.devices
-        dev = msg.get("sensor")
-        if dev not in devices:
-            raise link.LinkError(f"unknown sensor id {dev!r}; known: {', '.join(devices)}")
-        return devices.index(dev)
-
     def answer_command(self, payload: bytes) -> bytes:
-        """One command (JSON) -> {"status", "payload", "seq"}: the poller's own answers."""
+        """One command (JSON) -> {"status", "payload", "seq"}: checked against the command
+        table (:mod:`~mm_beagle.poller.commands`), then the poller's own answer."""
         msg = link.parse_request(payload, "command")
-        cmd = msg.get("cmd")
         poller = self.poller
-        if cmd == "info":
-            status, body = "ok", self.info()
-        elif cmd == "settings":
-            status, body = poller.serve_command(("settings", self._sensor(msg)))
-        elif cmd == "set_cpi":
-            i, cpi = self._sensor(msg), msg.get("cpi")
-            if isinstance(cpi, bool) or not isinstance(cpi, int):
-                raise link.LinkError(f"'cpi' must be an integer, got {cpi!r}")
-            status, body = poller.serve_command(("set_cpi", i, cpi))
-        elif cmd == "load_patch":
-            i, words = self._sensor(msg), self._patch_words(msg)
-            status, body = poller.serve_command(("load_patch", i, words))
+        cmd, i, args = commands.from_link(msg, poller.cfg.devices)
+        if cmd.name == "info":  # the agent's own configuration
+            status, body = commands.OK, self.info()
         else:
-            known = "info, settings, set_cpi, load_patch"
-            raise link.LinkError(f"unknown command {cmd!r}; known: {known}")
+            if cmd.name == "load_patch":
+                args = (self._patch_words(*args),)
+            status, body = poller.serve_command((cmd.name, i, *args))
         seqs = [ch.seq for ch in poller.channels]
         return json.dumps({"status": status, "payload": body, "seq": seqs}).encode()
 
-    def _patch_words(self, msg: dict) -> list[int]:
-        """The words of the patch file ``msg["file"]`` names in this agent's patch_dir.
+    def _patch_words(self, name: str) -> list[int]:
+        """The words of patch file ``name`` in this agent's patch_dir.
 
         A peer names a file; it never sends a path elsewhere or the code itself."""
         from mm_beagle.poller.patches import PatchPathError, resolve_patch_file
         from pln2033.errors import PatchError
         from pln2033.pln2033 import read_patch_file
 
-        if "words" in msg:
-            raise link.LinkError(
-                "load_patch takes 'file' (a patch file in the agent's --patch-dir), not 'words'"
-            )
-        name = msg.get("file")
-        if not isinstance(name, str) or not name:
-            raise link.LinkError("load_patch needs 'file': a patch file in the agent's --patch-dir")
         try:
             return read_patch_file(resolve_patch_file(self.poller.cfg.patch_dir, name))
         except (PatchPathError, PatchError) as exc:
-            raise link.LinkError(str(exc)) from None
+            raise commands.CommandRefusedError(str(exc)) from None
 
     def answer_history(self, payload: bytes) -> bytes:
         """Polls ``since`` onwards of one sensor (at most ``max``): a batch frame numbered
@@ -256,6 +235,7 @@ class AgentPoller(Poller):
     service_period = 0.01
 
     def __init__(self, cfg: PollerConfig, state: ss.SharedState) -> None:
+        # no pipes: their only users, emit and service, are overridden below
         super().__init__(cfg, state, None, None)  # type: ignore[arg-type]
         self.link: AgentLink | None = None
 
