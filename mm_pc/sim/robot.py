@@ -14,6 +14,7 @@ axes follow the seed: sensor +y = robot forward, sensor +x = robot right.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -246,7 +247,7 @@ def guided_calibration_run(
     return _segments(parts, dt)
 
 
-TRAJECTORIES = {
+TRAJECTORIES: dict[str, Callable[..., tuple[np.ndarray, np.ndarray]]] = {
     "still": still,
     "straight": straight,
     "figure_eight": figure_eight,
@@ -301,7 +302,7 @@ def load_trajectory_file(
         raise ValueError(f"trajectory file {name}: cannot read it ({e.strerror or e})") from None
     except UnicodeDecodeError:
         raise ValueError(f"trajectory file {name}: not a text (CSV) file") from None
-    header = None
+    header: tuple[str, ...] | None = None
     rows: list[list[float]] = []
     lines = []
     for no, raw in enumerate(text.splitlines(), start=1):
@@ -338,7 +339,7 @@ def load_trajectory_file(
                     f">= {1 / MAX_FILE_INTERVAL_S:g} Hz (at most {MAX_FILE_INTERVAL_S * 1e3:g} ms)"
                 )
         rows.append(vals)
-    if len(rows) < 2:
+    if header is None or len(rows) < 2:
         raise ValueError(f"trajectory file {name}: needs at least two rows after the header")
     a = np.array(rows)
     t = a[:, 0] - a[0, 0]
@@ -515,7 +516,7 @@ def lift_mask(n_steps: int, lifts: list[tuple[float, float]], dt: float = DT) ->
 def with_mount_yaw(mounts, yaw: float | list[float]) -> tuple[SensorMount, ...]:
     """The mounts with a mounting error ``yaw`` (rad, one for all or one per mount)."""
     mounts = tuple(mounts)
-    yaws = [yaw] * len(mounts) if np.ndim(yaw) == 0 else list(yaw)
+    yaws = list(yaw) if isinstance(yaw, (list, tuple, np.ndarray)) else [yaw] * len(mounts)
     if len(yaws) != len(mounts):
         raise ValueError(f"{len(yaws)} yaw(s) for {len(mounts)} mount(s)")
     return tuple(replace(m, yaw=float(y)) for m, y in zip(mounts, yaws, strict=True))
