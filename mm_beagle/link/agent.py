@@ -152,18 +152,13 @@ class AgentLink:
         rid = None
         try:
             msg = link.parse_request(payload, "history")
-            rid, i, since = msg.get("id"), msg.get("sensor"), msg.get("since")
-            most = msg.get("max", link.MAX_HISTORY)
+            rid = msg.get("id")
             n = len(self.poller.channels)
-            for name, v in (("id", rid), ("sensor", i), ("since", since), ("max", most)):
-                if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v < 2**63:
-                    raise link.LinkError(f"history '{name}' must be an integer >= 0, got {v!r}")
-            if i >= n:
-                raise link.LinkError(f"history 'sensor' {i} is not one of 0..{n - 1}")
+            rid, i, since, most = commands.history_request(msg, n, link.MAX_HISTORY)
             ch = self.poller.channels[i]
             if since > ch.seq:
-                raise link.LinkError(f"history since {since} is ahead of the newest poll {ch.seq}")
-        except link.LinkError as exc:
+                raise commands.CommandRefusedError(commands.history_ahead(since, ch.seq))
+        except (link.LinkError, commands.CommandRefusedError) as exc:
             rid = rid if isinstance(rid, int) and not isinstance(rid, bool) else None
             return json.dumps({"id": rid, "status": "invalid", "payload": str(exc)}).encode()
         end = min(ch.seq, since + min(most, link.MAX_HISTORY))

@@ -116,6 +116,28 @@ def takes_no_patch(device: str, title: str) -> str:
 # --- the link's JSON -------------------------------------------------------------------
 
 
+def _count(what: str, value: object) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < 2**63:
+        raise CommandRefusedError(f"history '{what}' must be an integer >= 0, got {value!r}")
+    return value
+
+
+def history_request(msg: dict, n_sensors: int, max_default: int) -> tuple[int, int, int, int]:
+    """A history request ``{"id", "sensor", "since", "max"}`` checked: (id, sensor index,
+    since, max); ``max`` defaults to ``max_default``. Raises :class:`CommandRefusedError`."""
+    rid = _count("id", msg.get("id"))
+    i = _count("sensor", msg.get("sensor"))
+    since = _count("since", msg.get("since"))
+    most = _count("max", msg.get("max", max_default))
+    if i >= n_sensors:
+        raise CommandRefusedError(f"history 'sensor' {i} is not one of 0..{n_sensors - 1}")
+    return rid, i, since, most
+
+
+def history_ahead(since: int, newest: int) -> str:
+    return f"history since {since} is ahead of the newest poll {newest}"
+
+
 def to_link(name: str, device: str, *args: object) -> dict[str, object]:
     """The JSON object of one command for ``device`` (the node's remote backend)."""
     cmd = COMMANDS[name]

@@ -66,3 +66,26 @@ def test_bad_link_requests_are_refused_with_the_tables_message(msg, expect):
     with pytest.raises(CommandRefusedError) as err:
         from_link(msg, DEVICES)
     assert expect in str(err.value)
+
+
+def test_a_history_request_is_checked_field_by_field():
+    assert commands.history_request({"id": 4, "sensor": 1, "since": 9}, 2, 100) == (4, 1, 9, 100)
+    assert commands.history_request({"id": 0, "sensor": 0, "since": 0, "max": 5}, 2, 9)[3] == 5
+
+
+@pytest.mark.parametrize(
+    ("msg", "expect"),
+    [
+        ({"id": 1, "sensor": -1, "since": 0}, "history 'sensor' must be an integer >= 0, got -1"),
+        ({"id": 1, "sensor": 2, "since": 0}, "history 'sensor' 2 is not one of 0..1"),
+        ({"id": 1, "sensor": 0, "since": 1e99}, "'since' must be an integer"),
+        ({"id": -5, "sensor": 0, "since": 0}, "history 'id' must be an integer >= 0, got -5"),
+        ({"id": True, "sensor": 0, "since": 0}, "'id'"),
+        ({"id": 1, "sensor": 0, "since": 0, "max": 2**63}, "'max'"),
+        ({"sensor": 0, "since": 0}, "'id' must be an integer >= 0, got None"),
+    ],
+)
+def test_bad_history_requests_are_refused_with_the_tables_message(msg, expect):
+    with pytest.raises(CommandRefusedError) as err:
+        commands.history_request(msg, 2, 100)
+    assert expect in str(err.value)
