@@ -30,7 +30,7 @@ import traceback
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
-from typing import TYPE_CHECKING, Protocol, cast
+from typing import TYPE_CHECKING, Any, Protocol, cast
 
 from mm_beagle.poller import chip_config, commands
 from mm_beagle.poller import shared_state as ss
@@ -104,15 +104,8 @@ class Bus(Protocol):
     def close(self) -> None: ...
 
 
-def _detached(_tx: list[int]) -> list[int]:
-    raise RuntimeError("the channel has no driver attached")
-
-
-def _detached_decode(_rx: list[int]) -> Motion:
-    raise RuntimeError("the channel has no driver attached")
-
-
-def _detached_read() -> Motion:
+def _detached(*_args: object) -> Any:
+    """A channel's driver calls before any driver is attached (never made: see ``ok``)."""
     raise RuntimeError("the channel has no driver attached")
 
 
@@ -169,8 +162,8 @@ class Channel:
         self.gap_m = LiftGapEstimator()  # in metres: right across a CPI change
         # the hot path's view of the driver (see attach)
         self._xfer: Callable[[list[int]], list[int]] = _detached
-        self._decode: Callable[[list[int]], Motion] = _detached_decode
-        self._read: Callable[[], Motion] = _detached_read
+        self._decode: Callable[[list[int]], Motion] = _detached
+        self._read: Callable[[], Motion] = _detached
         self._tx: list[int] = []
         self._unusual = 0xFFFF
         self._motion_bit = 0
