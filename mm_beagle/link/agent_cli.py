@@ -20,6 +20,7 @@ from mm_beagle.link import link
 from mm_beagle.link.agent import AgentLink, AgentPoller, StubMotionBus, make_state, rss_mb
 from mm_beagle.poller import chip_config
 from mm_beagle.poller import shared_state as ss
+from mm_beagle.poller.options import OPTIONS, Option, check_ranges, option_bounds
 from mm_beagle.poller.poller import PollerConfig, poller_config, tune_process
 from mm_beagle.poller.sim_backend import SimConfig, check_trajectory, parse_fail_windows
 from mm_beagle.poller.sim_channel import truth_of
@@ -38,12 +39,57 @@ class AgentConfig:
     credentials: str = ""
 
 
+#: the agent's own options (the poller's are mm_beagle.poller.options.OPTIONS)
+AGENT_OPTIONS = {
+    o.name: o
+    for o in (
+        Option(
+            "ring_seconds",
+            65.536,
+            "single polls kept (s); at least the link's replay window",
+            lo=MIN_RING_S,
+            unit=" s (the link's replay window)",
+        ),
+        Option("name", link.DEFAULT_NAME, "key prefix mm/NAME"),
+        Option("listen", [link.DEFAULT_ENDPOINT], "zenoh endpoints to listen on"),
+        Option("credentials", "", "user:password file (mode 600) peers must present"),
+    )
+}
+ALL_OPTIONS = {**OPTIONS, **AGENT_OPTIONS}
+DEFAULTS = {name: o.default for name, o in ALL_OPTIONS.items()}
+
+
 def _names(text: str) -> list[str]:
     """``"pmw3360,pln2033"`` -> ["pmw3360", "pln2033"]."""
     return chip_config.split_names([text])
 
 
+def _help(o: Option, text: str = "") -> str:
+    """An option's help: ``text`` or its description, with its range and default."""
+    extra = [bounds] if (bounds := option_bounds(o)) else []
+    if o.default not in ("", []):
+        d = o.default
+        extra.append(f"default {' '.join(d) if isinstance(d, list) else d}")
+    return f"{text or o.description}" + (f" [{', '.join(extra)}]" if extra else "")
+
+
+def _add(p: argparse.ArgumentParser, name: str, text: str = "", **kw) -> None:
+    """``--name`` typed after the option's default, with help from the option table."""
+    o = ALL_OPTIONS[name]
+    d = o.default
+    if isinstance(d, bool):
+        kw.setdefault("action", argparse.BooleanOptionalAction)
+    elif isinstance(d, list):
+        kw.setdefault("nargs", "*")
+    elif isinstance(d, (int, float)):
+        kw.setdefault("type", type(d))
+    if o.choices:
+        kw.setdefault("choices", o.choices)
+    p.add_argument("--" + name.replace("_", "-"), help=_help(o, text), **kw)
+
+
 def build_parser() -> argparse.ArgumentParser:
+    """The agent's options: every one of the option tables, and the actions."""
     p = argparse.ArgumentParser(
         prog="mm-beagle-agent",
         description="Poll the mouse sensors (PLN2033, PMW3360, ...) at 1 kHz and serve them "
@@ -51,93 +97,40 @@ def build_parser() -> argparse.ArgumentParser:
         "On the ROS machine: mm-beagle --ros-args -p backend:=remote -p agent:=ENDPOINT",
     )
     p.add_argument("--config", help="YAML file with any of these options (dashes as _)")
-    p.add_argument("--backend", choices=("spidev", "sim"), default=None)
-    p.add_argument("--devices", nargs="+", help="spidev paths (default /dev/spidev1.0 1.1)")
-    p.add_argument("--cpi", type=int)
-    p.add_argument("--poll-rate", type=float, help="polls per second (10..2000, default 1000)")
-    p.add_argument("--spi-speed-hz", type=int)
-    p.add_argument("--register-map", help="YAML overriding the assumed register map")
-    p.add_argument(
-        "--patch-file", help="vendor patch code loaded at every bring-up (in --patch-dir)"
-    )
-    p.add_argument(
-        "--patch-dir",
-        help="the only directory patch files are loaded from, at start or by a peer's "
-        "load_patch command (default '': patch loading off)",
-    )
-    p.add_argument(
-        "--srom-file",
-        help="SROM for PMW3360/PMW3389 devices, loaded at every bring-up (in --patch-dir)",
-    )
-    p.add_argument(
-        "--chips",
-        type=_names,
-        help=f"chip of each device, comma-separated, or one for all (default pln2033); "
-        f"allowed: {chip_config.chips_help()}",
-    )
-    p.add_argument(
-        "--chip-options",
-        nargs="*",
-        help="driver options key=value or CHIP.key=value (e.g. height_m=0.08)",
-    )
-    p.add_argument("--realtime-priority", type=int, help="SCHED_FIFO priority (0 = off)")
-    p.add_argument("--retry-interval", type=float)
-    p.add_argument("--ring-seconds", type=float, help="single polls kept (s, >= 60)")
-    p.add_argument("--name", help=f"key prefix mm/NAME (default {link.DEFAULT_NAME})")
-    p.add_argument(
-        "--listen",
-        action="append",
-        help=f"zenoh endpoint to listen on (repeatable; default {link.DEFAULT_ENDPOINT}); "
-        "anything but loopback needs --credentials",
-    )
-    p.add_argument("--credentials", help="user:password file (mode 600) peers must present")
+    special = {
+        "devices": dict(nargs="+"),
+        "chips": dict(
+            type=_names,
+            nargs=None,
+            text="chip of each device, comma-separated, or one for all (default pln2033); "
+            f"allowed: {chip_config.chips_help()}",
+        ),
+        "sim_chips": dict(
+            type=_names, nargs=None, text="emulated chip per device (default --chips)"
+        ),
+        "patch_file": dict(text="vendor patch code loaded at every bring-up (in --patch-dir)"),
+        "patch_dir": dict(
+            text="the only directory patch files are loaded from, at start or by a peer's "
+            "load_patch command ('' = patch loading off)"
+        ),
+        "srom_file": dict(
+            text="SROM for PMW3360/PMW3389 devices, loaded at every bring-up (in --patch-dir)"
+        ),
+        "listen": dict(
+            action="append",
+            nargs=None,
+            text="zenoh endpoint to listen on (repeatable); anything but loopback needs "
+            "--credentials",
+        ),
+    }
+    for name in ALL_OPTIONS:
+        _add(p, name, **special.get(name, {}))
     p.add_argument("--make-credentials", metavar="FILE", help="write a new credentials file")
-    p.add_argument("--sim-trajectory")
-    p.add_argument("--sim-speed", type=float)
-    p.add_argument("--sim-noise-counts", type=float)
-    p.add_argument("--sim-lift-rate", type=float)
-    p.add_argument("--sim-chips", type=_names, help="emulated chip per device (default --chips)")
-    p.add_argument("--sim-low-quality-rate", type=float, help="poor-surface windows per second")
-    p.add_argument("--sim-fail-windows", nargs="*", help="DEVICE@START-END (s) failure windows")
-    p.add_argument("--sim-start-delay", type=float, help="s standing still before the path")
-    p.add_argument("--sim-duration", type=float, help="s of motion, then still (0 = the path)")
-    p.add_argument("--sim-loop", action=argparse.BooleanOptionalAction, help="repeat the path")
     p.add_argument("--self-test", type=float, metavar="SECONDS", help="run, print one JSON line")
     # mm-bench agent: the motion burst answered by a constant stub, flat out unless paced
     p.add_argument("--bench-stub", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--bench-paced", action="store_true", help=argparse.SUPPRESS)
     return p
-
-
-DEFAULTS = {
-    "backend": "spidev",
-    "devices": ["/dev/spidev1.0", "/dev/spidev1.1"],
-    "cpi": 1600,
-    "poll_rate": 1000.0,
-    "spi_speed_hz": 3_000_000,
-    "register_map": "",
-    "patch_file": "",
-    "patch_dir": "",
-    "srom_file": "",
-    "chips": [],
-    "chip_options": [],
-    "realtime_priority": 50,
-    "retry_interval": 1.0,
-    "ring_seconds": 65.536,
-    "name": link.DEFAULT_NAME,
-    "listen": [link.DEFAULT_ENDPOINT],
-    "credentials": "",
-    "sim_trajectory": "figure_eight",
-    "sim_speed": 0.2,
-    "sim_noise_counts": 0.0,
-    "sim_lift_rate": 0.0,
-    "sim_chips": [],
-    "sim_low_quality_rate": 0.0,
-    "sim_fail_windows": [],
-    "sim_start_delay": 0.0,
-    "sim_duration": 0.0,
-    "sim_loop": True,
-}
 
 
 def _load_yaml(path: str) -> dict:
@@ -184,14 +177,7 @@ def config_from_args(args: argparse.Namespace) -> AgentConfig:
     devices = values["devices"]
     if len(set(devices)) != len(devices):
         raise ValueError(f"'devices' must name distinct devices, got {devices}")
-    if not 10.0 <= values["poll_rate"] <= 2000.0:
-        raise ValueError(f"'poll_rate' {values['poll_rate']} is outside 10..2000 Hz")
-    if not 0 <= values["realtime_priority"] <= 99:
-        raise ValueError("'realtime_priority' must be 0..99")
-    if not 0.1 <= values["retry_interval"] <= 60:
-        raise ValueError("'retry_interval' must be 0.1..60 s")
-    if values["ring_seconds"] < MIN_RING_S:
-        raise ValueError(f"'ring_seconds' must be >= {MIN_RING_S:g} (the link's replay window)")
+    check_ranges(ALL_OPTIONS, values)
     for name in ("chips", "sim_chips"):  # a config file may write "a,b" too
         values[name] = chip_config.split_names(values[name])
     options = chip_config.parse_chip_options(values["chip_options"])
@@ -221,8 +207,6 @@ def config_from_args(args: argparse.Namespace) -> AgentConfig:
         chips=list(values["sim_chips"]),
         low_quality_rate=values["sim_low_quality_rate"],
     )
-    if not (0 <= sim.start_delay <= 3600 and 0 <= sim.duration <= 1e6):
-        raise ValueError("'sim_start_delay' must be 0..3600 s and 'sim_duration' 0..1e6 s")
     parse_fail_windows(sim.fail_windows, devices)
     if values["backend"] == "sim":
         check_trajectory(sim.trajectory)

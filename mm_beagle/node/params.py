@@ -1,52 +1,54 @@
-"""The node's parameters, declared in one place with descriptors and ranges."""
+"""The node's parameters, declared in one place with descriptors and ranges.
+
+The poller's options (devices, cpi, rates, chips, sim backend) come from
+:mod:`mm_beagle.poller.options`, the table the agent's command line reads too; the
+node adds its publishing, odometry and remote-backend parameters.
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 
 from mm_beagle.link import link
 from mm_beagle.node.otos_calibration import otos_options
 from mm_beagle.poller import chip_config
+from mm_beagle.poller.options import OPTIONS
 from mm_beagle.poller.poller import PollerConfig, poller_config
 from mm_beagle.poller.sim_backend import SimConfig, check_trajectory, parse_fail_windows
+from mm_pc.ros.parameters import declare_all, float_range, int_range, mark_live, ranged
+from mm_pc.ros.parameters import read_only as _plain
 from mm_pc.ros.tf import frame_ids_problem, sensor_frame_names
 
-BACKENDS = ("spidev", "sim", "remote")
+#: the poller's backends and the node's own: an mm-beagle-agent on the board polls them
+BACKENDS = (*OPTIONS["backend"].choices, "remote")
 
 
 #: parameters that may change while the node runs (``ros2 param set``); the rest are read-only
 LIVE = ("cpi", "publish_rate", "diagnostics_period", "odom_frame", "base_frame")
 
 
-def _int(desc: str, lo: int, hi: int, step: int = 0) -> ParameterDescriptor:
-    return ParameterDescriptor(
-        description=desc,
-        read_only=True,
-        integer_range=[IntegerRange(from_value=lo, to_value=hi, step=step)],
-    )
+def _from_option(name: str) -> tuple[object, ParameterDescriptor]:
+    """(default, descriptor) of a poller option; an empty string list becomes [""] (ROS
+    infers a parameter's type from its default)."""
+    o = OPTIONS[name]
+    default = o.default if o.default != [] else [""]
+    return default, ranged(o.description, o.default, o.lo, o.hi, o.step)
 
 
 def _float(desc: str, lo: float, hi: float) -> ParameterDescriptor:
-    return ParameterDescriptor(
-        description=desc,
-        read_only=True,
-        floating_point_range=[FloatingPointRange(from_value=lo, to_value=hi, step=0.0)],
-    )
+    return _plain(desc, **float_range(lo, hi))
 
 
-def _plain(desc: str) -> ParameterDescriptor:
-    return ParameterDescriptor(description=desc, read_only=True)
+def _int(desc: str, lo: int, hi: int) -> ParameterDescriptor:
+    return _plain(desc, **int_range(lo, hi))
 
 
-# name -> (default, descriptor)
+# name -> (default, descriptor); _from_option: ranges and text in mm_beagle.poller.options
 PARAMETERS = {
-    "devices": (
-        ["/dev/spidev1.0", "/dev/spidev1.1"],
-        _plain("spidev device paths, one per sensor; they are also the sensor ids"),
-    ),
+    "devices": _from_option("devices"),
     "backend": (
         "spidev",
         _plain(
@@ -67,52 +69,17 @@ PARAMETERS = {
         True,
         _plain("remote backend: move the agent's stamps to this clock (false if both run NTP)"),
     ),
-    "cpi": (
-        1600,
-        _int(
-            "resolution of every sensor, counts per inch (X and Y); each chip also checks its "
-            "own range (pln2033 100..6400/100, pmw3360 100..12000/100, pmw3389 50..16000/50); "
-            "fixed-resolution chips (pmw3901, paa5100) ignore it",
-            *chip_config.cpi_union(),
-        ),
-    ),
-    "chips": (
-        [""],
-        _plain(
-            "the chip of each device, in device order, or one name for all ('' = all "
-            f"pln2033; 'a,b' in one string works too); allowed: {chip_config.chips_help()}"
-        ),
-    ),
-    "chip_options": (
-        [""],
-        _plain(
-            "driver options as key=value, each to every chip whose driver takes it, or "
-            "CHIP.key=value for one chip type (e.g. height_m=0.08, pmw3389.product_id=0x42)"
-        ),
-    ),
-    "srom_file": (
-        "",
-        _plain("SROM (PixArt firmware) for PMW3360/PMW3389, a file in patch_dir ('' = none)"),
-    ),
-    "poll_rate": (1000.0, _float("sensor polls per second (Hz)", 10.0, 2000.0)),
-    "spi_speed_hz": (3_000_000, _int("SPI clock (Hz)", 100_000, 8_000_000)),
-    "register_map": ("", _plain("YAML file overriding the assumed register map ('' = defaults)")),
-    "patch_file": (
-        "",
-        _plain("vendor patch code to load into the DSP RAM, a file in patch_dir ('' = none)"),
-    ),
-    "patch_dir": (
-        "",
-        _plain("the only directory patch files are loaded from ('' = patch loading off)"),
-    ),
-    "realtime_priority": (
-        50,
-        _int("SCHED_FIFO priority of the poller process (0 = normal scheduling)", 0, 99),
-    ),
-    "retry_interval": (
-        1.0,
-        _float("seconds between attempts to bring a failed sensor up", 0.1, 60.0),
-    ),
+    "cpi": _from_option("cpi"),
+    "chips": _from_option("chips"),
+    "chip_options": _from_option("chip_options"),
+    "srom_file": _from_option("srom_file"),
+    "poll_rate": _from_option("poll_rate"),
+    "spi_speed_hz": _from_option("spi_speed_hz"),
+    "register_map": _from_option("register_map"),
+    "patch_file": _from_option("patch_file"),
+    "patch_dir": _from_option("patch_dir"),
+    "realtime_priority": _from_option("realtime_priority"),
+    "retry_interval": _from_option("retry_interval"),
     "ring_size": (65536, _int("single polls kept per sensor for get_samples", 1024, 4_194_304)),
     "publish_rate": (
         50.0,
@@ -150,52 +117,23 @@ PARAMETERS = {
         [""],
         _plain("odometry: TF frame of each sensor, in device order ('' = mouse_ + device name)"),
     ),
-    "sim_trajectory": (
-        "figure_eight",
-        _plain(
-            "sim backend: still | straight | figure_eight | square | round_trip | meander | "
-            "s_curves | mixed_tour, or file:PATH (CSV t,v,w or t,vx,vy,w at >= 100 Hz)"
-        ),
-    ),
-    "sim_speed": (0.2, _float("sim backend: robot speed (m/s)", 0.001, 5.0)),
-    "sim_loop": (True, _plain("sim backend: repeat the trajectory; false = stop after one lap")),
-    "sim_duration": (
-        0.0,
-        _float(
-            "sim backend: seconds of motion, then stand still (0 = the path as it is)", 0.0, 1e6
-        ),
-    ),
-    "sim_start_delay": (
-        0.0,
-        _float("sim backend: seconds standing still before the path starts", 0.0, 3600.0),
-    ),
+    "sim_trajectory": _from_option("sim_trajectory"),
+    "sim_speed": _from_option("sim_speed"),
+    "sim_loop": _from_option("sim_loop"),
+    "sim_duration": _from_option("sim_duration"),
+    "sim_start_delay": _from_option("sim_start_delay"),
     "sim_mounts": (
         [0.049, -0.0395, 0.0, 0.049, 0.0395, 0.0],
         _plain("sim backend: x, y, yaw (base_link m, rad) of each sensor, flattened"),
     ),
-    "sim_lift_rate": (0.0, _float("sim backend: lifts per second per sensor", 0.0, 100.0)),
-    "sim_chips": (
-        [""],
-        _plain("sim backend: the emulated chip of each device ('' = as 'chips')"),
-    ),
-    "sim_low_quality_rate": (
-        0.0,
-        _float(
-            "sim backend: poor-surface windows (20 ms, quality low) per second per sensor",
-            0.0,
-            100.0,
-        ),
-    ),
-    "sim_noise_counts": (0.0, _float("sim backend: count noise per sqrt(second)", 0.0, 1e6)),
-    "sim_fail_windows": (
-        [""],
-        _plain("sim backend: 'DEVICE@START-END' (s) windows in which a sensor fails"),
-    ),
+    "sim_lift_rate": _from_option("sim_lift_rate"),
+    "sim_chips": _from_option("sim_chips"),
+    "sim_low_quality_rate": _from_option("sim_low_quality_rate"),
+    "sim_noise_counts": _from_option("sim_noise_counts"),
+    "sim_fail_windows": _from_option("sim_fail_windows"),
 }
-
-for _name in LIVE:
-    PARAMETERS[_name][1].read_only = False
-    PARAMETERS[_name][1].description += " (live: ros2 param set)"
+assert set(OPTIONS) <= set(PARAMETERS), "every poller option is a node parameter"
+mark_live(PARAMETERS, LIVE)
 
 
 @dataclass
@@ -234,9 +172,7 @@ class NodeSettings:
 
 def declare(node: Node) -> NodeSettings:
     """Declare every parameter and return validated settings; ValueError says what is wrong."""
-    for name, (default, desc) in PARAMETERS.items():
-        node.declare_parameter(name, default, desc)
-    p = {name: node.get_parameter(name).value for name in PARAMETERS}
+    p = declare_all(node, PARAMETERS)
     devices = list(p["devices"])
     if not devices or any(not d for d in devices) or len(set(devices)) != len(devices):
         raise ValueError(f"'devices' must name distinct devices, got {devices}")
