@@ -94,29 +94,6 @@ def sensor_settings(device: str, reply: dict) -> SensorSettings:
     return msg
 
 
-def chip_odometry(t: Totals, stamp_msg, odom_frame: str, base_frame: str):
-    """nav_msgs/Odometry of a chip's own pose (the OTOS's on-chip fusion) from a snapshot:
-    pose in ``odom_frame``, twist in ``base_frame`` (REP 103). No covariance is known: the
-    first element of each matrix is -1 (unknown), the rest 0."""
-    import math
-
-    from nav_msgs.msg import Odometry
-
-    msg = Odometry()
-    msg.header.stamp = stamp_msg
-    msg.header.frame_id = odom_frame
-    msg.child_frame_id = base_frame
-    msg.pose.pose.position.x, msg.pose.pose.position.y = t.chip_x, t.chip_y
-    q = msg.pose.pose.orientation
-    q.z, q.w = math.sin(t.chip_yaw / 2), math.cos(t.chip_yaw / 2)
-    msg.twist.twist.linear.x, msg.twist.twist.linear.y = t.chip_vx, t.chip_vy
-    msg.twist.twist.angular.z = t.chip_wz
-    unknown = [-1.0] + [0.0] * 35
-    msg.pose.covariance = unknown
-    msg.twist.covariance = unknown
-    return msg
-
-
 def fill_polls(out, first: int, nxt: int, dropped: int, arr: dict, cpi_now: int):
     """Set the poll fields shared by GetSamples' response and SensorPolls on ``out``.
 

@@ -489,7 +489,7 @@ class BeagleNode(Node):
 
         from mm_beagle.node.onboard_odometry import OnboardOdometry
         from mm_pc.core.uncertainty import PoseUncertainty
-        from mm_pc.ros.odometry_node import odometry_message
+        from mm_pc.ros.odometry_msgs import odometry_message
         from mm_pc.ros.reset import create_reset_service
         from mm_pc.ros.tf import TfPublisher, planar_transform, sensor_frame_names
 
@@ -549,6 +549,8 @@ class BeagleNode(Node):
             return
         from nav_msgs.msg import Odometry as OdometryMsg
 
+        from mm_pc.ros.odometry_msgs import chip_odometry
+
         pubs = {
             i: self.create_publisher(
                 OdometryMsg, "~/otos/odom" if k == 0 else f"~/otos/odom_{i}", 10
@@ -568,8 +570,12 @@ class BeagleNode(Node):
                     continue
                 sent[i] = t.chip_pose_ns
                 pub.publish(
-                    messages.chip_odometry(
-                        t, node_stamp(self, t.chip_pose_ns), o.odom_frame, o.base_frame
+                    chip_odometry(
+                        (t.chip_x, t.chip_y, t.chip_yaw),
+                        (t.chip_vx, t.chip_vy, t.chip_wz),
+                        node_stamp(self, t.chip_pose_ns),
+                        o.odom_frame,
+                        o.base_frame,
                     )
                 )
 

@@ -42,7 +42,6 @@ import rclpy
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PointStamped
 from nav_msgs.msg import Odometry as OdometryMsg
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus, Range
@@ -53,68 +52,70 @@ from mm_pc.core.fixes.gps import gps_accuracy_m
 from mm_pc.core.fusion.inputs import seconds_to_stamp
 from mm_pc.core.uncertainty import UNOBSERVED_VARIANCE, planar_covariance_6x6
 from mm_pc.ros import spin as ros_spin
+from mm_pc.ros.parameters import declare_all, float_range, int_range, read_only
 from mm_pc.sim.field_run import FieldSim, simulate_field_run
 
 GPS_MIN_SATELLITES = 5
 
 
-def _ro(desc: str, **kw) -> ParameterDescriptor:
-    return ParameterDescriptor(description=desc, read_only=True, **kw)
-
-
-def _range(lo: float, hi: float) -> dict:
-    return {"floating_point_range": [FloatingPointRange(from_value=lo, to_value=hi)]}
-
-
 PARAMETERS = {
     "seed": (
         1,
-        _ro("random seed of the run", integer_range=[IntegerRange(from_value=0, to_value=2**31)]),
+        read_only("random seed of the run", **int_range(0, 2**31)),
     ),
-    "speed": (1.0, _ro("replay speed (x real time)", **_range(0.01, 10000.0))),
-    "duration": (0.0, _ro("replay only the first this many seconds (0 = all)", **_range(0.0, 1e6))),
+    "speed": (1.0, read_only("replay speed (x real time)", **float_range(0.01, 10000.0))),
+    "duration": (
+        0.0,
+        read_only("replay only the first this many seconds (0 = all)", **float_range(0.0, 1e6)),
+    ),
     "wait_for_subscribers": (
         0,
-        _ro(
+        read_only(
             "wait for this many subscribers of the mouse odometry before starting",
-            integer_range=[IntegerRange(from_value=0, to_value=100)],
+            **int_range(0, 100),
         ),
     ),
-    "wait_timeout": (10.0, _ro("longest wait for them (s)", **_range(0.0, 3600.0))),
-    "linger": (0.5, _ro("seconds to stay up after the last message", **_range(0.0, 60.0))),
+    "wait_timeout": (10.0, read_only("longest wait for them (s)", **float_range(0.0, 3600.0))),
+    "linger": (
+        0.5,
+        read_only("seconds to stay up after the last message", **float_range(0.0, 60.0)),
+    ),
     "truth_every": (
         1,
-        _ro(
+        read_only(
             "publish the truth every this many requests (and at the last)",
-            integer_range=[IntegerRange(from_value=1, to_value=10**6)],
+            **int_range(1, 10**6),
         ),
     ),
     "mouse_dropout": (
         [0.0, 0.0],
-        _ro("no mouse odometry from start s for duration s (duration 0 = none)"),
+        read_only("no mouse odometry from start s for duration s (duration 0 = none)"),
     ),
-    "perimeter_known_wire": (False, _ro("contacts name the wire's coordinate")),
+    "perimeter_known_wire": (False, read_only("contacts name the wire's coordinate")),
     "mouse_odom_topic": (
         "mm_odometry/odom",
-        _ro("mouse odometry topic (relative: mm-fusion's default in the same namespace)"),
+        read_only("mouse odometry topic (relative: mm-fusion's default in the same namespace)"),
     ),
-    "wheel_odom_topic": ("/wheel/odom", _ro("wheel odometry topic")),
-    "gps_topic": ("/gps/fix", _ro("GPS topic")),
-    "imu_topic": ("/imu/data", _ro("compass (Imu) topic")),
-    "heading_topic": ("/compass/heading", _ro("compass (Float64, seed convention) topic")),
-    "perimeter_topic": ("/perimeter/contact", _ro("wire contact topic")),
-    "beacon_topic": ("/beacons/{name}/range", _ro("range topic per beacon, {name} = its name")),
-    "truth_topic": ("~/truth", _ro("ground truth topic")),
-    "map_frame": ("map", _ro("frame of the truth and of wire coordinates")),
-    "odom_frame": ("odom", _ro("frame of the mouse odometry")),
-    "wheel_odom_frame": ("wheel_odom", _ro("frame of the wheel odometry")),
-    "base_frame": ("base_link", _ro("robot frame")),
-    "gps_frame": ("gps", _ro("frame_id of the NavSatFix")),
-    "imu_frame": ("imu", _ro("frame_id of the Imu")),
-    "range_frame": ("range_antenna", _ro("frame_id of the Range messages")),
+    "wheel_odom_topic": ("/wheel/odom", read_only("wheel odometry topic")),
+    "gps_topic": ("/gps/fix", read_only("GPS topic")),
+    "imu_topic": ("/imu/data", read_only("compass (Imu) topic")),
+    "heading_topic": ("/compass/heading", read_only("compass (Float64, seed convention) topic")),
+    "perimeter_topic": ("/perimeter/contact", read_only("wire contact topic")),
+    "beacon_topic": (
+        "/beacons/{name}/range",
+        read_only("range topic per beacon, {name} = its name"),
+    ),
+    "truth_topic": ("~/truth", read_only("ground truth topic")),
+    "map_frame": ("map", read_only("frame of the truth and of wire coordinates")),
+    "odom_frame": ("odom", read_only("frame of the mouse odometry")),
+    "wheel_odom_frame": ("wheel_odom", read_only("frame of the wheel odometry")),
+    "base_frame": ("base_link", read_only("robot frame")),
+    "gps_frame": ("gps", read_only("frame_id of the NavSatFix")),
+    "imu_frame": ("imu", read_only("frame_id of the Imu")),
+    "range_frame": ("range_antenna", read_only("frame_id of the Range messages")),
     "queue_depth": (
         200,
-        _ro("publisher queue depth", integer_range=[IntegerRange(from_value=1, to_value=10**5)]),
+        read_only("publisher queue depth", **int_range(1, 10**5)),
     ),
 }
 
@@ -166,9 +167,7 @@ def _check_dropout(values) -> tuple[float, float]:
 class FieldSimNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("field_sim", **kwargs)
-        for name, (default, desc) in PARAMETERS.items():
-            self.declare_parameter(name, default, desc)
-        p = {name: self.get_parameter(name).value for name in PARAMETERS}
+        p = declare_all(self, PARAMETERS)
         self.p = p
         self.dropout = _check_dropout(p["mouse_dropout"])
         self.sim: FieldSim = simulate_field_run(int(p["seed"]))

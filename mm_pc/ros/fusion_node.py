@@ -50,12 +50,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, PoseStamped
 from nav_msgs.msg import Odometry as OdometryMsg
 from nav_msgs.msg import Path
-from rcl_interfaces.msg import (
-    FloatingPointRange,
-    IntegerRange,
-    ParameterDescriptor,
-    SetParametersResult,
-)
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -90,6 +85,7 @@ from mm_pc.core.uncertainty import (
     planar_covariance_6x6,
 )
 from mm_pc.ros import spin as ros_spin
+from mm_pc.ros.parameters import declare_all, float_range, int_range, mark_live, read_only
 from mm_pc.ros.reset import create_reset_service
 from mm_pc.ros.tf import TfPublisher, frame_ids_problem, planar_transform
 from mm_pc.ros.throttle import WarnThrottle
@@ -98,134 +94,156 @@ COMPASS_INPUTS = ("imu", "heading", "none")
 GPS_SCALES = ("wgs84", "plot")
 
 
-def _ro(desc: str, **kw) -> ParameterDescriptor:
-    return ParameterDescriptor(description=desc, read_only=True, **kw)
-
-
-def _range(lo: float, hi: float) -> dict:
-    return {"floating_point_range": [FloatingPointRange(from_value=lo, to_value=hi)]}
-
-
 PARAMETERS = {
     "mouse_odom_topic": (
         "mm_odometry/odom",
-        _ro("mouse odometry (nav_msgs/Odometry), relative to the namespace; '' = off"),
+        read_only("mouse odometry (nav_msgs/Odometry), relative to the namespace; '' = off"),
     ),
-    "wheel_odom_topic": ("/wheel/odom", _ro("wheel odometry (nav_msgs/Odometry); ''=off")),
-    "gps_topic": ("/gps/fix", _ro("GPS (sensor_msgs/NavSatFix); '' = off")),
-    "compass_input": ("imu", _ro(f"compass input: {', '.join(COMPASS_INPUTS)}")),
-    "imu_topic": ("/imu/data", _ro("compass as sensor_msgs/Imu (REP 103 yaw)")),
+    "wheel_odom_topic": ("/wheel/odom", read_only("wheel odometry (nav_msgs/Odometry); ''=off")),
+    "gps_topic": ("/gps/fix", read_only("GPS (sensor_msgs/NavSatFix); '' = off")),
+    "compass_input": ("imu", read_only(f"compass input: {', '.join(COMPASS_INPUTS)}")),
+    "imu_topic": ("/imu/data", read_only("compass as sensor_msgs/Imu (REP 103 yaw)")),
     "heading_topic": (
         "/compass/heading",
-        _ro("compass as std_msgs/Float64: rad, 0 = north, clockwise (seed 004)"),
+        read_only("compass as std_msgs/Float64: rad, 0 = north, clockwise (seed 004)"),
     ),
     "perimeter_topic": (
         "/perimeter/contact",
-        _ro("wire contacts (geometry_msgs/PointStamped, unmeasured axis NaN); '' = off"),
+        read_only("wire contacts (geometry_msgs/PointStamped, unmeasured axis NaN); '' = off"),
     ),
     "beacon_topic": (
         "/beacons/{name}/range",
-        _ro("sensor_msgs/Range topic per beacon, {name} = beacon name; '' = off"),
+        read_only("sensor_msgs/Range topic per beacon, {name} = beacon name; '' = off"),
     ),
-    "beacon_names": (["SW", "SE", "NE", "NW"], _ro("beacon names")),
-    "beacon_x": ([0.0, 20.0, 20.0, 0.0], _ro("beacon x (m, map frame)")),
-    "beacon_y": ([0.0, 0.0, 10.0, 10.0], _ro("beacon y (m, map frame)")),
+    "beacon_names": (["SW", "SE", "NE", "NW"], read_only("beacon names")),
+    "beacon_x": ([0.0, 20.0, 20.0, 0.0], read_only("beacon x (m, map frame)")),
+    "beacon_y": ([0.0, 0.0, 10.0, 10.0], read_only("beacon y (m, map frame)")),
     "beacon_heights": (
         [1.0, 1.0, 1.0, 1.0],
-        _ro("beacon heights above the robot's range antenna (m)"),
+        read_only("beacon heights above the robot's range antenna (m)"),
     ),
-    "range_sigma": (0.05, _ro("beacon range noise (m)", **_range(1e-4, 100.0))),
-    "map_frame": ("map", _ro("frame of the estimate (and of wire coordinates)")),
-    "base_frame": ("base_link", _ro("robot frame; odometry inputs must use it as child")),
-    "gps_frame": ("", _ro("required NavSatFix frame_id ('' = any)")),
-    "imu_frame": ("", _ro("required Imu frame_id ('' = any)")),
-    "range_frame": ("", _ro("required Range frame_id ('' = any)")),
-    "gps_origin_lat": (48.2, _ro("latitude of the plot's south-west corner (deg)")),
-    "gps_origin_lon": (16.37, _ro("longitude of the plot's south-west corner (deg)")),
+    "range_sigma": (0.05, read_only("beacon range noise (m)", **float_range(1e-4, 100.0))),
+    "map_frame": ("map", read_only("frame of the estimate (and of wire coordinates)")),
+    "base_frame": ("base_link", read_only("robot frame; odometry inputs must use it as child")),
+    "gps_frame": ("", read_only("required NavSatFix frame_id ('' = any)")),
+    "imu_frame": ("", read_only("required Imu frame_id ('' = any)")),
+    "range_frame": ("", read_only("required Range frame_id ('' = any)")),
+    "gps_origin_lat": (48.2, read_only("latitude of the plot's south-west corner (deg)")),
+    "gps_origin_lon": (16.37, read_only("longitude of the plot's south-west corner (deg)")),
     "gps_scale": (
         "wgs84",
-        _ro("metres per degree: 'wgs84' (at the origin) or 'plot' (plot size / NE corner)"),
+        read_only("metres per degree: 'wgs84' (at the origin) or 'plot' (plot size / NE corner)"),
     ),
-    "gps_ne_lat": (0.0, _ro("latitude of the plot's NE corner (deg; gps_scale 'plot')")),
-    "gps_ne_lon": (0.0, _ro("longitude of the plot's NE corner (deg; gps_scale 'plot')")),
-    "plot_width": (20.0, _ro("plot west-east size (m); wires on its edges", **_range(0.0, 1e4))),
-    "plot_height": (10.0, _ro("plot south-north size (m); 0 x 0 = no wires", **_range(0.0, 1e4))),
+    "gps_ne_lat": (0.0, read_only("latitude of the plot's NE corner (deg; gps_scale 'plot')")),
+    "gps_ne_lon": (0.0, read_only("longitude of the plot's NE corner (deg; gps_scale 'plot')")),
+    "plot_width": (
+        20.0,
+        read_only("plot west-east size (m); wires on its edges", **float_range(0.0, 1e4)),
+    ),
+    "plot_height": (
+        10.0,
+        read_only("plot south-north size (m); 0 x 0 = no wires", **float_range(0.0, 1e4)),
+    ),
     "gps_default_sigma": (
         2.5,
-        _ro("GPS sigma per axis (m) when the fix gives no covariance", **_range(0.01, 1e3)),
+        read_only(
+            "GPS sigma per axis (m) when the fix gives no covariance", **float_range(0.01, 1e3)
+        ),
     ),
     "gps_max_sigma": (
         3.55,
-        _ro(
+        read_only(
             "fixes with a larger sigma (m) are not used (HDOP 2 x 2.5 m / sqrt 2)",
-            **_range(0.01, 1e3),
+            **float_range(0.01, 1e3),
         ),
     ),
     "gps_error_tau": (
         30.0,
-        _ro(
+        read_only(
             "correlation time of the GPS error (s): fixes are weighted as what a stream "
             "of them is worth (0 = independent fixes)",
-            **_range(0.0, 1e5),
+            **float_range(0.0, 1e5),
         ),
     ),
     "compass_sigma": (
         math.radians(math.hypot(2.0, 1.0)),
-        _ro("compass sigma (rad) when the message gives none", **_range(1e-5, math.pi)),
+        read_only("compass sigma (rad) when the message gives none", **float_range(1e-5, math.pi)),
     ),
     "compass_offset": (
         0.0,
-        _ro("added to every compass yaw (rad): declination, mounting", **_range(-7.0, 7.0)),
+        read_only(
+            "added to every compass yaw (rad): declination, mounting", **float_range(-7.0, 7.0)
+        ),
     ),
-    "wire_sigma": (0.03, _ro("wire contact position sigma (m)", **_range(1e-4, 10.0))),
+    "wire_sigma": (0.03, read_only("wire contact position sigma (m)", **float_range(1e-4, 10.0))),
     "wire_max_distance": (
         2.0,
-        _ro("an unnamed contact takes the nearest wire within this (m)", **_range(0.0, 1e3)),
+        read_only(
+            "an unnamed contact takes the nearest wire within this (m)", **float_range(0.0, 1e3)
+        ),
     ),
-    "initial_pose": ([2.0, -1.0, math.pi / 2], _ro("start pose x, y (m), yaw (rad) in map")),
-    "initial_sigma": ([0.01, 0.01, 0.01], _ro("start sigma x, y (m), yaw (rad), each > 0")),
+    "initial_pose": ([2.0, -1.0, math.pi / 2], read_only("start pose x, y (m), yaw (rad) in map")),
+    "initial_sigma": ([0.01, 0.01, 0.01], read_only("start sigma x, y (m), yaw (rad), each > 0")),
     "mouse_noise": (
         [Q_POS, Q_YAW_DIST, Q_YAW_TURN],
-        _ro("mouse increment noise q_pos (m^2/m), q_yaw_dist (rad^2/m), q_yaw_turn (rad^2/rad)"),
+        read_only(
+            "mouse increment noise q_pos (m^2/m), q_yaw_dist (rad^2/m), q_yaw_turn (rad^2/rad)"
+        ),
     ),
-    "wheel_noise": ([0.03**2, 0.03**2, 0.03**2], _ro("wheel increment noise, as mouse_noise")),
+    "wheel_noise": (
+        [0.03**2, 0.03**2, 0.03**2],
+        read_only("wheel increment noise, as mouse_noise"),
+    ),
     "mouse_stale_timeout": (
         0.5,
-        _ro("mouse odometry silent this long (s, stamps) -> wheels", **_range(0.01, 60.0)),
+        read_only(
+            "mouse odometry silent this long (s, stamps) -> wheels", **float_range(0.01, 60.0)
+        ),
     ),
     "max_delay": (
         1.0,
-        _ro(
+        read_only(
             "a quiet source is waited for this long (s, stamps); later fixes are dropped",
-            **_range(0.01, 3600.0),
+            **float_range(0.01, 3600.0),
         ),
     ),
     "max_speed": (
         5.0,
-        _ro("odometry faster than this (m/s) is a reset or corrupt", **_range(0.01, 1000.0)),
+        read_only(
+            "odometry faster than this (m/s) is a reset or corrupt", **float_range(0.01, 1000.0)
+        ),
     ),
     "reacquire_after": (
         10,
-        _ro(
+        read_only(
             "gate rejections in a row before a source's next fix is applied ungated (0 = never)",
-            integer_range=[IntegerRange(from_value=0, to_value=10**6)],
+            **int_range(0, 10**6),
         ),
     ),
     "queue_depth": (
         200,
-        _ro("subscription queue depth", integer_range=[IntegerRange(from_value=1, to_value=10**5)]),
+        read_only("subscription queue depth", **int_range(1, 10**5)),
     ),
-    "publish_rate": (20.0, _ro("~/odom messages per second (Hz)", **_range(0.1, 1000.0))),
-    "path_rate": (1.0, _ro("~/path messages per second (Hz)", **_range(0.01, 100.0))),
-    "path_spacing": (0.05, _ro("a path pose every this many metres", **_range(0.0, 100.0))),
+    "publish_rate": (
+        20.0,
+        read_only("~/odom messages per second (Hz)", **float_range(0.1, 1000.0)),
+    ),
+    "path_rate": (1.0, read_only("~/path messages per second (Hz)", **float_range(0.01, 100.0))),
+    "path_spacing": (
+        0.05,
+        read_only("a path pose every this many metres", **float_range(0.0, 100.0)),
+    ),
     "path_length": (
         10000,
-        _ro("poses kept in the path", integer_range=[IntegerRange(from_value=2, to_value=10**6)]),
+        read_only("poses kept in the path", **int_range(2, 10**6)),
     ),
-    "diagnostics_rate": (1.0, _ro("/diagnostics messages per second (Hz)", **_range(0.01, 100.0))),
+    "diagnostics_rate": (
+        1.0,
+        read_only("/diagnostics messages per second (Hz)", **float_range(0.01, 100.0)),
+    ),
     "publish_tf": (
         True,
-        _ro(
+        read_only(
             "broadcast map -> odom on /tf (from the estimate and the mouse odometry's pose); "
             "odom -> base_link stays mm-odometry's"
         ),
@@ -234,9 +252,7 @@ PARAMETERS = {
 
 #: parameters that take ``ros2 param set`` while the node runs; the rest are read-only
 LIVE = ("publish_rate", "path_rate", "diagnostics_rate", "map_frame", "base_frame")
-for _name in LIVE:
-    PARAMETERS[_name][1].read_only = False
-    PARAMETERS[_name][1].description += " (live: ros2 param set)"
+mark_live(PARAMETERS, LIVE)
 
 #: Wall seconds without any odometry message after which fixes are applied on arrival.
 IDLE_AFTER_S = 0.5
@@ -286,9 +302,7 @@ def grid_from(p: dict) -> LocalGrid:
 class FusionNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("mm_fusion", **kwargs)
-        for name, (default, desc) in PARAMETERS.items():
-            self.declare_parameter(name, default, desc)
-        p = {name: self.get_parameter(name).value for name in PARAMETERS}
+        p = declare_all(self, PARAMETERS)
         self.p = p
         if p["compass_input"] not in COMPASS_INPUTS:
             raise ValueError(

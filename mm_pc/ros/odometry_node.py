@@ -30,7 +30,6 @@ Header stamps follow the node clock (:func:`mm_pc.ros.clock.node_stamp`).
 
 from __future__ import annotations
 
-import math
 import sys
 import time
 
@@ -38,23 +37,19 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry as OdometryMsg
 from nav_msgs.msg import Path
-from rcl_interfaces.msg import (
-    FloatingPointRange,
-    IntegerRange,
-    ParameterDescriptor,
-    SetParametersResult,
-)
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 
 from mm_interfaces.srv import GetSamples, GetSensorData
-from mm_pc.core.angles import yaw_to_quaternion
 from mm_pc.core.calibration import Calibration
 from mm_pc.core.geometry import DEFAULT_MOUNTS, SensorMount
 from mm_pc.core.odometry import METHODS, Odometry, Pose2D, Sample
 from mm_pc.core.polls import PollBatch, PollTracker, SensorTotals, integrate_steps
-from mm_pc.core.uncertainty import PoseUncertainty, twist_covariance
+from mm_pc.core.uncertainty import PoseUncertainty
 from mm_pc.ros import spin as ros_spin
 from mm_pc.ros.clock import ClockWatch, node_stamp
+from mm_pc.ros.odometry_msgs import odometry_message
+from mm_pc.ros.parameters import declare_all, float_range, int_range, mark_live, read_only
 from mm_pc.ros.reset import create_reset_service
 from mm_pc.ros.tf import (
     TfPublisher,
@@ -68,113 +63,71 @@ from mm_pc.ros.tf import (
 FETCH_TIMEOUT_S = 2.0
 
 
-def _ro(desc: str, **kw) -> ParameterDescriptor:
-    return ParameterDescriptor(description=desc, read_only=True, **kw)
-
-
 PARAMETERS = {
     "beagle": (
         "mm_beagle",
-        _ro("the mm_beagle node to ask: relative to this node's namespace, or absolute (/...)"),
+        read_only(
+            "the mm_beagle node to ask: relative to this node's namespace, or absolute (/...)"
+        ),
     ),
     "rate": (
         15.0,
-        _ro(
+        read_only(
             "requests per second (Hz)",
-            floating_point_range=[FloatingPointRange(from_value=1.0, to_value=500.0)],
+            **float_range(1.0, 500.0),
         ),
     ),
-    "method": ("exact", _ro(f"pose method: {', '.join(sorted(METHODS))}")),
+    "method": ("exact", read_only(f"pose method: {', '.join(sorted(METHODS))}")),
     "sensor": (
         0,
-        _ro(
+        read_only(
             "which sensor the one-sensor methods use (index into devices)",
-            integer_range=[IntegerRange(from_value=0, to_value=15, step=1)],
+            **int_range(0, 15, 1),
         ),
     ),
-    "devices": (["/dev/spidev1.0", "/dev/spidev1.1"], _ro("sensor ids, in mount order")),
+    "devices": (["/dev/spidev1.0", "/dev/spidev1.1"], read_only("sensor ids, in mount order")),
     "mounts": (
         [m for mount in DEFAULT_MOUNTS for m in (mount.x, mount.y, mount.yaw)],
-        _ro("x, y, yaw (base_link m, rad) of each sensor, flattened"),
+        read_only("x, y, yaw (base_link m, rad) of each sensor, flattened"),
     ),
-    "calibration_file": ("", _ro("YAML calibration to apply ('' = none)")),
-    "use_lift_estimates": (True, _ro("add the node's estimates of counts lost to lifts")),
-    "per_poll": (True, _ro("integrate every single poll (get_samples); false = per request")),
-    "odom_frame": ("odom", _ro("frame_id of the odometry (and parent of the TF)")),
-    "base_frame": ("base_link", _ro("child_frame_id of the odometry (and of the TF)")),
+    "calibration_file": ("", read_only("YAML calibration to apply ('' = none)")),
+    "use_lift_estimates": (True, read_only("add the node's estimates of counts lost to lifts")),
+    "per_poll": (True, read_only("integrate every single poll (get_samples); false = per request")),
+    "odom_frame": ("odom", read_only("frame_id of the odometry (and parent of the TF)")),
+    "base_frame": ("base_link", read_only("child_frame_id of the odometry (and of the TF)")),
     "publish_tf": (
         True,
-        _ro(
+        read_only(
             "broadcast odom -> base_link on /tf and the sensor mounts on /tf_static; this node "
             "normally owns odom -> base_link (keep mm-beagle's publish_tf false)"
         ),
     ),
     "sensor_frames": (
         [""],
-        _ro("TF frame of each sensor, in device order ('' = mouse_ + the device name)"),
+        read_only("TF frame of each sensor, in device order ('' = mouse_ + the device name)"),
     ),
     "path_length": (
         10000,
-        _ro("poses kept in the path", integer_range=[IntegerRange(from_value=2, to_value=10**6)]),
+        read_only("poses kept in the path", **int_range(2, 10**6)),
     ),
     "path_rate": (
         1.0,
-        _ro(
+        read_only(
             "path messages per second (Hz)",
-            floating_point_range=[FloatingPointRange(from_value=0.1, to_value=100.0)],
+            **float_range(0.1, 100.0),
         ),
     ),
 }
 
 #: parameters that take ``ros2 param set`` while the node runs; the rest are read-only
 LIVE = ("rate", "path_rate", "method", "odom_frame", "base_frame")
-for _name in LIVE:
-    PARAMETERS[_name][1].read_only = False
-    PARAMETERS[_name][1].description += " (live: ros2 param set)"
-
-
-def odometry_message(
-    before: Pose2D,
-    after: Pose2D,
-    dt: float,
-    stamp,
-    cpi: int,
-    uncertainty: PoseUncertainty,
-    odom_frame: str,
-    base_frame: str,
-) -> OdometryMsg:
-    """nav_msgs/Odometry for the step ``before`` -> ``after`` over ``dt`` s.
-
-    The twist is the body-frame increment (x forward, y left, yaw) divided by
-    dt; ``uncertainty`` is advanced by the step. Shared by mm-odometry and
-    mm-beagle's own 1 kHz odometry.
-    """
-    c, s = math.cos(before.yaw), math.sin(before.yaw)
-    ddx, ddy = after.x - before.x, after.y - before.y
-    fwd, left = c * ddx + s * ddy, -s * ddx + c * ddy
-    turned = after.yaw - before.yaw
-    uncertainty.cpi = max(cpi, 1)  # the quantisation floor at the CPI in force
-    uncertainty.add(fwd, turned, lateral=left, heading=before.yaw)
-    msg = OdometryMsg()
-    msg.header.stamp = stamp
-    msg.header.frame_id = odom_frame
-    msg.child_frame_id = base_frame
-    msg.pose.pose.position.x, msg.pose.pose.position.y = after.x, after.y
-    o = msg.pose.pose.orientation
-    o.x, o.y, o.z, o.w = yaw_to_quaternion(after.yaw)
-    msg.pose.covariance = uncertainty.pose_covariance()
-    msg.twist.twist.linear.x, msg.twist.twist.linear.y = fwd / dt, left / dt
-    msg.twist.twist.angular.z = turned / dt
-    msg.twist.covariance = twist_covariance(max(cpi, 1), dt)
-    return msg
+mark_live(PARAMETERS, LIVE)
 
 
 class OdometryNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("mm_odometry", **kwargs)
-        for name, (default, desc) in PARAMETERS.items():
-            self.declare_parameter(name, default, desc)
-        p = {name: self.get_parameter(name).value for name in PARAMETERS}
+        p = declare_all(self, PARAMETERS)
         self.p = p
         flat = list(p["mounts"])
         devices = list(p["devices"])
@@ -373,7 +326,7 @@ class OdometryNode(Node):
     def _finish_fetch(self) -> None:
         fetch, self._fetch = self._fetch, None
         steps = self.tracker.step(fetch["totals"], fetch["polls"])
-        for why in self.tracker.gap_reasons[len(self.tracker.gap_reasons) - int(steps.gap.sum()):]:
+        for why in self.tracker.gap_reasons[len(self.tracker.gap_reasons) - int(steps.gap.sum()) :]:
             self.get_logger().warning(f"gap in the single polls: {why}; stepped with the totals")
         if not len(steps):
             return
@@ -417,9 +370,7 @@ class OdometryNode(Node):
         ))  # fmt: skip
         self.diag_pub.publish(arr)
 
-    def publish_odometry(
-        self, before: Pose2D, after: Pose2D, dt: float, data, stamp=None
-    ) -> None:
+    def publish_odometry(self, before: Pose2D, after: Pose2D, dt: float, data, stamp=None) -> None:
         """Publish nav_msgs/Odometry for the step ``before`` -> ``after`` over ``dt`` s."""
         poll = data.stamp if stamp is None else stamp
         msg = odometry_message(
