@@ -13,31 +13,19 @@ from mm_pc import prerequisites
 
 def mm_beagle() -> int:
     """``mm-beagle``: the sensor node."""
-    prerequisites.install()
-    from mm_beagle.node.node import main
-
-    return main()
+    return prerequisites.launch("mm_beagle.node.node")
 
 
 def mm_beagle_agent() -> int:
     """``mm-beagle-agent``: the poller on the board, served over zenoh (no ROS)."""
-    prerequisites.install()
-    from mm_beagle.link.agent_cli import main
-
-    return main()
+    return prerequisites.launch("mm_beagle.link.agent_cli")
 
 
 def mm_watch() -> int:
     """``mm-watch``: the node's totals in a terminal."""
-    prerequisites.install()
-    from mm_beagle.tools.watch import main
-
-    return main()
+    return prerequisites.launch("mm_beagle.tools.watch")
 
 
 def mm_security() -> int:
-    """``mm-security``: can this ROS installation run DDS security (SROS 2)?."""
-    prerequisites.install()
-    from mm_beagle.link.security import main
-
-    return main()
+    """``mm-security``: can this ROS installation run DDS security (SROS 2)"""
+    return prerequisites.launch("mm_beagle.link.security")

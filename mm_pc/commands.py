@@ -13,47 +13,29 @@ from mm_pc import prerequisites
 
 def mm_odometry() -> int:
     """``mm-odometry``: robot pose from the sensor node's samples."""
-    prerequisites.install()
-    from mm_pc.ros.odometry_node import main
-
-    return main()
+    return prerequisites.launch("mm_pc.ros.odometry_node")
 
 
 def mm_fusion() -> int:
     """``mm-fusion``: odometry fused with wheels, GPS and the perimeter wire."""
-    prerequisites.install()
-    from mm_pc.ros.fusion_node import main
-
-    return main()
+    return prerequisites.launch("mm_pc.ros.fusion_node")
 
 
 def mm_field_sim() -> int:
     """``mm-field-sim``: the simulated mowing run on topics."""
-    prerequisites.install()
-    from mm_pc.ros.field_sim_node import main
-
-    return main()
+    return prerequisites.launch("mm_pc.ros.field_sim_node")
 
 
 def mm_monitor() -> int:
     """``mm-monitor``: the Qt monitor."""
-    prerequisites.install()
-    from mm_pc.monitor.app import main
-
-    return main()
+    return prerequisites.launch("mm_pc.monitor.app")
 
 
 def mm_bench() -> int:
     """``mm-bench``: the benchmarks (JSON)."""
-    prerequisites.install()
-    from mm_pc.bench.cli import main
-
-    return main()
+    return prerequisites.launch("mm_pc.bench.cli")
 
 
 def mm_otos_settings() -> int:
     """``mm-otos-settings``: an OTOS's linear scalar and offset from a calibration file."""
-    prerequisites.install()
-    from mm_pc.core.otos_settings import main
-
-    return main()
+    return prerequisites.launch("mm_pc.core.otos_settings")

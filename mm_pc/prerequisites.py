@@ -21,6 +21,7 @@ package whose library ``ldd`` finds missing among the Qt files the monitor loads
 
 from __future__ import annotations
 
+import importlib
 import importlib.util
 import os
 import re
@@ -284,3 +285,11 @@ def install() -> None:
     of ours does not)."""
     if not getattr(sys.excepthook, "mm_prerequisites", False):
         sys.excepthook = _hook(sys.excepthook)
+
+
+def launch(module: str) -> int:
+    """A console script's body: install the hook, then import ``module`` and return what its
+    ``main()`` returns (the exit status). The import comes after the hook, so a missing ROS,
+    extra or system library at the program's top is a message and exit 2."""
+    install()
+    return importlib.import_module(module).main()
