@@ -64,7 +64,7 @@ class PollerClient:
     def restart(self) -> None:
         """Kill a stuck poller (SIGKILL: a stopped process never sees SIGTERM), start a new one.
 
-        The new poller carries on from the shared totals (see poller.Channel);
+        The new poller carries on from the shared totals (see channel.Channel);
         its sensors are initialised again, so counts the chips held are lost.
         """
         with self._lock:

@@ -174,7 +174,7 @@ class Totals:
 class SharedState:
     """Views onto one shared buffer; built identically in every process that maps it.
 
-    The writer (:class:`mm_beagle.poller.poller.Channel`) uses the plain memoryviews of
+    The writer (:class:`mm_beagle.poller.channel.Channel`) uses the plain memoryviews of
     :meth:`sensor_views`, :attr:`glob_view` and :attr:`hist_view`, so the board's
     agent needs no numpy; readers use the numpy arrays (``ints``, ``floats``,
     ``glob``, ``hist``, ``ring_*``), made on first use.
@@ -332,8 +332,8 @@ class SharedState:
         ]
 
 
-# The poller's hot path (poller.Channel.poll) writes these by literal index.
+# The poller's hot path (channel.Channel.poll) writes these by literal index.
 assert (I_VERSION, I_SEQ, I_X_TOTAL, I_Y_TOTAL, I_STAMP_NS) == (0, 1, 2, 3, 10)
-# ... and unpacks the ring fields in this order (poller.Channel.poll/record)
+# ... and unpacks the ring fields in this order (channel.Channel.poll/record)
 assert ring_layout.NAMES == ("stamp_ns", "dx", "dy", "status", "cpi", "flags", "quality")
 assert (F_X_TOTAL_M, F_Y_TOTAL_M, FLAG_MOTION) == (0, 1, 2)

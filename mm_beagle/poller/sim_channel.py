@@ -1,4 +1,4 @@
-"""The sim backend's channel: the production :class:`~mm_beagle.poller.poller.Channel`
+"""The sim backend's channel: the production :class:`~mm_beagle.poller.channel.Channel`
 plus the emulator's ground truth, kept out of the production hot path.
 
 After every write of its channel a :class:`SimChannel` copies what its emulated sensor
@@ -12,7 +12,7 @@ Only the sim backend imports this module.
 from __future__ import annotations
 
 from mm_beagle.poller import shared_state as ss
-from mm_beagle.poller.poller import Channel
+from mm_beagle.poller.channel import Channel
 from pln2033 import Motion
 
 

@@ -1,6 +1,6 @@
 """mm-bench chips: CPU per poll of each chip's driver in the real poller, in this process.
 
-For every installed chip, one :class:`~mm_beagle.poller.poller.Channel` is brought up on the
+For every installed chip, one :class:`~mm_beagle.poller.channel.Channel` is brought up on the
 chip's emulator (the real driver's bring-up), then polled flat out:
 
 - ``stub_us``: after bring-up the motion burst is answered by a constant reply (the

@@ -11,7 +11,7 @@ import pytest
 from mm_beagle.node.onboard_odometry import OnboardOdometry
 from mm_beagle.node.params import OdometrySettings
 from mm_beagle.poller import shared_state as ss
-from mm_beagle.poller.poller import Channel
+from mm_beagle.poller.channel import Channel
 from pln2033 import INCH_M, Motion
 
 MOUNTS = [(0.049, -0.0395, 0.0), (0.049, 0.0395, 0.0)]

@@ -1,6 +1,6 @@
 """SharedState: layout, the sequence lock, the ring buffer reader, period percentiles.
 
-The writer side used here is the poller's own :class:`mm_beagle.poller.poller.Channel`
+The writer side used here is the poller's own :class:`mm_beagle.poller.channel.Channel`
 (its ``record`` is the only writer in production), or a hand-written writer
 that follows the same version protocol.
 """
@@ -19,7 +19,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mm_beagle.poller import shared_state as ss
-from mm_beagle.poller.poller import Channel
+from mm_beagle.poller.channel import Channel
 from pln2033 import INCH_M, Motion
 
 
