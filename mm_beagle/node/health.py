@@ -11,6 +11,9 @@ Thresholds (docs/beagle-node.md section 4.2):
   collects more than ``COUNTER_LIMIT`` (32 767) counts in the longest gap.
   Each wrap loses 65 536 counts; the estimate is in the values (counts and
   metres at the CPI in force).
+
+:func:`sensor_status` builds one sensor's status (level, message, values) from
+plain values: the node only reads the snapshots and publishes what it returns.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mm_beagle.poller.shared_state import STATE_NAMES, STATE_UP, Totals
 from pln2033 import INCH_M
 
 STALL_S = 0.05
@@ -101,4 +105,97 @@ def assess(rate_hz: float, poll_rate: float, overruns_grew: int, gap: Gap,
         why.append(f"stall: no poll for {gap.seconds * 1e3:.0f} ms (> {STALL_S * 1e3:.0f} ms)")
     if why:
         return "WARN", "; ".join(why), values
+    return "OK", "up", values
+
+
+@dataclass(frozen=True)
+class PollerRound:
+    """What one diagnostics round measured of the whole poller (the same for every sensor).
+
+    ``period_p50_us``/``period_p99_us``: poll period percentiles (µs); ``late_polls``,
+    ``overruns``: the poller's totals; ``cpu_percent``: its CPU; ``link``: the remote
+    link's values ({} locally); ``stuck``/``unavailable``: why the poller counts as
+    stuck or the agent cannot be reached ('' = it polls, it can); ``sim``: the sim
+    backend, whose emulators' ground truth is reported too.
+    """
+
+    period_p50_us: float
+    period_p99_us: float
+    late_polls: int
+    overruns: int
+    cpu_percent: float
+    restarts: int
+    link: dict[str, object]
+    stuck: str = ""
+    unavailable: str = ""
+    sim: bool = False
+
+
+def sensor_status(
+    r: PollerRound,
+    chip: str,
+    t: Totals,
+    rate_hz: float,
+    last_error: str,
+    assessed: tuple[str, str, dict[str, object]],
+    down_message: str,
+    errors_before: tuple[int, int],
+) -> tuple[str, str, dict[str, object]]:
+    """('OK'|'WARN'|'ERROR', message, values) of one sensor's /diagnostics status.
+
+    ``t``: the sensor's snapshot; ``rate_hz``: polls per second over the round (nan:
+    the first round); ``assessed``: :func:`assess` of its polls; ``down_message``: what
+    to say while it is not up; ``errors_before``: its (spi_errors, overflows) at the
+    previous round (a change is a WARN). The level goes by the worst of: stuck poller,
+    unreachable agent, sensor down, ``assessed`` ERROR, new SPI errors or overflows,
+    ``assessed`` WARN.
+    """
+    values: dict[str, object] = {
+        "chip": chip,
+        "state": STATE_NAMES.get(t.state, "?"),
+        "polls": t.seq,
+        "achieved_rate_hz": f"{rate_hz:.1f}",
+        "period_p50_us": f"{r.period_p50_us:.0f}",
+        "period_p99_us": f"{r.period_p99_us:.0f}",
+        "late_polls": r.late_polls,
+        "overruns": r.overruns,
+        "spi_errors": t.spi_errors,
+        "lift_events": t.lift_total,
+        "quality": t.quality,  # the newest poll's (SQUAL; -1: the chip has none)
+        "low_quality_events": t.low_quality_total,
+        # counts lost to lifts, estimated (pln2033.lift_fill), and its 1 sigma
+        "lift_est_x_counts": f"{t.x_est_counts:.1f}",
+        "lift_est_y_counts": f"{t.y_est_counts:.1f}",
+        "lift_est_sigma_x_counts": f"{t.x_est_var_counts**0.5:.1f}",
+        "lift_est_sigma_y_counts": f"{t.y_est_var_counts**0.5:.1f}",
+        "overflows": t.overflows,
+        "cpi": t.cpi_y,
+        "x_total_counts": t.x_total,
+        "y_total_counts": t.y_total,
+        "reinits": t.reinits,
+        "poller_cpu_percent": f"{r.cpu_percent:.1f}",
+        "poller_restarts": r.restarts,
+        "last_error": last_error,
+    }
+    values.update(r.link)
+    level_name, health_text, health_values = assessed
+    values.update(health_values)
+    if r.sim or t.gen_x or t.gen_y:
+        values["sim_generated_x_counts"] = t.gen_x
+        values["sim_generated_y_counts"] = t.gen_y
+        values["sim_lift_lost_x_counts"] = t.lift_lost_x
+        values["sim_lift_lost_y_counts"] = t.lift_lost_y
+    if r.stuck:
+        return "ERROR", r.stuck, values
+    if r.unavailable:
+        return "ERROR", r.unavailable, values
+    if t.state != STATE_UP:
+        return "ERROR", down_message, values
+    if level_name == "ERROR":
+        return "ERROR", health_text, values
+    if (t.spi_errors, t.overflows) != errors_before:
+        text = "SPI errors or counter overflows since last report"
+        return "WARN", text + (f"; {health_text}" if level_name == "WARN" else ""), values
+    if level_name == "WARN":
+        return "WARN", health_text, values
     return "OK", "up", values

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 
 from mm_beagle.node import health
+from mm_beagle.poller.shared_state import STATE_STARTING, STATE_UP, Totals
 from pln2033 import INCH_M
 
 
@@ -63,3 +65,62 @@ def test_a_stall_going_on_now_counts():
     gap = health.longest_gap(t, dx, dy, 0, int(t[-1]) + 300_000_000)
     assert math.isclose(gap.seconds, 0.3)
     assert health.longest_gap([], [], [], 5, 5 + 200_000_000).seconds == 0.2
+
+
+def _round(**kw) -> health.PollerRound:
+    values = dict(
+        period_p50_us=1000.2, period_p99_us=1180.7, late_polls=3, overruns=1,
+        cpu_percent=12.34, restarts=0, link={},
+    )  # fmt: skip
+    return health.PollerRound(**{**values, **kw})
+
+
+def _up(**kw) -> Totals:
+    base = dict(state=STATE_UP, seq=5000, cpi_y=1600, x_total=120, y_total=-40, spi_errors=2)
+    return dataclasses.replace(Totals.zero(7), **{**base, **kw})
+
+
+OK = ("OK", "up", {"longest_poll_gap_ms": "1.0", "gap_est_counts": "0"})
+
+
+def test_a_sensor_status_carries_the_snapshot_and_the_round():
+    level, text, values = health.sensor_status(
+        _round(link={"link_age_ms": "4.0"}), "pmw3360", _up(quality=37), 999.94, "", OK,
+        "down?", (2, 0),
+    )  # fmt: skip
+    assert (level, text) == ("OK", "up")
+    assert values["chip"] == "pmw3360" and values["state"] == "up"
+    assert values["polls"] == 5000 and values["achieved_rate_hz"] == "999.9"
+    assert (values["period_p50_us"], values["period_p99_us"]) == ("1000", "1181")
+    assert (values["late_polls"], values["overruns"], values["spi_errors"]) == (3, 1, 2)
+    assert (values["x_total_counts"], values["y_total_counts"], values["cpi"]) == (120, -40, 1600)
+    assert values["quality"] == 37 and values["poller_cpu_percent"] == "12.3"
+    assert values["link_age_ms"] == "4.0" and values["longest_poll_gap_ms"] == "1.0"
+    assert "sim_generated_x_counts" not in values  # not the sim backend, no ground truth
+    _, _, sim = health.sensor_status(_round(sim=True), "pln2033", _up(gen_x=9), 1000.0, "",
+                                     OK, "", (2, 0))  # fmt: skip
+    assert sim["sim_generated_x_counts"] == 9 and sim["sim_lift_lost_y_counts"] == 0
+
+
+def test_the_status_level_goes_by_the_worst_of_its_causes():
+    warn = ("WARN", "3 overruns", {})
+    error = ("ERROR", "counter may have wrapped", {})
+
+    def status(r=None, t=None, assessed=OK, errors_before=(2, 0)):
+        level, text, _ = health.sensor_status(
+            r or _round(), "pln2033", t or _up(), 1000.0, "gone", assessed,
+            "sensor /dev/a is down (gone)", errors_before,
+        )  # fmt: skip
+        return level, text
+
+    assert status(assessed=warn) == ("WARN", "3 overruns")
+    assert status(errors_before=(1, 0)) == (
+        "WARN", "SPI errors or counter overflows since last report",
+    )  # fmt: skip
+    assert status(errors_before=(1, 0), assessed=warn)[1].endswith("; 3 overruns")
+    assert status(assessed=error, errors_before=(1, 0)) == ("ERROR", "counter may have wrapped")
+    down = _up(state=STATE_STARTING)
+    assert status(t=down, assessed=error) == ("ERROR", "sensor /dev/a is down (gone)")
+    assert status(_round(unavailable="agent unreachable"), down) == ("ERROR", "agent unreachable")
+    stuck = _round(stuck="poller stuck", unavailable="agent unreachable")
+    assert status(stuck, down) == ("ERROR", "poller stuck")
