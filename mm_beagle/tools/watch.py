@@ -15,6 +15,8 @@ import sys
 import time
 from dataclasses import dataclass
 
+from mm_pc.core.polls import SensorTotals
+
 
 @dataclass
 class SensorView:
@@ -33,13 +35,15 @@ class SensorView:
     quality: int = -1
 
     def update(self, msg) -> None:
+        """Add one ``mm_interfaces/SensorData``; the totals read as mm-odometry reads them."""
+        totals = SensorTotals.from_msg(msg)
         self.samples += msg.samples
         self.interval += msg.interval
         self.x_speed, self.y_speed = msg.x_speed, msg.y_speed
-        self.x_total, self.y_total = msg.x_total_disp, msg.y_total_disp
+        self.x_total, self.y_total = totals.x_m, totals.y_m
         self.cpi = msg.cpi
         self.lifts = msg.lift_events_total
-        self.lift_est = math.hypot(msg.x_lift_est_total_disp, msg.y_lift_est_total_disp)
+        self.lift_est = math.hypot(totals.x_est_m, totals.y_est_m)
         self.chip = msg.chip or "pln2033"  # an older node sends none
         self.quality = msg.quality if msg.chip else -1
 
