@@ -269,3 +269,28 @@ def test_agent_config_file_takes_chips(tmp_path):
     cfg = config_from_args(build_parser().parse_args(["--config", str(f)]))
     assert cfg.poller.chips == ["pln2033", "pmw3360"]
     assert cfg.poller.chip_options == {"pmw3360.check_crc": False}
+
+
+def test_the_node_and_the_agent_take_the_poller_options_from_one_table():
+    """mm_beagle.poller.options: the node's descriptors and the agent's defaults, ranges and
+    help come from the same entries."""
+    from mm_beagle.link.agent_cli import DEFAULTS, build_parser
+    from mm_beagle.node.params import PARAMETERS
+    from mm_beagle.poller.options import OPTIONS
+
+    assert set(OPTIONS) <= set(PARAMETERS) and set(OPTIONS) <= set(DEFAULTS)
+    for name, o in OPTIONS.items():
+        default, desc = PARAMETERS[name]
+        assert default == (o.default or [""] if isinstance(o.default, list) else o.default), name
+        assert DEFAULTS[name] == o.default, name
+        ranges = list(desc.integer_range) + list(desc.floating_point_range)
+        if o.lo is None:
+            assert not ranges, name
+        else:
+            (r,) = ranges
+            assert (r.from_value, r.to_value) == (o.lo, o.hi), name
+    rate = PARAMETERS["poll_rate"][1].floating_point_range[0]
+    assert (rate.from_value, rate.to_value) == (10.0, 2000.0)
+    cpi = PARAMETERS["cpi"][1].integer_range[0]
+    assert (cpi.from_value, cpi.step) == (OPTIONS["cpi"].lo, OPTIONS["cpi"].step)
+    assert "[10..2000, default 1000.0]" in " ".join(build_parser().format_help().split())
