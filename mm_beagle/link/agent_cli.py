@@ -20,9 +20,14 @@ from mm_beagle.link import link
 from mm_beagle.link.agent import AgentLink, AgentPoller, StubMotionBus, make_state, rss_mb
 from mm_beagle.poller import chip_config
 from mm_beagle.poller import shared_state as ss
-from mm_beagle.poller.options import OPTIONS, Option, check_ranges, option_bounds
-from mm_beagle.poller.poller import PollerConfig, poller_config, tune_process
-from mm_beagle.poller.sim_backend import SimConfig, check_trajectory, parse_fail_windows
+from mm_beagle.poller.options import (
+    OPTIONS,
+    Option,
+    check_ranges,
+    option_bounds,
+    poller_config_from,
+)
+from mm_beagle.poller.poller import PollerConfig, tune_process
 from mm_beagle.poller.sim_channel import truth_of
 
 EXIT_CONFIG = 2
@@ -174,17 +179,9 @@ def config_from_args(args: argparse.Namespace) -> AgentConfig:
         if v is not None:
             values[name] = v
     values = {k: _check_type(k, v) for k, v in values.items()}
-    devices = values["devices"]
-    if len(set(devices)) != len(devices):
-        raise ValueError(f"'devices' must name distinct devices, got {devices}")
     check_ranges(ALL_OPTIONS, values)
-    for name in ("chips", "sim_chips"):  # a config file may write "a,b" too
-        values[name] = chip_config.split_names(values[name])
-    options = chip_config.parse_chip_options(values["chip_options"])
-    chip_config.check_board_config(
-        devices, values["chips"], options, values["cpi"], values["register_map"]
-    )
-    values["chip_options"] = options
+    ring = round(values["ring_seconds"] * values["poll_rate"])
+    cfg = poller_config_from(values, ring)
     link.keys(values["name"])
     for ep in values["listen"]:
         if not link.is_loopback(ep) and not values["credentials"]:
@@ -195,27 +192,6 @@ def config_from_args(args: argparse.Namespace) -> AgentConfig:
             )
     if values["credentials"]:
         link.load_credentials(values["credentials"])
-    sim = SimConfig(
-        trajectory=values["sim_trajectory"],
-        speed=values["sim_speed"],
-        noise_counts=values["sim_noise_counts"],
-        lift_rate=values["sim_lift_rate"],
-        fail_windows=list(values["sim_fail_windows"]),
-        start_delay=values["sim_start_delay"],
-        duration=values["sim_duration"],
-        loop=values["sim_loop"],
-        chips=list(values["sim_chips"]),
-        low_quality_rate=values["sim_low_quality_rate"],
-    )
-    parse_fail_windows(sim.fail_windows, devices)
-    if values["backend"] == "sim":
-        check_trajectory(sim.trajectory)
-    ring = round(values["ring_seconds"] * values["poll_rate"])
-    cfg = poller_config(values, ring, sim)
-    if values["backend"] == "sim":
-        from mm_beagle.poller.sim_backend import sim_chips
-
-        sim_chips(cfg)
     return AgentConfig(cfg, values["name"], values["listen"], values["credentials"])
 
 

@@ -15,9 +15,8 @@ from rclpy.node import Node
 from mm_beagle.link import link
 from mm_beagle.node.otos_calibration import otos_options
 from mm_beagle.poller import chip_config
-from mm_beagle.poller.options import OPTIONS
-from mm_beagle.poller.poller import PollerConfig, poller_config
-from mm_beagle.poller.sim_backend import SimConfig, check_trajectory, parse_fail_windows
+from mm_beagle.poller.options import OPTIONS, poller_config_from
+from mm_beagle.poller.poller import PollerConfig
 from mm_pc.ros.parameters import declare_all, float_range, int_range, mark_live, ranged
 from mm_pc.ros.parameters import read_only as _plain
 from mm_pc.ros.tf import frame_ids_problem, sensor_frame_names
@@ -170,45 +169,21 @@ class NodeSettings:
     remote: RemoteSettings
 
 
+def _triples(flat: list[float]) -> list[tuple[float, float, float]]:
+    """[x0, y0, yaw0, x1, ...] -> [(x0, y0, yaw0), ...] (a length that is a multiple of 3)."""
+    return [(flat[i], flat[i + 1], flat[i + 2]) for i in range(0, len(flat) - 2, 3)]
+
+
 def declare(node: Node) -> NodeSettings:
     """Declare every parameter and return validated settings; ValueError says what is wrong."""
     p = declare_all(node, PARAMETERS)
-    devices = list(p["devices"])
-    if not devices or any(not d for d in devices) or len(set(devices)) != len(devices):
-        raise ValueError(f"'devices' must name distinct devices, got {devices}")
     if p["backend"] not in BACKENDS:
         raise ValueError(f"'backend' is '{p['backend']}'; allowed: {', '.join(BACKENDS)}")
     mounts_flat = list(p["sim_mounts"])
     if len(mounts_flat) % 3:
         raise ValueError("'sim_mounts' needs x, y, yaw per sensor (a multiple of 3 numbers)")
-    mounts = [tuple(mounts_flat[i : i + 3]) for i in range(0, len(mounts_flat), 3)]
-    fails = [s for s in p["sim_fail_windows"] if s]
-    parse_fail_windows(fails, devices)  # validate now, with a clear message
-    sim = SimConfig(
-        trajectory=p["sim_trajectory"],
-        speed=p["sim_speed"],
-        loop=p["sim_loop"],
-        duration=p["sim_duration"],
-        start_delay=p["sim_start_delay"],
-        mounts=mounts,  # type: ignore[arg-type]
-        lift_rate=p["sim_lift_rate"],
-        noise_counts=p["sim_noise_counts"],
-        fail_windows=fails,
-        chips=chip_config.split_names(p["sim_chips"]),
-        low_quality_rate=p["sim_low_quality_rate"],
-    )
-    if p["backend"] == "sim":
-        check_trajectory(sim.trajectory)
-    chips = chip_config.split_names(p["chips"])
-    options = chip_config.parse_chip_options(list(p["chip_options"]))
-    chip_config.check_board_config(devices, chips, options, p["cpi"], p["register_map"])
-    cfg = poller_config(
-        {**p, "devices": devices, "chips": chips, "chip_options": options}, p["ring_size"], sim
-    )
-    if p["backend"] == "sim":
-        from mm_beagle.poller.sim_backend import sim_chips
-
-        sim_chips(cfg)  # a bad name now, with a clear message
+    cfg = poller_config_from(p, p["ring_size"], _triples(mounts_flat))
+    devices, chips = cfg.devices, cfg.chips
     cfg.device_options = otos_options(
         devices, chip_config.resolve_chips(chips, devices), p["calibration_file"], p["mounts"]
     )
@@ -221,7 +196,7 @@ def declare(node: Node) -> NodeSettings:
         rate=p["odometry_rate"],
         method=p["odometry_method"],
         sensor=p["odometry_sensor"],
-        mounts=[tuple(flat[i : i + 3]) for i in range(0, len(flat), 3)],  # type: ignore[misc]
+        mounts=_triples(flat),
         calibration_file=p["calibration_file"],
         odom_frame=p["odom_frame"],
         base_frame=p["base_frame"],

@@ -3,8 +3,9 @@
 Both ways of starting a poller read this table: the node's ROS parameters
 (:mod:`mm_beagle.node.params` builds ParameterDescriptors from it) and the agent's
 command line and YAML file (:mod:`mm_beagle.link.agent_cli` builds its defaults and
-range checks from it). Only what both share is here; the node's publishing and
-odometry parameters and the agent's zenoh options stay with them.
+range checks from it), and both build their PollerConfig from the checked values
+with :func:`poller_config_from`. Only what both share is here; the node's publishing
+and odometry parameters and the agent's zenoh options stay with them.
 No ROS, no numpy (the board's agent imports it).
 """
 
@@ -13,6 +14,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from mm_beagle.poller import chip_config
+from mm_beagle.poller.poller import PollerConfig, poller_config
+from mm_beagle.poller.sim_backend import (
+    SimConfig,
+    check_trajectory,
+    parse_fail_windows,
+    sim_chips,
+)
 
 
 @dataclass(frozen=True)
@@ -177,3 +185,42 @@ def check_ranges(options: dict[str, Option], values: dict[str, object]) -> None:
     for name, option in options.items():
         if name in values and (problem := range_problem(option, values[name])):
             raise ValueError(problem)
+
+
+def poller_config_from(
+    values: dict, ring_size: int, sim_mounts: list[tuple[float, float, float]] | None = None
+) -> PollerConfig:
+    """The PollerConfig of option values already typed and range-checked, by the node
+    (its parameters) and the agent (its command line) alike: devices, chips and their
+    options, the firmware files and the sim backend checked here; ValueError says what
+    is wrong. ``sim_mounts``: the sim backend's sensor mounts (base_link x, y, yaw)."""
+    devices = list(values["devices"])
+    if not devices or any(not d for d in devices) or len(set(devices)) != len(devices):
+        raise ValueError(f"'devices' must name distinct devices, got {devices}")
+    fails = [s for s in values["sim_fail_windows"] if s]
+    parse_fail_windows(fails, devices)  # checked whatever the backend, with a clear message
+    sim = SimConfig(
+        trajectory=values["sim_trajectory"],
+        speed=values["sim_speed"],
+        loop=values["sim_loop"],
+        duration=values["sim_duration"],
+        start_delay=values["sim_start_delay"],
+        mounts=list(sim_mounts or []),
+        lift_rate=values["sim_lift_rate"],
+        noise_counts=values["sim_noise_counts"],
+        fail_windows=fails,
+        chips=chip_config.split_names(values["sim_chips"]),
+        low_quality_rate=values["sim_low_quality_rate"],
+    )
+    backend = values["backend"]
+    if backend == "sim":
+        check_trajectory(sim.trajectory)
+    chips = chip_config.split_names(values["chips"])  # a config file may write "a,b" too
+    options = chip_config.parse_chip_options(list(values["chip_options"]))
+    chip_config.check_board_config(devices, chips, options, values["cpi"], values["register_map"])
+    cfg = poller_config(
+        {**values, "devices": devices, "chips": chips, "chip_options": options}, ring_size, sim
+    )
+    if backend == "sim":
+        sim_chips(cfg)  # a bad emulated chip name now, with a clear message
+    return cfg
