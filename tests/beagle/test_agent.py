@@ -518,3 +518,24 @@ def test_applying_a_block_never_puts_the_agents_lock_word_into_the_node_state():
     assert int(st[ss.I_VERSION]) == before + 2
     assert 12345 not in seen and all(v in (before, before + 1, before + 2) for v in seen)
     assert int(st[ss.I_Y_TOTAL]) == 7 and int(st[ss.I_SEQ]) == 3
+
+
+def test_the_agents_config_is_built_as_the_nodes(tmp_path):
+    """Defaults <- file <- command line, then mm_beagle.poller.options.poller_config_from."""
+    from mm_beagle.link.agent_cli import DEFAULTS, build_parser, config_from_args
+    from mm_beagle.poller.options import poller_config_from
+
+    f = tmp_path / "agent.yaml"
+    f.write_text("poll_rate: 500\nsim_speed: 0.5\nchips: ['pln2033,pln2033']\n")
+    args = ["--config", str(f), "--backend", "sim", "--sim-fail-windows", "/dev/spidev1.1@1-2"]
+    cfg = config_from_args(build_parser().parse_args(args))
+    p = cfg.poller
+    assert (p.backend, p.poll_rate, p.sim.speed) == ("sim", 500.0, 0.5)
+    assert p.chips == ["pln2033", "pln2033"]  # "a,b" in one entry too
+    assert p.sim.fail_windows == ["/dev/spidev1.1@1-2"] and p.sim.trajectory == "figure_eight"
+    assert p.ring_size == round(65.536 * 500)
+    direct = poller_config_from({**DEFAULTS, "backend": "sim"}, 1024, [(0.1, 0.0, 0.0)] * 2)
+    assert (direct.devices, direct.cpi, direct.ring_size) == (DEFAULTS["devices"], 1600, 1024)
+    assert direct.sim.mounts == [(0.1, 0.0, 0.0)] * 2
+    with pytest.raises(ValueError, match="distinct"):
+        poller_config_from({**DEFAULTS, "devices": ["/dev/a", "/dev/a"]}, 1024)
