@@ -28,10 +28,18 @@ PARAM_TABLE_FILE = {"mm_beagle.node.node": "mm_beagle/node/params.py"}
 
 @cache
 def scripts() -> dict[str, str]:
-    """pyproject's console scripts: name -> entry module."""
+    """pyproject's console scripts: name -> the program module its launcher in
+    ``<package>/commands.py`` starts (``prerequisites.launch("<module>")``)."""
     text = (ROOT / "pyproject.toml").read_text()
     body = re.search(r"^\[project\.scripts\]\n(.*?)(?=^\[)", text, re.M | re.S).group(1)
-    return {n: t.partition(":")[0] for n, t in re.findall(r'^([\w-]+) = "([\w.:]+)"', body, re.M)}
+    out = {}
+    for name, target in re.findall(r'^([\w-]+) = "([\w.:]+)"', body, re.M):
+        module, _, func = target.partition(":")
+        tree = ast.parse(_module_file(module).read_text())
+        launcher = next(f for f in tree.body if isinstance(f, ast.FunctionDef) and f.name == func)
+        call = next(n for n in ast.walk(launcher) if isinstance(n, ast.Call) and n.args)
+        out[name] = call.args[0].value
+    return out
 
 
 def _module_file(module: str) -> Path:
