@@ -231,9 +231,14 @@ def message(program: str, missing: str) -> str | None:
     )
 
 
+_launched: str | None = None  # the program prerequisites.launch started
+
+
 def _program() -> str:
-    """The command the user typed: the console script (``sys.argv[0]``), else the module
-    run with ``python -m``."""
+    """The command the user typed: the program :func:`launch` started, the console script
+    (``sys.argv[0]``), else the module run with ``python -m``."""
+    if _launched:
+        return _launched
     spec = getattr(sys.modules.get("__main__"), "__spec__", None)
     if spec is None:  # a console script, or python -c
         name = os.path.basename(sys.argv[0]) if sys.argv and sys.argv[0] else ""
@@ -287,9 +292,12 @@ def install() -> None:
         sys.excepthook = _hook(sys.excepthook)
 
 
-def launch(module: str) -> int:
+def launch(program: str, module: str) -> int:
     """A console script's body: install the hook, then import ``module`` and return what its
     ``main()`` returns (the exit status). The import comes after the hook, so a missing ROS,
-    extra or system library at the program's top is a message and exit 2."""
+    extra or system library at the program's top is a message and exit 2 that names
+    ``program`` (also when started as ``python -m``)."""
+    global _launched
+    _launched = program
     install()
     return importlib.import_module(module).main()

@@ -29,7 +29,7 @@ PARAM_TABLE_FILE = {"mm_beagle.node.node": "mm_beagle/node/params.py"}
 @cache
 def scripts() -> dict[str, str]:
     """pyproject's console scripts: name -> the program module its launcher in
-    ``<package>/commands.py`` starts (``prerequisites.launch("<module>")``)."""
+    ``<package>/commands.py`` starts (``prerequisites.launch("<program>", "<module>")``)."""
     text = (ROOT / "pyproject.toml").read_text()
     body = re.search(r"^\[project\.scripts\]\n(.*?)(?=^\[)", text, re.M | re.S).group(1)
     out = {}
@@ -38,7 +38,7 @@ def scripts() -> dict[str, str]:
         tree = ast.parse(_module_file(module).read_text())
         launcher = next(f for f in tree.body if isinstance(f, ast.FunctionDef) and f.name == func)
         call = next(n for n in ast.walk(launcher) if isinstance(n, ast.Call) and n.args)
-        out[name] = call.args[0].value
+        out[name] = call.args[1].value
     return out
 
 

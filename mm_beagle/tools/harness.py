@@ -91,7 +91,7 @@ def use_isolated_ros_env(
 
 def node_command(params: dict[str, object], namespace: str = "") -> list[str]:
     """The command line of mm-beagle with ``-p name:=value`` for each parameter."""
-    cmd = [sys.executable, "-m", "mm_beagle.node.node", "--ros-args"]
+    cmd = [sys.executable, "-m", "mm_beagle.node", "--ros-args"]
     if namespace:
         cmd += ["-r", f"__ns:={namespace}"]
     for name, value in params.items():

@@ -237,7 +237,7 @@ def test_bad_chips_exit_2_from_a_params_file(tmp_path):
     f = tmp_path / "p.yaml"
     f.write_text("mm_beagle:\n  ros__parameters:\n    backend: sim\n    chips: [pmw9999]\n")
     out = subprocess.run(
-        [sys.executable, "-m", "mm_beagle.node.node", "--ros-args", "--params-file", str(f)],
+        [sys.executable, "-m", "mm_beagle.node", "--ros-args", "--params-file", str(f)],
         capture_output=True, text=True, timeout=scaled(120), env=isolated_ros_env(),
     )  # fmt: skip
     assert out.returncode == 2 and "allowed: pln2033" in out.stderr, out.stderr

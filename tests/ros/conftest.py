@@ -14,7 +14,7 @@ def ros_command():
 
     def build(module: str, params: dict, namespace: str = "", params_file=None) -> list[str]:
         cmd = node_command(params, namespace)
-        assert cmd[1:4] == ["-m", "mm_beagle.node.node", "--ros-args"], cmd
+        assert cmd[1:4] == ["-m", "mm_beagle.node", "--ros-args"], cmd
         cmd[2] = module
         if params_file:
             cmd[4:4] = ["--params-file", str(params_file)]
