@@ -108,7 +108,7 @@ def _replies(counts: np.ndarray, ends: np.ndarray, cpi: int, devices) -> list:
     """Monitor replies (Reading totals + the polls since the previous reply) at ``ends``."""
     from types import SimpleNamespace
 
-    from mm_pc.monitor.model.readings import Reading, Reply
+    from mm_pc.core.sensor_data import Reading, Reply
 
     n, k, _ = counts.shape
     c = counts.astype(np.int64)
@@ -144,7 +144,7 @@ def session_cost(rates=(15.0, 100.0, 500.0), seconds: float = 30.0) -> dict:
     at 500 Hz also ``process_batch`` with the polls, in batches of :data:`BATCH_500HZ`."""
     import time
 
-    from mm_pc.monitor.model.readings import Reply
+    from mm_pc.core.sensor_data import Reply
     from mm_pc.monitor.model.session import MonitorSession
 
     v, w = sim.trajectory("s_curves")

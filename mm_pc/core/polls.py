@@ -56,6 +56,7 @@ from mm_pc.core.poll_flags import (  # the bits of GetSamples' flags, defined on
     FLAG_SPI_ERROR,
     FLAG_UNSEEN,
 )
+from mm_pc.core.sensor_data import Reading
 from pln2033 import INCH_M
 
 __all__ = [
@@ -110,17 +111,18 @@ class SensorTotals(NamedTuple):
 
     @classmethod
     def from_msg(cls, msg) -> SensorTotals:
-        """From an ``mm_interfaces/SensorData`` (attributes only)."""
+        """From an ``mm_interfaces/SensorData`` (attributes only), read by the one reader."""
+        r = Reading.from_msg(msg)
         return cls(
-            seq=int(msg.seq),
-            stamp_ns=int(msg.stamp.sec) * 1_000_000_000 + int(msg.stamp.nanosec),
-            x_counts=int(msg.x_total_counts),
-            y_counts=int(msg.y_total_counts),
-            x_m=float(msg.x_total_disp),
-            y_m=float(msg.y_total_disp),
-            x_est_m=float(msg.x_lift_est_total_disp),
-            y_est_m=float(msg.y_lift_est_total_disp),
-            instance_id=int(getattr(msg, "instance_id", 0)),
+            seq=r.seq,
+            stamp_ns=r.stamp_ns,
+            x_counts=r.x_total_counts,
+            y_counts=r.y_total_counts,
+            x_m=r.x_total,
+            y_m=r.y_total,
+            x_est_m=r.x_lift_total,
+            y_est_m=r.y_lift_total,
+            instance_id=r.instance_id,
         )
 
 

@@ -16,7 +16,7 @@ from PySide6.QtCore import QObject, Signal
 
 from mm_pc.core.calibration import Calibration
 from mm_pc.core.geometry import DEFAULT_GEOMETRY, RobotGeometry
-from mm_pc.monitor.model.readings import Reply
+from mm_pc.core.sensor_data import Reply
 from mm_pc.monitor.model.session import MonitorSession
 from mm_pc.monitor.settings import config_dir
 

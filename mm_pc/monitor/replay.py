@@ -39,8 +39,8 @@ import numpy as np
 from PySide6.QtCore import QObject, Qt, QTimer, Signal
 from PySide6.QtWidgets import QFileDialog, QMessageBox, QProgressBar
 
+from mm_pc.core.sensor_data import Reply
 from mm_pc.monitor.io.mcap_reader import read_replies
-from mm_pc.monitor.model.readings import Reply
 from mm_pc.monitor.model.session import MonitorSession
 from mm_pc.monitor.settings import last_folder, open_settings, remember_folder
 

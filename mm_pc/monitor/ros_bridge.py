@@ -54,7 +54,7 @@ from typing import ClassVar
 
 from PySide6.QtCore import QObject, QTimer, Signal
 
-from mm_pc.monitor.model.readings import Reading, Reply
+from mm_pc.core.sensor_data import Reading, Reply
 
 __all__ = ["EXECUTORS", "MAX_RATE_HZ", "MIN_RATE_HZ", "BridgeStats", "RosBridge", "validate_rate"]
 

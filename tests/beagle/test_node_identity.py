@@ -14,7 +14,7 @@ from fakes import scaled, wait_until
 rclpy = pytest.importorskip("rclpy")
 
 from mm_beagle.tools.harness import BeagleClient, beagle_process  # noqa: E402
-from mm_pc.monitor.model.readings import Reading, Reply  # noqa: E402
+from mm_pc.core.sensor_data import Reading, Reply  # noqa: E402
 from mm_pc.monitor.model.session import MonitorSession  # noqa: E402
 
 S0 = "/dev/spidev1.0"

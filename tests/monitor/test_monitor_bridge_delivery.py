@@ -10,7 +10,7 @@ import time
 import pytest
 from fakes import scaled
 
-from mm_pc.monitor.model.readings import Reply
+from mm_pc.core.sensor_data import Reply
 from mm_pc.monitor.ros_bridge import DELIVERY_INTERVAL_S, RosBridge
 
 

@@ -16,9 +16,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from mm_pc.core.sensor_data import Reply
 from mm_pc.monitor.context import MonitorContext
 from mm_pc.monitor.model.chips import chip_title, cpi_range, quality_figure
-from mm_pc.monitor.model.readings import Reply
 from mm_pc.monitor.model.session import MonitorSession
 from mm_pc.monitor.model.sim_feed import DEFAULT_DEVICES, sim_replies
 from mm_pc.monitor.widgets.data_list import DataListView

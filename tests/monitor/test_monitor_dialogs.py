@@ -25,8 +25,8 @@ from mm_pc.core.calibration import Calibration, SensorCalibration
 from mm_pc.core.calibration_fit import CalibrationStep, check_step
 from mm_pc.core.frames import counts_to_m
 from mm_pc.core.geometry import DEFAULT_MOUNTS, SensorMount
+from mm_pc.core.sensor_data import Reading, Reply
 from mm_pc.monitor.context import MonitorConfig, MonitorContext
-from mm_pc.monitor.model.readings import Reading, Reply
 from mm_pc.monitor.model.session import MonitorSession
 from mm_pc.monitor.model.sim_feed import DEFAULT_DEVICES, sim_replies
 from mm_pc.monitor.ros_bridge import RosBridge

@@ -19,12 +19,12 @@ from rclpy.serialization import deserialize_message, serialize_message
 from mm_interfaces.msg import SensorData
 from mm_interfaces.srv import GetSamples
 from mm_pc.core.geometry import DEFAULT_MOUNTS, SensorMount
+from mm_pc.core.sensor_data import Reading, Reply
 from mm_pc.monitor.context import MonitorConfig, MonitorContext
 from mm_pc.monitor.io.mcap_reader import read_replies, read_samples
 from mm_pc.monitor.io.mcap_writer import McapRecorder
 from mm_pc.monitor.io.schemas import META_TOPIC, POLLS_TYPE, SENSOR_TOPIC, ros2msg_definition
 from mm_pc.monitor.main_window import MainWindow
-from mm_pc.monitor.model.readings import Reading, Reply
 from mm_pc.monitor.model.session import MonitorSession
 from mm_pc.monitor.model.sim_feed import sim_replies
 from mm_pc.monitor.recording import start_recording, stop_recording, toggle_recording

@@ -10,8 +10,8 @@ import pytest
 
 from mm_pc.core.calibration import Calibration, SensorCalibration
 from mm_pc.core.geometry import DEFAULT_MOUNTS, SensorMount
+from mm_pc.core.sensor_data import Reading, Reply
 from mm_pc.monitor.model.history import History
-from mm_pc.monitor.model.readings import Reading, Reply
 from mm_pc.monitor.model.session import MonitorSession
 from mm_pc.monitor.model.sim_feed import DEFAULT_DEVICES, sim_replies
 from mm_pc.sim.robot import guided_calibration_steps, integrate_pose, trajectory, with_mount_yaw
@@ -310,7 +310,7 @@ def _poll_replies(ring, ends, skip=()):
     bridge fetches them); ``skip``: poll counts whose fetch of sensor 1 failed."""
     from fakes import FakeRing  # noqa: F401 - the ring's type
 
-    from mm_pc.monitor.model.readings import Reading, Reply
+    from mm_pc.core.sensor_data import Reading, Reply
 
     out, cursor = [], None
     for k in ends:

@@ -17,10 +17,10 @@ from fakes import wait_until
 from PySide6.QtCore import QItemSelectionModel, Qt
 from PySide6.QtGui import QGuiApplication, QImage
 
+from mm_pc.core.sensor_data import Reading, Reply
 from mm_pc.monitor.context import MonitorContext
 from mm_pc.monitor.model.csv_export import COLUMNS
 from mm_pc.monitor.model.peak_decimator import bucket_size
-from mm_pc.monitor.model.readings import Reading, Reply
 from mm_pc.monitor.model.session import MonitorSession, sensor_columns
 from mm_pc.monitor.model.sim_feed import DEFAULT_DEVICES
 from mm_pc.monitor.widgets.data_list import DataListView, HistoryTableModel

@@ -10,8 +10,8 @@ from __future__ import annotations
 import functools
 from types import SimpleNamespace
 
+from mm_pc.core.sensor_data import Reading
 from mm_pc.monitor.io.schemas import LEGACY_POLLS_TYPE, POLLS_TYPE
-from mm_pc.monitor.model.readings import Reading
 
 __all__ = ["decode_polls", "deserialize_appended", "polls_msg", "ros_types", "serialize_reading"]
 

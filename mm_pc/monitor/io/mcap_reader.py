@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from mm_pc.core.sensor_data import Reading, Reply
 from mm_pc.monitor.io.bag_format import bag_files
 from mm_pc.monitor.io.cdr import decode_polls, deserialize_appended, ros_types
 from mm_pc.monitor.io.schemas import (
@@ -20,7 +21,6 @@ from mm_pc.monitor.io.schemas import (
     SENSOR_TOPIC,
     SENSOR_TYPE,
 )
-from mm_pc.monitor.model.readings import Reading, Reply
 
 __all__ = ["open_messages", "read_replies", "read_samples"]
 

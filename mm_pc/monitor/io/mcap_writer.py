@@ -13,6 +13,7 @@ import time
 from datetime import datetime, timezone
 from pathlib import Path
 
+from mm_pc.core.sensor_data import Reply
 from mm_pc.monitor.io.bag_format import (
     DEFAULT_QOS,
     qos_yaml,
@@ -32,7 +33,6 @@ from mm_pc.monitor.io.schemas import (
     SENSOR_TYPE,
     ros2msg_definition,
 )
-from mm_pc.monitor.model.readings import Reply
 
 __all__ = ["McapRecorder"]
 

@@ -56,10 +56,10 @@ from mm_pc.core.filters import SensorMedianFilter
 from mm_pc.core.geometry import DEFAULT_MOUNTS, SensorMount
 from mm_pc.core.odometry import METHODS, Odometry, Pose2D, Sample
 from mm_pc.core.polls import PollBatch, PollTracker, SensorTotals, integrate_steps
+from mm_pc.core.sensor_data import Reading, Reply
 from mm_pc.monitor.model.calibration_run import CalibrationRun
 from mm_pc.monitor.model.chips import quality_figure
 from mm_pc.monitor.model.history import History
-from mm_pc.monitor.model.readings import Reading, Reply
 
 __all__ = ["Gap", "LogEntry", "MonitorSession", "SessionStats", "sensor_columns"]
 

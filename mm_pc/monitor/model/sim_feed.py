@@ -14,7 +14,7 @@ import numpy as np
 
 from mm_pc.core.frames import m_to_counts
 from mm_pc.core.geometry import DEFAULT_MOUNTS, SensorMount
-from mm_pc.monitor.model.readings import Reading, Reply
+from mm_pc.core.sensor_data import Reading, Reply
 from mm_pc.sim.robot import request_samples, trajectory
 
 __all__ = ["DEFAULT_DEVICES", "sim_replies"]

@@ -40,8 +40,8 @@ from PySide6.QtWidgets import (
 
 from mm_pc.core.frames import counts_to_m
 from mm_pc.core.polls import FLAG_LIFT, FLAG_LOW_QUALITY
+from mm_pc.core.sensor_data import Reply
 from mm_pc.monitor.context import MonitorContext
-from mm_pc.monitor.model.readings import Reply
 from mm_pc.monitor.widgets.style import ERROR_STYLE
 
 __all__ = ["MAX_POLLS_PER_FETCH", "DebugView", "ManualSample"]

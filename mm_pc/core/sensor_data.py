@@ -1,9 +1,10 @@
-"""What one reply of mm_beagle holds, as plain Python (no Qt, no ROS).
+"""What one reply of mm_beagle holds, as plain Python (no Qt, no ROS): the one reader of
+``mm_interfaces/SensorData``.
 
-The ROS bridge turns each ``mm_interfaces/SensorData`` into a
-:class:`Reading` (duck-typed: :meth:`Reading.from_msg` reads attributes
-only), so the processing in :mod:`.session` and the replay of a recording run
-the very same code without rclpy.
+The monitor's ROS bridge turns each ``SensorData`` into a :class:`Reading` (duck-typed:
+:meth:`Reading.from_msg` reads attributes only), so the monitor's session and the replay
+of a recording run the very same code without rclpy; mm-odometry's totals
+(:meth:`mm_pc.core.polls.SensorTotals.from_msg`) and mm-watch read it through here too.
 """
 
 from __future__ import annotations
