@@ -205,7 +205,7 @@ class SensorServices:
         """All registers of one sensor; the displacement that read cleared is kept."""
         i, payload = self._poller_command(res, req.id, "settings")
         if i >= 0:
-            res.settings = messages.sensor_settings(self.node.devices[i], payload)  # type: ignore[arg-type]
+            res.settings = messages.sensor_settings(self.node.devices[i], payload)
             res.success = True
         return res
 

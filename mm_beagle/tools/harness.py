@@ -153,8 +153,8 @@ def _child(cmd: list[str], env: dict[str, str], log_path: str | None) -> Iterato
         yield proc
     finally:
         stop_process(proc)
-        if log_path:
-            out.close()  # type: ignore[union-attr]
+        if not isinstance(out, int):  # a log file, not DEVNULL
+            out.close()
 
 
 def stop_process(proc: subprocess.Popen, timeout: float = 10.0) -> int:
