@@ -19,6 +19,11 @@ What the chip does here (facts: :mod:`.regs`; assumptions marked):
 - Reading 0x02 latches the counters into 0x03..0x06 (little-endian, read clears each
   axis after its high byte); the burst latches and clears them, and returns motion,
   observation, delta X/Y, SQUAL, raw sum/max/min, shutter upper/lower.
+- Lift and poor-surface edges: the chip has no lift detector that clears its counters; it
+  stops counting when the image has no features and keeps what it counted until the next
+  read. So a read whose interval straddles an edge holds the counts made before the lift
+  (or after the touch-down), with a low SQUAL; ``stats.lift_cleared_x/y`` stay 0. The
+  time between reads is split at each window edge (:meth:`advance`).
 - SQUAL: around ``squal`` (default 0x60) with the shutter upper byte 0x02 on a good surface;
   below 0x19 with the shutter upper byte at 0x1F after a lift, over a low-quality window,
   or while not tracking -- the [pimoroni] rejection rule then rejects the read.
@@ -113,6 +118,11 @@ class EmulatedPMW3901(CountingCore):
         self._expected_lengths = {len(v) for v in self._expected.values()}
         self._lq = sorted((float(a), float(b)) for a, b in core.get("low_quality_windows", ()))
         self._lq_i = 0
+        # every start and end of a lift or low-quality window, in time order
+        self._edges = sorted(
+            {float(t) for w in (*core.get("lift_windows", ()), *self._lq) for t in w[:2]}
+        )
+        self._edge_i = 0
         self.latch_x = self.latch_y = 0
         super().__init__(
             motion=motion,
@@ -166,6 +176,25 @@ class EmulatedPMW3901(CountingCore):
     # --- time -------------------------------------------------------------------------------
 
     def advance(self, now: float | None = None) -> None:
+        """Count up to ``now``, stopping at every window edge on the way (module doc)."""
+        if now is None:
+            now = self.clock()
+        edges, i = self._edges, self._edge_i
+        while i < len(edges) and edges[i] <= self._t:
+            i += 1
+        while i < len(edges) and edges[i] < now:
+            self._advance_to(edges[i])
+            i += 1
+        self._edge_i = i
+        self._advance_to(now)
+
+    def _start_lift(self) -> None:
+        # the core clears the counters when a lift starts; this chip keeps them (module doc)
+        self._lifted = True
+        self._lift_flag = True
+        self.stats.lift_events += 1
+
+    def _advance_to(self, now: float) -> None:
         t0 = self._t
         super().advance(now)
         t1 = self._t

@@ -206,6 +206,65 @@ def test_lift_and_poor_surface_read_as_low_quality_with_the_shutter_at_0x1f(drv_
     assert emu.stats.lift_events == 1 and emu.stats.low_quality_events == 1
 
 
+class StartsAt:
+    """Still until ``t_on``, then ``vy`` m/s forward (the counts' fraction starts at 0)."""
+
+    def __init__(self, t_on: float, vy: float) -> None:
+        self.t_on, self.vy = t_on, vy
+
+    def displacement(self, t0: float, t1: float) -> tuple[float, float]:
+        return 0.0, self.vy * max(0.0, t1 - max(t0, self.t_on))
+
+
+def straddle_rig(window_kw: str, polls_ms=range(10, 201, 10)):
+    """1.25 counts per ms forward from t = 1.0002 s (0.306 m/s at 0.10 m), a window from
+    1.0232 to 1.1168 s, reads at 1 s + ``polls_ms``: [(t_ms, dy, low quality)] and the stats."""
+    clock = FakeClock()
+    vy = 1250 * INCH_M / EmulatedPMW3901.OPTICS.cpi(0.10)
+    emu = EmulatedPMW3901(
+        motion=StartsAt(1.0002, vy), clock=clock, **{window_kw: [(1.0232, 1.1168)]}
+    )
+    drv = PMW3901(emu, sleep=clock.sleep)
+    drv.initialise(0)
+    assert clock.t < 1.0
+    reads = []
+    for ms in polls_ms:
+        clock.t = 1.0 + ms / 1000
+        m = drv.read_motion()
+        reads.append((ms, m.dy, drv.info.low_quality(m.quality)))
+    return reads, emu.stats
+
+
+@pytest.mark.parametrize("window_kw", ["lift_windows", "low_quality_windows"])
+def test_a_read_that_straddles_a_window_edge_keeps_the_counts_outside_the_window(window_kw):
+    # true counts: 1.25 per ms from 1.0002 s: 24.75 by 1.020, 28.75 by the window's start
+    # (1.0232), 117 inside it (93.6 ms), 4.0 from its end (1.1168) to 1.120, 249.75 by 1.200
+    reads, s = straddle_rig(window_kw)
+    by_ms = {ms: (dy, low) for ms, dy, low in reads}
+    assert by_ms[10] == (12, False) and by_ms[20] == (12, False)  # 12.25 -> 12, 24.75 -> 24
+    # the read at 1.030: the 4 counts (24 -> 28) made before the window began, low quality
+    # (the chip saw the window; [pimoroni]'s rule rejects the read, our driver keeps the counts)
+    assert by_ms[30] == (4, True)
+    assert all(by_ms[ms] == (0, True) for ms in range(40, 111, 10))
+    # the read at 1.120: the 4 counts made after it ended (the fraction 0.75 kept through the
+    # window + 4.0), still low quality (its interval saw the window)
+    assert by_ms[120] == (4, True)
+    assert by_ms[130] == (13, False) and by_ms[200] == (12, False)  # 0.75 + 12.5, 0.25 + 12.5
+    assert sum(dy for _, dy, _ in reads) == s.counted_y == 132  # floor(249.75) - 117 in the window
+    assert s.lift_motion_y == pytest.approx(117.0, abs=1e-9)  # exactly the window: 93.6 ms
+    assert s.lift_cleared_y == 0  # no lift detector clears the counters
+    # before (issue 26) the two straddling reads dropped their whole 10 ms: 125 lost, 124 read
+
+
+def test_counts_made_before_a_lift_wait_in_the_counter_until_the_next_read():
+    # no read from 1.020 s to after the lift: the next read holds the 4 counts before the lift
+    # and the 42 after it (0.75 + 41.5 by 1.150), as the chip's accumulator holds them
+    reads, s = straddle_rig("lift_windows", polls_ms=(20, 150))
+    assert reads == [(20, 24, False), (150, 4 + 42, True)]
+    assert s.counted_y == 70 and s.lift_motion_y == pytest.approx(117.0, abs=1e-9)
+    assert s.lift_events == 1
+
+
 # --- counts through the scale --------------------------------------------------------------------
 
 
