@@ -16,7 +16,9 @@ from other clients, applies the calibration, runs the pose math of
   ~/path (nav_msgs/Path):    the poses so far (at most ``path_length``), at
           ``path_rate`` Hz
   /diagnostics:              "/NS/mm_odometry: pose" once a second: polls integrated,
-          gap steps and the last reason (WARN after a new gap)
+          gap steps and the last reason (WARN after a new gap), requests sent/answered,
+          the stamp of the last integrated poll; WARN "no reply from /NS/mm_beagle for N s"
+          while replies are missing, ERROR past ``no_reply_error``
   /tf (publish_tf):          odom -> base_link, the same pose and stamp as ~/odom
   /tf_static (publish_tf):   base_link -> each sensor frame (``sensor_frames``) at its
           mount (the calibrated one where a calibration is loaded)
@@ -25,13 +27,15 @@ from other clients, applies the calibration, runs the pose math of
 Frame ids, rates, method and geometry are parameters; ``LIVE`` ones take
 ``ros2 param set`` (checked: a refused value keeps the old one). ``beagle`` is
 relative to the node's namespace (``-r __ns:=/robot1`` asks /robot1/mm_beagle).
+A request without a reply after ``reply_timeout`` is given up and asked again at the
+next tick (:class:`mm_pc.ros.deadline_client.DeadlineClient`): a lost reply costs one
+interval, stepped with the totals, never the stream.
 Header stamps follow the node clock (:func:`mm_pc.ros.clock.node_stamp`).
 """
 
 from __future__ import annotations
 
 import sys
-import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped
@@ -48,6 +52,7 @@ from mm_pc.core.polls import PollBatch, PollTracker, SensorTotals, integrate_ste
 from mm_pc.core.uncertainty import PoseUncertainty
 from mm_pc.ros import spin as ros_spin
 from mm_pc.ros.clock import ClockWatch, node_stamp
+from mm_pc.ros.deadline_client import DeadlineClient
 from mm_pc.ros.odometry_msgs import odometry_message
 from mm_pc.ros.parameters import declare_all, float_range, int_range, mark_live, read_only
 from mm_pc.ros.reset import create_reset_service
@@ -58,10 +63,6 @@ from mm_pc.ros.tf import (
     planar_transform,
     sensor_frame_names,
 )
-
-#: a get_samples reply later than this is given up on (the interval is stepped with the totals)
-FETCH_TIMEOUT_S = 2.0
-
 
 PARAMETERS = {
     "beagle": (
@@ -117,10 +118,32 @@ PARAMETERS = {
             **float_range(0.1, 100.0),
         ),
     ),
+    "reply_timeout": (
+        1.0,
+        read_only(
+            "a request to mm_beagle unanswered this long (s) is given up and asked again",
+            **float_range(0.05, 60.0),
+        ),
+    ),
+    "no_reply_error": (
+        5.0,
+        read_only(
+            "/diagnostics says ERROR after this long (s) without a reply (WARN before)",
+            **float_range(0.1, 3600.0),
+        ),
+    ),
 }
 
 #: parameters that take ``ros2 param set`` while the node runs; the rest are read-only
-LIVE = ("rate", "path_rate", "method", "odom_frame", "base_frame")
+LIVE = (
+    "rate",
+    "path_rate",
+    "method",
+    "odom_frame",
+    "base_frame",
+    "reply_timeout",
+    "no_reply_error",
+)
 mark_live(PARAMETERS, LIVE)
 
 
@@ -149,13 +172,20 @@ class OdometryNode(Node):
         if problem := frame_ids_problem(p, ("odom_frame", "base_frame")):
             raise ValueError(problem)
         self.sensor_frames = sensor_frame_names(devices, p["sensor_frames"])
-        self.client = self.create_client(GetSensorData, f"{p['beagle']}/get_sensor_data")
-        self.samples_client = self.create_client(GetSamples, f"{p['beagle']}/get_samples")
+        self.client = DeadlineClient(
+            self.create_client(GetSensorData, f"{p['beagle']}/get_sensor_data"),
+            p["reply_timeout"],
+        )
+        self.samples_client = DeadlineClient(
+            self.create_client(GetSamples, f"{p['beagle']}/get_samples"), p["reply_timeout"]
+        )
         #: the mm_beagle node asked, fully qualified (``beagle`` resolved in this namespace)
         self.beagle = self.resolve_service_name(p["beagle"])
         self.tracker = PollTracker(len(devices), p["use_lift_estimates"])
         self._fetch: dict | None = None  # the reply waiting for its polls
         self._reported_gaps = 0
+        self._reported_abandoned = 0
+        self._last_stamp = None  # header stamp of the last integrated poll
         self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_timer(1.0, self.publish_diagnostics)
         self.odom_pub = self.create_publisher(OdometryMsg, "~/odom", 10)
@@ -163,7 +193,6 @@ class OdometryNode(Node):
         self.path = Path()
         self.path.header.frame_id = p["odom_frame"]
         self._last: dict[str, tuple[float, float, int]] = {}  # id -> totals, stamp
-        self._in_flight = False
         self.samples_used = 0
         self.tf = TfPublisher(self, p["publish_tf"])
         self.send_static_frames()
@@ -220,6 +249,8 @@ class OdometryNode(Node):
         if "path_rate" in changes:
             self.destroy_timer(self._path_timer)
             self._path_timer = self.create_timer(1.0 / changes["path_rate"], self.publish_path)
+        if "reply_timeout" in changes:
+            self.client.timeout_s = self.samples_client.timeout_s = changes["reply_timeout"]
         self.p.update(changes)
         if "odom_frame" in changes:
             self.path.header.frame_id = changes["odom_frame"]
@@ -230,16 +261,21 @@ class OdometryNode(Node):
         return SetParametersResult(successful=True)
 
     def request(self) -> None:
-        """Ask mm-beagle for new sensor data (timer callback); one call in flight at a time."""
-        if self._fetch is not None and (
-            time.monotonic() > self._fetch["deadline"] or not self.samples_client.service_is_ready()
-        ):
-            self._finish_fetch()  # the polls did not come: step over it with the totals
-        if self._in_flight or self._fetch is not None or not self.client.service_is_ready():
+        """Ask mm-beagle for new sensor data (timer callback); one call in flight at a time.
+
+        Calls past ``reply_timeout`` are given up first: polls that did not come are
+        stepped over with the totals, a lost get_sensor_data reply is asked again now.
+        """
+        if self.client.expire():
+            self.get_logger().warning(
+                f"no reply from {self.beagle}/get_sensor_data within "
+                f"{self.client.timeout_s:g} s: asking again",
+                throttle_duration_sec=5.0,
+            )
+        self.samples_client.expire()
+        if self.client.busy or self._fetch is not None:
             return  # a slow reply is never doubled up: the totals cover any gap
-        self._in_flight = True
-        future = self.client.call_async(GetSensorData.Request(id=""))
-        future.add_done_callback(self.on_reply)
+        self.client.call(GetSensorData.Request(id=""), self.on_reply)
 
     def _displacement(self, data) -> tuple[float, float, int] | None:
         """Metres since this sensor's previous reply, from the totals; None the first time."""
@@ -254,10 +290,8 @@ class OdometryNode(Node):
             return None
         return x - prev[0], y - prev[1], stamp - prev[2]
 
-    def on_reply(self, future) -> None:
-        """Turn a get_sensor_data reply into a pose step and publish it; a failed call is logged."""
-        self._in_flight = False
-        res = future.result()
+    def on_reply(self, res) -> None:
+        """Turn a get_sensor_data reply into a pose step and publish it (None: given up)."""
         if res is None or not res.success:
             return
         by_id = {d.id: d for d in res.data}
@@ -295,25 +329,25 @@ class OdometryNode(Node):
             t.baseline(totals)
             return
         fetch = {"data": data, "totals": totals, "polls": [None] * len(self.devices),
-                 "waiting": 0, "deadline": time.monotonic() + FETCH_TIMEOUT_S}  # fmt: skip
+                 "waiting": 0}  # fmt: skip
+        self._fetch = fetch
         for i, (dev, x) in enumerate(zip(self.devices, totals, strict=True)):
             want = x.seq - t.cursor(i)
             if want == 0:
                 continue
-            if not self.samples_client.service_is_ready():
-                continue
             req = GetSamples.Request(id=dev, since_seq=t.cursor(i), max_samples=want)
-            future = self.samples_client.call_async(req)
             fetch["waiting"] += 1
-            future.add_done_callback(lambda f, i=i, fetch=fetch: self._on_polls(fetch, i, f))
-        self._fetch = fetch
+            if not self.samples_client.call(
+                req, lambda res, i=i, fetch=fetch: self._on_polls(fetch, i, res)
+            ):
+                fetch["waiting"] -= 1  # not offered: a gap, stepped with the totals
         if fetch["waiting"] == 0:
             self._finish_fetch()
 
-    def _on_polls(self, fetch: dict, i: int, future) -> None:
+    def _on_polls(self, fetch: dict, i: int, res) -> None:
+        """One sensor's get_samples reply (None: given up; the interval becomes a gap)."""
         if fetch is not self._fetch:
             return  # given up on
-        res = future.result()
         if res is not None and res.success:
             try:
                 fetch["polls"][i] = PollBatch.from_reply(res)
@@ -343,23 +377,41 @@ class OdometryNode(Node):
         self.publish_odometry(before, after, float(steps.dt.sum()), data, data_stamp)
 
     def publish_diagnostics(self) -> None:
-        """/diagnostics: polls integrated and the gaps in them (WARN after a new gap)."""
-        t = self.tracker
+        """/diagnostics: replies missing (WARN, ERROR past ``no_reply_error``), requests given
+        up since the last round (WARN), polls integrated and the gaps in them (WARN after a
+        new gap), the stamp of the last integrated poll."""
+        t, c = self.tracker, self.client
         new = t.gaps - self._reported_gaps
         self._reported_gaps = t.gaps
-        if not self.p["per_poll"]:
-            level, text = DiagnosticStatus.OK, "per request (per_poll false)"
-        elif new:
+        lost = c.abandoned - self._reported_abandoned
+        self._reported_abandoned = c.abandoned
+        silent, longest = c.silent_s(), c.take_silence()  # now; the longest this round
+        level, problems = DiagnosticStatus.OK, []
+        if longest > c.timeout_s:
+            too_long = silent > self.p["no_reply_error"]
+            level = DiagnosticStatus.ERROR if too_long else DiagnosticStatus.WARN
+            offered = "" if c.ready() else f" ({self.beagle}/get_sensor_data not offered)"
+            problems.append(f"no reply from {self.beagle} for {longest:.1f} s{offered}")
+        elif lost:
             level = DiagnosticStatus.WARN
-            text = f"{new} gap(s) in the single polls: {t.gap_reasons[-1]}"
-        else:
-            level, text = DiagnosticStatus.OK, "per poll"
+            problems.append(f"{lost} request(s) unanswered within {c.timeout_s:g} s, asked again")
+        if new and self.p["per_poll"]:
+            level = level if level == DiagnosticStatus.ERROR else DiagnosticStatus.WARN
+            problems.append(f"{new} gap(s) in the single polls: {t.gap_reasons[-1]}")
+        mode = "per poll" if self.p["per_poll"] else "per request (per_poll false)"
+        text = "; ".join(problems) or mode
+        stamp = self._last_stamp
         values = {
             "polls_integrated": sum(t.polls_used),
             "gaps": t.gaps,
             "last_gap": t.gap_reasons[-1] if t.gap_reasons else "",
             "steps_used": self.samples_used,
             "method": self.p["method"],
+            "requests_sent": c.sent,
+            "replies": c.answered,
+            "requests_unanswered": c.abandoned,
+            "s_since_reply": f"{silent:.3f}",
+            "last_poll_stamp": f"{stamp.sec}.{stamp.nanosec:09d}" if stamp else "",
         }
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
@@ -384,6 +436,7 @@ class OdometryNode(Node):
             self.p["base_frame"],
         )
         self.odom_pub.publish(msg)
+        self._last_stamp = msg.header.stamp
         self.tf.send(
             planar_transform(
                 msg.header.stamp, self.p["odom_frame"], self.p["base_frame"], after.x, after.y,
