@@ -10,18 +10,29 @@ acceleration, std devs and the raw PAA5160 burst; a power cycle forgets scalars,
 calibration and runs the 64-sample quick IMU calibration after 100 ms.
 
 The motion model: the shared :class:`~pln2033.emulated.CountingCore` turns the true
-sensor-frame motion into the PAA5160's counts at 20 000 CPI (lifts, poor surface, noise,
-faults as for every chip); each update scales them by the linear scalar, turns them into the
-world frame by the emulated heading and integrates the position (an ideal filter: no
-Kalman lag, no accelerometer). The heading comes from ``heading_source`` (a sensor-frame
-motion source has no rotation) scaled by the angular scalar, plus the gyro's residual bias:
-``gyro_bias_rps`` until the first calibration, then what the calibration left
-(``gyro_noise_rps`` / sqrt(samples), plus minus the mean true yaw rate during it when the
-robot turned while calibrating): a heading drift at rest, as users report.
+sensor-frame motion into the PAA5160's counts at 20 000 CPI times ``paa_resolution`` (lifts,
+poor surface, noise, faults as for every chip). Each update follows sensorUpdate: the
+optical velocity (counts x 25.4 um / 20 000 / 2.4 ms), divided by ``paa_resolution`` when
+the lookup-table bit is set (the table is modelled as the exact inverse of the chip's
+resolution error), times the linear scalar; turned into the world frame by the heading
+when the rotation bit is set (else integrated as it is, as the firmware does); the
+accelerometer reads the true sensor-frame acceleration (change of the true velocity
+between updates; no gravity, tilt or centripetal terms). With the accelerometer bit set the
+firmware's rejection rule runs: measured |vx|+|vy| < 0.25 m/s while the estimate is above
+0.5 m/s (the filters' velocity, as in the firmware) sets the optical warning and the
+velocity follows the accelerometer alone. The
+heading comes from ``heading_source`` scaled by the angular scalar, plus the gyro's residual
+bias: ``gyro_bias_rps`` until the first calibration, then what the calibration left
+(``gyro_noise_rps`` / sqrt(samples), minus the mean true yaw rate during it when the robot
+turned while calibrating): a heading drift at rest, as users report.
 
-Simplifications (docs/sensors.md (OTOS section)): no Kalman filter or velocity lookup table, the
-status tracking warning is set exactly while lifted or over a poor surface, acceleration and
-std-dev registers stay 0, the PAA burst holds only the deltas (bytes 2..5).
+Position and velocity are the lag-free integration of those measurements; acceleration and
+the nine standard deviations come from the firmware's own Kalman filters
+(:mod:`pln2033.otos.kalman`) run alongside on the same measurements, with its variances (times
+the variance bit). Simplifications (docs/sensors.md, OTOS section): position and velocity
+without the filters' lag, a constant resolution error in place of the speed-dependent
+table, no tilt (warnTiltAngle stays 0), the PAA burst holds only the deltas (bytes 2..5),
+the raw LSM6DSO registers stay 0.
 """
 
 from __future__ import annotations
@@ -34,7 +45,7 @@ from ..emulated import CountingCore
 from ..i2c import I2cError, I2cNoAckError
 from ..motion import MotionSource
 from ..sensor import INCH_M
-from . import regs
+from . import kalman, regs
 
 _T = 1.0 / regs.UPDATE_HZ
 _POWER_UP_S = 0.1 + regs.POWER_UP_IMU_SAMPLES * _T  # delay(100) then calibrateImu(64) [fw]
@@ -78,7 +89,12 @@ class EmulatedOTOS(CountingCore):
         gyro_bias_rps: the gyro's zero-rate offset before any calibration (rad/s).
         gyro_noise_rps: per-sample gyro noise that a calibration of n samples leaves as
             residual bias / sqrt(n) (rad/s).
-        write_latency_s: how long the main loop takes to apply a host write.
+        write_latency_s: how long the main loop takes to apply a host write; a write is
+            applied before the next transaction in any case (the loop passes many times
+            while the host sends the next address), unless a calibration blocks the loop.
+        paa_resolution: the PAA5160's true resolution over its nominal 20 000 CPI (1.0:
+            exact). SparkFun's lookup table corrects it (signal-process bit 0); clear the
+            bit and the position reads the true distance times this.
     """
 
     def __init__(
@@ -90,15 +106,17 @@ class EmulatedOTOS(CountingCore):
         address: int = regs.ADDRESS,
         gyro_bias_rps: float = math.radians(1.0),
         gyro_noise_rps: float = 0.005,
-        write_latency_s: float = 0.0005,
+        write_latency_s: float = 0.0001,
+        paa_resolution: float = 1.0,
         **core: Any,
     ) -> None:
         super().__init__(
             motion=motion,
             **core,
-            cpi=regs.PAA_CPI,
+            cpi=regs.PAA_CPI * paa_resolution,
             counter_bits=16,
         )
+        self.paa_resolution = paa_resolution
         self.heading_source: HeadingSource = heading_source or NoRotation()
         self.product_id = product_id
         self.address = address
@@ -127,11 +145,21 @@ class EmulatedOTOS(CountingCore):
         self.offset = (0.0, 0.0, 0.0)
         self._offset_inv = (0.0, 0.0, 0.0)
         self.sx = self.sy = self.sh = 0.0  # the sensor's own pose (firmware: the filters)
+        self.vx = self.vy = 0.0  # the sensor's velocity estimate, world frame (m/s)
+        self._v_true: tuple[float, float] | None = None  # true sensor-frame velocity, last update
+        self.kf_x = kalman.AxisFilter(kalman.Q_LINEAR)
+        self.kf_y = kalman.AxisFilter(kalman.Q_LINEAR)
+        self.kf_h = kalman.AxisFilter(kalman.Q_HEADING)
         self._host_prev: tuple[float, float, float] | None = None
         self.gyro_residual = self.gyro_bias_rps  # uncalibrated until the quick calibration
         self.imu_calibrations = 0
         self._t_frame = now
         self._start_calibration(now + 0.1, regs.POWER_UP_IMU_SAMPLES)
+
+    @property
+    def t_update(self) -> float:
+        """When the latest 2.4 ms update ran (s, emulator clock): the registers' moment."""
+        return self._t_frame
 
     def power_cycle(self) -> None:
         """Power off and on (also the end of a fault window): everything set is forgotten."""
@@ -144,6 +172,10 @@ class EmulatedOTOS(CountingCore):
         self._busy_until: float | None = start + self._cal_samples * _T
         self._cal_yaw_start: float | None = None  # set when the truth reaches ``start``
         self.mem[regs.IMU_CALIB] = samples
+
+    def _set_filters(self) -> None:
+        """The filters' positions follow a pose the host wrote (copyRegsFromHostShadow)."""
+        self.kf_x.x[0], self.kf_y.x[0], self.kf_h.x[0] = self.sx, self.sy, self.sh
 
     def _end_calibration(self, t: float) -> None:
         """The blocking calibration ends at ``t`` (s, emulator clock)."""
@@ -197,7 +229,7 @@ class EmulatedOTOS(CountingCore):
                 self._update(t_next)
 
     def _update(self, t: float) -> None:
-        """One sensorUpdate: PAA counts -> world-frame position, heading, registers."""
+        """One sensorUpdate: PAA counts and IMU -> pose, velocity, filters, registers."""
         self._t_frame = t
         self.advance(t)
         nx, ny = self.take_counts()
@@ -205,37 +237,105 @@ class EmulatedOTOS(CountingCore):
         yaw = self.heading_source.yaw(self._t_yaw, t) if t > self._t_yaw else 0.0
         self._t_yaw = t
         self.true_yaw += yaw
-        dh = self.angular_scalar * (yaw + self.gyro_residual * _T)
-        hm = self.sh + dh / 2
-        k = INCH_M / regs.PAA_CPI * self.linear_scalar
-        ex, ey = nx * k, ny * k
-        c, s = math.cos(hm), math.sin(hm)
-        self.sx += c * ex - s * ey
-        self.sy += s * ex + c * ey
+        sp = self.mem[regs.SIGNAL_PROCESS]
+        var = 1.0 if sp & regs.SP_VAR else 0.0
+        # the optical velocity, sensor frame (m/s)
+        k = INCH_M / regs.PAA_CPI / _T
+        mx, my = nx * k, ny * k
+        if sp & regs.SP_LUT and max(abs(mx), abs(my)) < regs.LUT_LIMIT_IPS * INCH_M:
+            mx, my = mx / self.paa_resolution, my / self.paa_resolution
+        mx, my = mx * self.linear_scalar, my * self.linear_scalar
+        ax, ay = self._accelerometer(t)
+        # heading: the gyro rate (true yaw plus the residual bias) times the angular scalar
+        wh = self.angular_scalar * (yaw / _T + self.gyro_residual)
+        dh = wh * _T
+        self.kf_h.predict(_T)
+        self.kf_h.update(wh, kalman.R_GYRO, 1)
+        if sp & regs.SP_ROT:  # by the mid-update heading: no lag in the emulator
+            hm = self.sh + dh / 2
+            c, s = math.cos(hm), math.sin(hm)
+            mx, my = c * mx - s * my, s * mx + c * my
+            ax, ay = c * ax - s * ay, s * ax + c * ay
         self.sh = wrap_pi(self.sh + dh)
+        status = self.mem[regs.STATUS]
+        self.kf_x.predict(_T)
+        self.kf_y.predict(_T)
+        if sp & regs.SP_ACC:
+            self.kf_x.update(ax, kalman.R_ACC * var, 2)
+            self.kf_y.update(ay, kalman.R_ACC * var, 2)
+            rejected = (
+                abs(mx) + abs(my) < regs.REJECT_MEASURED_MPS
+                and abs(self.kf_x.x[1]) + abs(self.kf_y.x[1]) > regs.REJECT_ESTIMATED_MPS
+            )
+            if rejected:  # IMU only: the velocity follows the accelerometer
+                status |= regs.STATUS_WARN_OPTICAL
+                mx, my = self.vx + ax * _T, self.vy + ay * _T
+            else:
+                status &= ~regs.STATUS_WARN_OPTICAL
+                self.kf_x.update(mx, kalman.R_VEL * var, 1)
+                self.kf_y.update(my, kalman.R_VEL * var, 1)
+        else:  # the warning bit keeps its last value: the firmware does not touch it
+            self.kf_x.update(mx, kalman.R_VEL * var, 1)
+            self.kf_y.update(my, kalman.R_VEL * var, 1)
+        self.vx, self.vy = mx, my
+        self.sx += mx * _T
+        self.sy += my * _T
+        self.mem[regs.STATUS] = status
         hx, hy, hh = self._host_pose()
         prev = self._host_prev or (hx, hy, hh)
         self._host_prev = (hx, hy, hh)
         vx, vy, vh = (hx - prev[0]) / _T, (hy - prev[1]) / _T, dh / _T
         out: list[int] = []
-        for v in (
-            hx / regs.POS_M_PER_LSB,
-            hy / regs.POS_M_PER_LSB,
-            hh / regs.HEADING_RAD_PER_LSB,
-            vx / regs.VEL_MPS_PER_LSB,
-            vy / regs.VEL_MPS_PER_LSB,
-            vh / regs.VEL_RPS_PER_LSB,
+        for v, lsb in zip(
+            (hx, hy, hh, vx, vy, vh, *self._host_acceleration(), *self._std_devs()),
+            (
+                regs.POS_M_PER_LSB,
+                regs.POS_M_PER_LSB,
+                regs.HEADING_RAD_PER_LSB,
+                regs.VEL_MPS_PER_LSB,
+                regs.VEL_MPS_PER_LSB,
+                regs.VEL_RPS_PER_LSB,
+                regs.ACC_MPSS_PER_LSB,
+                regs.ACC_MPSS_PER_LSB,
+                regs.ACC_RPSS_PER_LSB,
+            )
+            * 2,
+            strict=True,
         ):
-            out += regs.int16_bytes(_to_int16(v))
-        self.mem[regs.POSITION : regs.POSITION + 12] = bytes(out)
+            out += regs.int16_bytes(_to_int16(v / lsb))
+        self.mem[regs.POSITION : regs.POSITION + len(out)] = bytes(out)
         burst = bytearray(regs.PAA_BURST_LEN)
         burst[regs.PAA_BURST_DX : regs.PAA_BURST_DX + 2] = bytes(regs.int16_bytes(nx))
         burst[regs.PAA_BURST_DY : regs.PAA_BURST_DY + 2] = bytes(regs.int16_bytes(ny))
         self.mem[regs.PAA_BURST : regs.PAA_BURST + regs.PAA_BURST_LEN] = burst
-        status = self.mem[regs.STATUS] & ~regs.STATUS_WARN_OPTICAL
-        if self.lifted or self.poor_surface:
-            status |= regs.STATUS_WARN_OPTICAL
-        self.mem[regs.STATUS] = status
+
+    def _accelerometer(self, t: float) -> tuple[float, float]:
+        """The true sensor-frame acceleration over the update ending at ``t`` (m/s^2)."""
+        dx, dy = self.motion.displacement(t - _T, t)
+        v = (dx / _T, dy / _T)
+        prev = self._v_true or v
+        self._v_true = v
+        return (v[0] - prev[0]) / _T, (v[1] - prev[1]) / _T
+
+    def _host_acceleration(self) -> tuple[float, float, float]:
+        """The filters' acceleration moved to the host (main.cpp accHost, its terms as written)."""
+        ix, iy, _ = self._offset_inv
+        c, s = math.cos(self.sh), math.sin(self.sh)
+        w, alpha = self.kf_h.x[1], self.kf_h.x[2]
+        cen = math.hypot(ix, iy) * w * w
+        return (
+            self.kf_x.x[2] + (-ix * s - iy * c) * alpha - (cen * c - cen * s),
+            self.kf_y.x[2] + (ix * c - iy * s) * alpha - (cen * s + cen * c),
+            alpha,
+        )
+
+    def _std_devs(self) -> tuple[float, ...]:
+        """sqrt of the filters' covariance diagonals: position, velocity, acceleration (x, y, h)."""
+        out: list[float] = []
+        for i in range(3):
+            for f in (self.kf_x, self.kf_y, self.kf_h):
+                out.append(math.sqrt(max(0.0, f.p[i][i])))
+        return tuple(out)
 
     def _host_pose(self) -> tuple[float, float, float]:
         """The robot's pose from the sensor's (main.cpp: posHost from the filters + offset)."""
@@ -266,6 +366,10 @@ class EmulatedOTOS(CountingCore):
             if sh[regs.RESET] & regs.RESET_TRACKING:
                 ox, oy, oh = self.offset  # the host at the origin: the sensor at the offset
                 self.sx, self.sy, self.sh = ox, oy, oh
+                self.vx = self.vy = 0.0
+                for f in (self.kf_x, self.kf_y, self.kf_h):
+                    f.reset()
+                self._set_filters()
                 self._host_prev = None
             mem[regs.RESET] = 0
         if w[regs.SIGNAL_PROCESS]:
@@ -306,6 +410,7 @@ class EmulatedOTOS(CountingCore):
         c, s = math.cos(host[2]), math.sin(host[2])
         self.sx, self.sy = ox * c - oy * s + host[0], ox * s + oy * c + host[1]
         self.sh = wrap_pi(oh + host[2])
+        self._set_filters()
         self._host_prev = None
 
     # --- I2C ----------------------------------------------------------------------------------
@@ -319,6 +424,10 @@ class EmulatedOTOS(CountingCore):
                 f"no chip acknowledges address {addr:#04x} (emulated OTOS at "
                 f"{self.address:#04x}{', faulted' if mode else ''})"
             )
+        if self._apply_at is not None and self._apply_at > now:
+            # the loop applies a write on its next pass, long before the host has sent the
+            # next address (unless a blocking calibration holds the loop: run() waits then)
+            self._apply_at = now
         self.run(now)
         return mode
 

@@ -58,6 +58,15 @@ SELF_TEST_IN_PROGRESS = 0x02
 SELF_TEST_PASS = 0x04
 SELF_TEST_FAIL = 0x08
 SIGNAL_PROCESS_DEFAULT = 0x0F  # [fw] resetRegisters: enLut | enAcc | enRot | enVar
+SP_LUT = 0x01  # [fw] main.cpp: the velocity lookup table corrects the PAA5160's resolution
+SP_ACC = 0x02  # accelerometer updates, and the optical-rejection rule (the warning bit)
+SP_ROT = 0x04  # optical velocity and acceleration turned into the world frame by the heading
+SP_VAR = 0x08  # measurement variances on (0: the linear filters take each measurement as exact)
+
+# --- the firmware's optical-rejection rule [fw] main.cpp sensorUpdate --------------------------
+REJECT_MEASURED_MPS = 0.25  # |vx| + |vy| measured below this ...
+REJECT_ESTIMATED_MPS = 0.5  # ... while the filters' |vx| + |vy| is above this: warning, IMU only
+LUT_LIMIT_IPS = 100  # [fw] otosLut.h: the table spans -100..100 in/s per axis, 1.0 outside
 
 # --- units of the int16 pose registers [lib] sfDevOTOS.h, [fw] otosConstants.h -------------------
 POS_M_PER_LSB = 10.0 / 32768  # +-10 m full scale: 0.305 mm per LSB

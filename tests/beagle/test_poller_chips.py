@@ -122,6 +122,8 @@ def test_low_quality_window_is_treated_like_a_lift(chip):
     info = registry.chip_info(chip)
     if info.quality_threshold <= 0:
         pytest.skip(f"the {chip} has no quality threshold")
+    if chip == "otos":  # issue 26: tests/pln2033/test_otos_driver.py pins the firmware's rule
+        pytest.skip("OTOS firmware: no warning below 0.5 m/s; above, its IMU carries the pose")
     motion = ConstantVelocity(0.0, 0.3)
     start = T0 + 2.0  # after the slowest bring-up (the OTOS's IMU calibration: 0.6 s)
     rig = Rig([chip], [{"motion": motion, "low_quality_windows": [(start, start + 0.03)]}])

@@ -206,19 +206,37 @@ def test_counts_survive_the_position_registers_wrapping_at_10_m():
     assert drv.last_pose.pose.y == pytest.approx(true_y / 1000 * INCH_M, abs=0.01)
 
 
-def test_a_lift_sets_the_tracking_warning_quality_zero():
+def lift_run(speed):
     ft = FakeClock()
-    emu = EmulatedOTOS(motion=ConstantVelocity(0.0, 0.2), clock=ft, lift_windows=[(2.0, 2.5)])
+    emu = EmulatedOTOS(motion=ConstantVelocity(0.0, speed), clock=ft, lift_windows=[(2.0, 2.5)])
     drv = OTOS(emu, sleep=ft.sleep, clock=ft, imu_samples=0)
     drv.initialise(1000)
     seen = []
     while ft.t < 3.0:
         ft.t += 0.01
         m = drv.read_motion()
-        seen.append((ft.t, m.quality, m.status))
-    low = [t for t, q, s in seen if q == 0]
-    assert low and 2.0 <= low[0] <= 2.02 and low[-1] <= 2.52
-    assert all(s & regs.STATUS_WARN_OPTICAL for t, q, s in seen if q == 0)
+        seen.append((ft.t, m.quality, m.status, m.dy))
+    return emu, seen
+
+
+def test_a_lift_at_speed_sets_the_tracking_warning_and_the_imu_carries_on():
+    # the firmware's rule: measured |vx|+|vy| < 0.25 m/s while its estimate is > 0.5 m/s
+    emu, seen = lift_run(1.0)
+    low = [t for t, q, s, dy in seen if q == 0]
+    assert low and 2.0 <= low[0] <= 2.02 and 2.49 <= low[-1] <= 2.52
+    assert all(s & regs.STATUS_WARN_OPTICAL for t, q, s, dy in seen if q == 0)
+    # IMU only: the velocity held (the accelerometer reads 0), so the pose keeps following
+    lifted = sum(dy for t, q, s, dy in seen if 2.03 <= t <= 2.48)
+    assert lifted == pytest.approx(0.46 / INCH_M * 1000, rel=0.01)
+    assert emu.stats.lift_events == 1
+
+
+def test_a_lift_below_the_firmware_threshold_sets_no_warning_and_the_pose_stops():
+    emu, seen = lift_run(0.3)  # the estimate falls with the measurement: never above 0.5 m/s
+    assert all(q == 1 and not s & regs.STATUS_WARN_OPTICAL for t, q, s, dy in seen)
+    lifted = sum(dy for t, q, s, dy in seen if 2.03 <= t <= 2.48)
+    assert lifted == 0
+    assert emu.stats.lift_events == 1
 
 
 def test_heading_drifts_at_rest_without_calibration_and_not_after_it():
