@@ -26,6 +26,7 @@ from PySide6.QtWidgets import (
     QMainWindow,
     QPushButton,
     QScrollArea,
+    QStatusBar,
     QTabWidget,
     QVBoxLayout,
     QWidget,
@@ -44,9 +45,15 @@ FRAME_HZ = 30.0
 #: the status bar's sample count is renewed at most this often (s)
 ROWS_LABEL_PERIOD_S = 0.5
 #: the Control dock's width (px); with the Direction dock and the tabs the window fits 1024 px
-CONTROL_DOCK_WIDTH = 255
-#: the window's size on a first start (clamped to the screen)
+CONTROL_DOCK_WIDTH = 270
+#: the window's size on a first start (clamped to the screen, title bar included)
 DEFAULT_SIZE = (1280, 800)
+#: the window manager's frame before the window is shown (left, top, right, bottom; px):
+#: a title bar of about 30 px, thin borders
+FRAME_GUESS = (4, 30, 4, 4)
+#: narrower than this (px) the Direction dock goes under the Control dock (one column of
+#: docks), so the map keeps most of the width
+COMPACT_WIDTH = 960
 #: below this share of the requested rate the achieved rate is shown in the warning colour
 ACHIEVED_OK = 0.9
 #: style of a figure that is below what was asked (orange: not an error, a warning)
@@ -141,6 +148,57 @@ class RateEditor(QWidget):
         return low
 
 
+def first_size(avail, frame=FRAME_GUESS) -> tuple[int, int]:
+    """The inner size of a first start on a screen whose free area is ``avail`` (a QRect):
+    DEFAULT_SIZE, or less so that the window with its ``frame`` (left, top, right, bottom)
+    fits the free area."""
+    left, top, right, bottom = frame
+    return (min(DEFAULT_SIZE[0], avail.width() - left - right),
+            min(DEFAULT_SIZE[1], avail.height() - top - bottom))
+
+
+class ElidingStatusBar(QStatusBar):
+    """A status bar whose message never runs off its edge: too long, it ends in "…" and
+    the whole text is the tooltip; ``currentMessage()`` is the whole text."""
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self._full = ""
+        self.messageChanged.connect(self._on_changed)
+
+    def showMessage(self, message: str, timeout: int = 0) -> None:  # noqa: N802 - Qt API
+        self._full = message
+        super().showMessage(self._elided(message), timeout)
+        self.setToolTip(message if message != self._elided(message) else "")
+
+    def currentMessage(self) -> str:  # noqa: N802 - Qt API
+        return self._full if super().currentMessage() else ""
+
+    def message_room(self) -> int:
+        """The width (px) left to the message beside the permanent widgets."""
+        used = sum(w.width() + 4 for w in self.findChildren(QLabel)
+                   if w.isVisible() and w.parentWidget() is self)
+        return max(0, self.width() - used - 16)
+
+    def _elided(self, message: str) -> str:
+        return self.fontMetrics().elidedText(message, Qt.ElideRight, self.message_room())
+
+    def _on_changed(self, shown: str) -> None:
+        if not shown:  # timed out or cleared
+            self._full = ""
+            self.setToolTip("")
+
+    def resizeEvent(self, event) -> None:  # noqa: N802 - Qt API
+        super().resizeEvent(event)
+        if self._full and super().currentMessage():
+            text = self._elided(self._full)
+            if text != super().currentMessage():
+                self.blockSignals(True)
+                super().showMessage(text)  # the timer keeps running: clearMessage ends it
+                self.blockSignals(False)
+                self.setToolTip(self._full if text != self._full else "")
+
+
 class _ExportShortcut(QObject):
     """Lets the window's Ctrl+E through while a text field has the focus.
 
@@ -182,7 +240,9 @@ class MainWindow(QMainWindow):
         self.ctx = ctx
         self.settings = settings
         self.setWindowTitle(f"Mouse Monitor — {ctx.config.beagle}")
+        self.setStatusBar(ElidingStatusBar(self))
         self.resize(*self.default_size())
+        self.compact = False
         self.frame_ms: deque[float] = deque(maxlen=100_000)
         self.views: dict[str, QWidget] = {}
         self.tabs = QTabWidget()
@@ -601,13 +661,33 @@ class MainWindow(QMainWindow):
     # -- remembered layout and values ------------------------------------------------------------
 
     def default_size(self) -> tuple[int, int]:
-        """DEFAULT_SIZE, or the screen's available size if that is smaller."""
-        w, h = DEFAULT_SIZE
+        """DEFAULT_SIZE, or less so that the window with its title bar fits the screen."""
         screen = QGuiApplication.primaryScreen()
-        if screen is not None:
-            avail = screen.availableGeometry()
-            w, h = min(w, avail.width()), min(h, avail.height())
-        return w, h
+        if screen is None:
+            return DEFAULT_SIZE
+        return first_size(screen.availableGeometry())
+
+    def screen_too_small(self) -> bool:
+        """The screen's free area cannot hold DEFAULT_SIZE and a title bar."""
+        return self.default_size() != DEFAULT_SIZE
+
+    def resizeEvent(self, event) -> None:  # noqa: N802 - Qt API
+        super().resizeEvent(event)
+        self.set_compact(self.width() < COMPACT_WIDTH)
+
+    def set_compact(self, compact: bool) -> None:
+        """Compact (narrow window): the Direction dock goes under Control, so the docks
+        take one column (both scroll); wide again, it goes back to the right."""
+        if compact == self.compact:
+            return
+        self.compact = compact
+        docked = [d for d in (self.control_dock, self.direction_dock) if not d.isFloating()]
+        if len(docked) < 2:
+            return  # a floating dock takes no room from the map
+        if compact:
+            self.splitDockWidget(self.control_dock, self.direction_dock, Qt.Vertical)
+        else:
+            self.addDockWidget(Qt.RightDockWidgetArea, self.direction_dock)
 
     def restore_layout(self) -> None:
         """Geometry, dock layout and tab from the settings (nothing without settings)."""
@@ -617,6 +697,9 @@ class MainWindow(QMainWindow):
         geometry = s.value("window/geometry")
         if geometry is not None:
             self.restoreGeometry(geometry)
+        elif self.screen_too_small():
+            # first start on a small screen: the window manager fits it, title bar and all
+            self.setWindowState(self.windowState() | Qt.WindowMaximized)
         state = s.value("window/state")
         if state is not None:
             self.restoreState(state)

@@ -264,6 +264,7 @@ def test_frames_repaint_neither_the_status_bar_nor_the_dock_under_the_dials(
     from mm_pc.monitor.model.sim_feed import sim_replies
 
     w = make_window()
+    w.resize(1024, 700)  # every dial in view (an 800 px screen stacks the docks: they scroll)
     replies = sim_replies("figure_eight", 50.0, 30.0)
     feed(w.ctx, itertools.islice(replies, 100))
     settle(qapp, w)

@@ -48,6 +48,27 @@ def _cell(fmt: str, value: float) -> str:
     return "\u2013" if math.isnan(value) else fmt.format(value)
 
 
+#: the widest text a column of each format shows (a sign, 4-5 digits before the point)
+_WIDEST = {"{:.3f}": "99999.999", "{:.4f}": "-9999.9999", "{:.2f}": "-99999.99",
+           "{:.0f}": "999999"}
+
+
+def fit_columns(table: QTableView) -> None:
+    """Each column as wide as its header and its widest value (font metrics), never less:
+    a narrow window scrolls the table sideways instead of cutting the numbers ("144…")."""
+    header = table.horizontalHeader()
+    header.setSectionResizeMode(QHeaderView.Interactive)
+    header.setStretchLastSection(True)
+    style = table.style()
+    cell_pad = 2 * (style.pixelMetric(style.PixelMetric.PM_FocusFrameHMargin) + 1) + 6
+    head_pad = 2 * style.pixelMetric(style.PixelMetric.PM_HeaderMargin) + 6
+    fm, hfm = table.fontMetrics(), header.fontMetrics()
+    for col, (title, _field, _scale, fmt) in enumerate(COLUMNS):
+        widest = _WIDEST.get(fmt, "-99999.9999")
+        table.setColumnWidth(col, max(hfm.horizontalAdvance(title) + head_pad,
+                                      fm.horizontalAdvance(widest) + cell_pad))
+
+
 class HistoryTableModel(QAbstractTableModel):
     """One sensor's history rows, newest first, read in place from the session's History."""
 
@@ -211,7 +232,7 @@ class SensorTable(QWidget):
         vh = self.table.verticalHeader()
         vh.setSectionResizeMode(QHeaderView.Fixed)
         vh.setDefaultSectionSize(20)
-        self.table.horizontalHeader().setSectionResizeMode(QHeaderView.Stretch)
+        fit_columns(self.table)
         self.table.copy_requested.connect(self.copy_selection)
 
         self.copy_button = QPushButton("Copy")

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 import pyqtgraph as pg
+from PySide6.QtCore import Qt
 from PySide6.QtWidgets import (
     QHBoxLayout,
     QLabel,
@@ -47,7 +48,7 @@ MAX_WINDOW_S = 3600
 #: (key, title, history fields, unit)
 PLOTS = (
     ("speed", "speed", ("vx", "vy"), "mm/s"),
-    ("disp", "displacement per reply (∝ request interval)", ("dx", "dy"), "mm"),
+    ("disp", "displacement per reply<br>(∝ request interval)", ("dx", "dy"), "mm"),
 )
 #: the axes' names in the legend line (sensor frame)
 AXIS_NAMES = {"x": "X (sensor right)", "y": "Y (sensor forward)"}
@@ -59,6 +60,8 @@ X_LEAD = 0.1
 #: changed only when the data leave it or fill less than Y_SHRINK of it
 Y_PAD = 0.1
 Y_SHRINK = 0.4
+#: a plot is never drawn lower than this (px): below it the page scrolls
+MIN_PLOT_HEIGHT = 120
 
 
 def legend_html() -> str:
@@ -132,7 +135,7 @@ class GraphsView(QWidget):
         for k, dev in enumerate(devices):
             for row, (key, title, _fields, unit) in enumerate(PLOTS):
                 plot = self.canvas.addPlot(row=row, col=k)
-                plot.setTitle(f"{dev}: {title}", color="#222222")
+                plot.setTitle(f"{dev}<br>{title}", color="#222222")
                 self._style(plot, title, unit)
                 for axis in ("x", "y"):
                     pen = pg.mkPen(AXIS_COLOURS[axis], width=1)
@@ -145,8 +148,18 @@ class GraphsView(QWidget):
                     plot.hideAxis("bottom")  # the axes' labels are what a range step costs
                 self.plots[(k, key)] = plot
         self._built_for = tuple(devices)
+        self._fit_canvas()
         self._apply_interaction()
         self._invalidate()
+
+    def _fit_canvas(self) -> None:
+        """The canvas never shrinks below what its plots need (pyqtgraph would draw the
+        last column past the edge, unseen): a narrower tab scrolls (the window's scroll
+        area) to every sensor's plots instead."""
+        need = self.canvas.ci.effectiveSizeHint(Qt.MinimumSize)
+        frame = 2 * self.canvas.frameWidth() + 4
+        self.canvas.setMinimumSize(int(need.width()) + frame,
+                                   max(int(need.height()) + frame, MIN_PLOT_HEIGHT * len(PLOTS)))
 
     @staticmethod
     def _style(plot: pg.PlotItem, title: str, unit: str) -> None:
@@ -157,7 +170,7 @@ class GraphsView(QWidget):
             axis.setPen(pg.mkPen("#444444"))
             axis.setTextPen(pg.mkPen("#222222"))
         plot.setLabel("bottom", "t", units="s")
-        plot.setLabel("left", f"{title.split(' (')[0]} ({unit})")
+        plot.setLabel("left", f"{title.split('<br>')[0].split(' (')[0]} ({unit})")
         plot.getAxis("left").enableAutoSIPrefix(False)
         plot.getAxis("bottom").enableAutoSIPrefix(False)
 

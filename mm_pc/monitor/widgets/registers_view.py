@@ -100,7 +100,9 @@ class RegistersView(QWidget):
         self.table = QTableWidget(len(FIELDS), 0)
         self.table.setVerticalHeaderLabels(list(FIELDS))
         self.table.setEditTriggers(QTableWidget.NoEditTriggers)
-        self.table.horizontalHeader().setSectionResizeMode(QHeaderView.Stretch)
+        # as wide as the device's name at least (a narrow window scrolls), the rest shared
+        self.table.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeToContents)
+        self.table.horizontalHeader().setStretchLastSection(True)
         self.table.setToolTip(NO_LOSS_TIP)
         mono = QFont("monospace")
         mono.setStyleHint(QFont.Monospace)

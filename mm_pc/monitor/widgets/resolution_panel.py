@@ -25,6 +25,7 @@ from PySide6.QtWidgets import (
     QLabel,
     QLineEdit,
     QPushButton,
+    QSizePolicy,
     QVBoxLayout,
 )
 
@@ -89,13 +90,14 @@ class _SensorRow:
     def __init__(self, device: str) -> None:
         self.device = device
         self.edit = QLineEdit()
-        self.edit.setPlaceholderText(f"{CPI_MIN}..{CPI_MAX}")
-        self.edit.setMinimumWidth(60)
+        self._placeholder(f"{CPI_MIN}..{CPI_MAX}")
         self.edit.setToolTip(f"counts per inch of both axes, {ALLOWED} (Enter sets)")
         self.set_button = QPushButton("Set")
         self.set_button.setMaximumWidth(48)  # the dock is narrow (1024 px screens)
         self.set_button.setToolTip("ask the node to set this CPI; it reads the register back")
         self.current = QLabel("now: –")
+        # never narrower than its text ("now: 12000 CPI"): the field gives way first
+        self.current.setSizePolicy(QSizePolicy.Minimum, QSizePolicy.Preferred)
         self.current.setToolTip("the CPI in force, from the newest reply")
         self.read_back = QLabel("")
         self.read_back.setWordWrap(True)
@@ -109,6 +111,12 @@ class _SensorRow:
         #: its range from the node's SensorSettings (None: not read yet)
         self.settings_range: CpiRange | None = None
         self.online = True
+
+    def _placeholder(self, text: str) -> None:
+        """Show ``text`` in the empty field, never cut: the field is at least that wide."""
+        self.edit.setPlaceholderText(text)
+        # the frame and text margins of the style: about 8 px a side
+        self.edit.setMinimumWidth(self.edit.fontMetrics().horizontalAdvance(text) + 18)
 
     def allowed(self) -> CpiRange | None:
         """The range to check against: the node's word, else the registry's (None: a chip not
@@ -126,14 +134,14 @@ class _SensorRow:
         allowed = self.allowed()
         if allowed is not None and allowed.fixed:
             tip = fixed_tip(self.chip, cpi)
-            self.edit.setPlaceholderText(f"fixed {cpi or allowed.min}")
+            self._placeholder(f"fixed {cpi or allowed.min}")
             self.edit.setToolTip(tip)
             self.set_button.setToolTip(tip)
             self.edit.setEnabled(False)
             self.set_button.setEnabled(False)
             return
         if allowed is not None:
-            self.edit.setPlaceholderText(f"{allowed.min}..{allowed.max}")
+            self._placeholder(f"{allowed.min}..{allowed.max}")
             self.edit.setToolTip(f"counts per inch of both axes, {chip_title(self.chip)} allows "
                                  f"{allowed.describe()} (Enter sets)")
         self.edit.setEnabled(self.online)
@@ -183,6 +191,7 @@ class ResolutionPanel(QGroupBox):
             self.grid.addWidget(row.edit, base + 1, 0)
             self.grid.addWidget(row.set_button, base + 1, 1)
             self.grid.addWidget(row.current, base + 1, 2)
+            self.grid.setColumnStretch(0, 1)
             self.grid.addWidget(row.read_back, base + 2, 0, 1, 3)
             self.grid.addWidget(row.error, base + 3, 0, 1, 3)
             self.rows[dev] = row

@@ -160,7 +160,7 @@ class MapView(QWidget):
         bar.addWidget(QLabel("Zoom"))
         self.zoom_slider = QSlider(Qt.Orientation.Horizontal)
         self.zoom_slider.setRange(0, SLIDER_STEPS)
-        self.zoom_slider.setMinimumWidth(140)
+        self.zoom_slider.setMinimumWidth(80)  # 800 px windows: the map's width decides
         self.zoom_slider.setToolTip(
             f"visible width of the map, {MIN_WIDTH_M:g} m to {MAX_WIDTH_M:g} m (log scale)"
         )
@@ -182,13 +182,15 @@ class MapView(QWidget):
         self.fit_button.clicked.connect(self.fit_paths)
         bar.addWidget(self.fit_button)
         bar.addStretch(1)
-        self.reset_button = QPushButton("Reset path and values")
-        self.reset_button.setToolTip("clear the paths and put the robot back to the origin")
+        self.reset_button = QPushButton("Reset")
+        self.reset_button.setToolTip("reset path and values: clear the paths and put the "
+                                     "robot back to the origin")
         self.reset_button.clicked.connect(self.ctx.reset)
         bar.addWidget(self.reset_button)
         second = QHBoxLayout()
         second.setContentsMargins(0, 0, 0, 0)
-        second.addWidget(QLabel("Paths:"))
+        # the checkboxes name the paths (sensor's colour icons): no "Paths:" label, so the
+        # row fits an 800 px window
         self.path_bar = QHBoxLayout()
         second.addLayout(self.path_bar)
         second.addStretch(1)

@@ -1,0 +1,254 @@
+"""Every view at 1024x700 and 800x600: the window fits the screen, no text is cut off.
+
+The real MainWindow (offscreen Qt, no node) fed by the simulated figure eight; at each
+size every tab is shown in turn and every visible label, button, combo box, line-edit
+placeholder, table header and cell and the status bar's message is measured: its text
+must fit the width it has (font metrics), or be elided ("…") with the whole text in a
+tooltip, or wrap.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+pytest.importorskip("PySide6")
+
+from PySide6.QtCore import QRect, Qt
+from PySide6.QtWidgets import (
+    QAbstractButton,
+    QComboBox,
+    QLabel,
+    QLineEdit,
+    QStatusBar,
+    QStyle,
+    QStyleOptionComboBox,
+    QTableView,
+    QWidget,
+)
+
+from mm_pc.monitor.context import MonitorConfig, MonitorContext
+from mm_pc.monitor.main_window import MainWindow
+from mm_pc.monitor.model.session import MonitorSession
+
+ELLIPSIS = "…"
+#: the end-of-replay summary, the longest message the status bar shows
+REPLAY_SUMMARY = (
+    "replay of run.mcap ended: 801 of 801 replies; pose from 16020 single polls, "
+    "0 replies per reply, 0 gap(s); live data waits for Back to live"
+)
+SIZES = ((1024, 700), (800, 600))
+
+
+def _plain(text: str) -> str:
+    from PySide6.QtGui import QTextDocument
+
+    if "<" in text and ">" in text:
+        doc = QTextDocument()
+        doc.setHtml(text)
+        return doc.toPlainText()
+    return text
+
+
+def _elided_ok(shown: str, tooltip: str) -> bool:
+    """Elided on purpose: the text ends (or is cut) with "…" and the tooltip has the rest."""
+    return ELLIPSIS in shown and bool(tooltip.strip())
+
+
+def _widest_line(fm, text: str) -> int:
+    return max((fm.horizontalAdvance(line) for line in text.replace("&&", "&").split("\n")),
+               default=0)
+
+
+def _visible(w: QWidget, window: QWidget) -> bool:
+    return w.isVisibleTo(window) and w.isVisible() and not w.visibleRegion().isEmpty()
+
+
+def _label_problem(label: QLabel) -> str | None:
+    text = _plain(label.text())
+    if not text.strip() or (label.pixmap() is not None and not label.pixmap().isNull()):
+        return None
+    if label.wordWrap():
+        return None
+    if _elided_ok(text, label.toolTip()):
+        return None
+    room = label.contentsRect().width() - 2 * max(label.margin(), 0) - max(label.indent(), 0)
+    need = _widest_line(label.fontMetrics(), text)
+    return None if need <= room else f"label {text!r}: {need} px in {room} px"
+
+
+def _button_problem(button: QAbstractButton) -> str | None:
+    text = button.text().replace("&", "")
+    if not text.strip() or _elided_ok(text, button.toolTip()):
+        return None
+    need = button.fontMetrics().horizontalAdvance(text)
+    if not button.icon().isNull():
+        need += button.iconSize().width() + 4
+    room = button.width() - 8  # the style's frame and margins (about 4 px a side)
+    return None if need <= room else f"button {text!r}: {need} px in {room} px"
+
+
+def _combo_problem(box: QComboBox) -> str | None:
+    text = box.currentText()
+    if not text:
+        return None
+    opt = QStyleOptionComboBox()
+    box.initStyleOption(opt)
+    field: QRect = box.style().subControlRect(
+        QStyle.CC_ComboBox, opt, QStyle.SC_ComboBoxEditField, box
+    )
+    need = box.fontMetrics().horizontalAdvance(text)
+    return None if need <= field.width() else f"combo {text!r}: {need} px in {field.width()} px"
+
+
+def _line_edit_problem(edit: QLineEdit) -> str | None:
+    if isinstance(edit.parent(), QComboBox):
+        return None
+    text = edit.text() or edit.placeholderText()
+    if not text:
+        return None
+    m = edit.textMargins()
+    room = edit.contentsRect().width() - m.left() - m.right() - 6  # the frame's padding
+    need = edit.fontMetrics().horizontalAdvance(text)
+    what = "field" if edit.text() else "placeholder"
+    return None if need <= room else f"{what} {text!r}: {need} px in {room} px"
+
+
+def _table_problems(table: QTableView) -> list[str]:
+    model = table.model()
+    if model is None:
+        return []
+    out = []
+    fm = table.fontMetrics()
+    header = table.horizontalHeader()
+    hfm = header.fontMetrics()
+    last_row = min(model.rowCount(), 50)
+    for col in range(model.columnCount()):
+        if table.isColumnHidden(col):
+            continue
+        width = table.columnWidth(col)
+        title = str(model.headerData(col, Qt.Horizontal, Qt.DisplayRole) or "")
+        tip = str(model.headerData(col, Qt.Horizontal, Qt.ToolTipRole) or "")
+        if header.isVisible() and title and not _elided_ok(title, tip):
+            need = _widest_line(hfm, title) + 8  # the section's margins (4 px a side)
+            if need > width:
+                out.append(f"header {title!r}: {need} px in {width} px")
+        for row in range(last_row):
+            idx = model.index(row, col)
+            text = model.data(idx, Qt.DisplayRole)
+            if text is None:
+                continue
+            text = str(text)
+            need = fm.horizontalAdvance(text) + 6  # the cell's margins
+            if need > width and not model.data(idx, Qt.ToolTipRole):
+                out.append(f"cell {title!r} {text!r}: {need} px in {width} px")
+                break
+    return out
+
+
+def clipped_texts(window: QWidget) -> list[str]:
+    """What the shown widgets of ``window`` cut off, one line each."""
+    found: list[str] = []
+    for w in window.findChildren(QWidget):
+        if not _visible(w, window):
+            continue
+        problem = None
+        if isinstance(w, QLabel):
+            problem = _label_problem(w)
+        elif isinstance(w, QAbstractButton) and w.metaObject().className() in (
+            "QPushButton", "QCheckBox", "QRadioButton"
+        ):
+            problem = _button_problem(w)
+        elif isinstance(w, QComboBox):
+            problem = _combo_problem(w)
+        elif isinstance(w, QLineEdit):
+            problem = _line_edit_problem(w)
+        elif isinstance(w, QTableView):
+            found += [f"{type(w).__name__}: {p}" for p in _table_problems(w)]
+        if problem:
+            found.append(f"{type(w.window()).__name__}/{_path(w)}: {problem}")
+    bar = window.statusBar()
+    shown = QStatusBar.currentMessage(bar)  # what is drawn (the bar may elide it)
+    if shown and not _elided_ok(shown, bar.toolTip()):
+        room = bar.width() - sum(
+            c.width() for c in bar.findChildren(QLabel) if c.isVisible()
+        ) - 12
+        need = bar.fontMetrics().horizontalAdvance(shown)
+        if need > room:
+            found.append(f"status bar message: {need} px in {room} px")
+    return found
+
+
+def _path(w: QWidget) -> str:
+    names = []
+    while w is not None and len(names) < 3:
+        names.append(w.objectName() or type(w).__name__)
+        w = w.parentWidget()
+    return "/".join(reversed(names))
+
+
+@pytest.fixture
+def window(qapp, feed, tmp_path):
+    config = MonitorConfig(rate_hz=15.0, calibration_file=tmp_path / "cal.yaml")
+    w = MainWindow(MonitorContext(MonitorSession(), None, config), None)
+    feed(w.ctx, rate_hz=50.0, seconds=3.0)
+    w.show()
+    yield w
+    w.close()
+
+
+def settle(qapp, w, rounds: int = 4) -> None:
+    for _ in range(rounds):
+        w.frame()
+        qapp.processEvents()
+
+
+def _walk(qapp, w, size) -> dict[str, list[str]]:
+    w.resize(*size)
+    settle(qapp, w)
+    w.statusBar().showMessage(REPLAY_SUMMARY)
+    per_tab = {}
+    for i in range(w.tabs.count()):
+        w.tabs.setCurrentIndex(i)
+        settle(qapp, w)
+        per_tab[w.tabs.tabText(i)] = clipped_texts(w)
+    return per_tab
+
+
+@pytest.mark.parametrize("size", SIZES, ids=lambda s: f"{s[0]}x{s[1]}")
+def test_no_text_is_cut_off_on_any_tab(window, qapp, size):
+    per_tab = _walk(qapp, window, size)
+    report = [f"{tab}: {p}" for tab, problems in per_tab.items() for p in problems]
+    print(f"{size}: {len(report)} clipped texts")
+    assert not report, "\n".join(report)
+
+
+@pytest.mark.parametrize("size", SIZES, ids=lambda s: f"{s[0]}x{s[1]}")
+def test_map_keeps_a_usable_size_and_graphs_scroll(window, qapp, size):
+    window.resize(*size)
+    settle(qapp, window)
+    window.tabs.setCurrentIndex(0)
+    settle(qapp, window)
+    map_view, scroll = window.views["Map"], window.tabs.currentWidget()
+    assert window.compact == (size[0] < 960)
+    # the map's toolbar fits: no sideways scrolling, the map has most of the width
+    assert map_view.minimumSizeHint().width() <= scroll.viewport().width()
+    assert map_view.width() >= 0.55 * size[0], (map_view.width(), size)
+    window.tabs.setCurrentIndex(1)
+    settle(qapp, window)
+    graphs, scroll = window.views["Graphs"], window.tabs.currentWidget()
+    assert len(graphs.plots) == 4  # two sensors, two plots each
+    canvas = graphs.canvas
+    for (k, key), plot in graphs.plots.items():  # sensor 2's plots are drawn inside the canvas
+        right = plot.sceneBoundingRect().right()
+        assert right <= canvas.viewport().width() + 1, (k, key, right, canvas.width())
+    if graphs.width() > scroll.viewport().width():  # what does not fit scrolls
+        assert scroll.horizontalScrollBar().maximum() > 0
+
+
+def test_the_whole_window_fits_a_small_screen_at_first_start(qapp):
+    from mm_pc.monitor import main_window
+
+    avail = QRect(0, 0, 1024, 700 - 30)  # a 1024x700 screen less a panel
+    assert main_window.first_size(avail, frame=(0, 30, 0, 0)) == (1024, 700 - 30 - 30)
+    big = QRect(0, 0, 1600, 1000)
+    assert main_window.first_size(big, frame=(4, 30, 4, 4)) == main_window.DEFAULT_SIZE
