@@ -1,28 +1,29 @@
 """Register-level PMW3360 / PMW3389 emulators behind ``xfer_segments`` (and ``xfer2``).
 
 Built on the shared :class:`~pln2033.emulated.CountingCore` (motion -> 16-bit counts, lifts,
-poor-surface windows, noise, faults), they speak the chip's bytes: one frame (chip select
-low) holds address/data operations; the delay after each segment is checked against the
-datasheet's timing [DS3360 AC table]:
+poor-surface windows, noise, faults), they speak the chip's bytes. One call is one frame
+(chip select low); each segment's delay follows its bytes, a leading empty segment waits
+after chip select falls. Timing [DS3360 Table 4] is checked as constraints BETWEEN COMMANDS
+(:mod:`~pln2033.pmw33xx.timing`), from the end of one command to the start of the next,
+whether chip select rose between them or not: the emulator lays every byte on the chip's
+timeline (``sclk_hz`` per bit, ``cs_setup_us`` after chip select falls, the delays, and
+between two calls the host clock's time with chip select high, at least ``min_cs_high_us``).
 
-- a read needs tSRAD (160 us) after its address byte, the motion burst tSRAD_MOTBR (35 us):
-  shorter, and the data bytes are garbage;
-- after a read's data byte tSRR/tSRW (20 us), after a write tSWW/tSWR (180 us) before the
-  next command -- also at the end of a frame, since the driver keeps chip select low through
-  that gap; shorter, and the rest of the frame is ignored;
-- SROM_Load_Burst bytes need 15 us between them; a byte sent sooner is stored garbled;
-- 50 ms after Power_Up_Reset, 10 ms between SROM_Enable 0x1D and 0x18, 10 ms between the
-  CRC start (0x15) and reading Data_Out -- measured on the emulator's clock.
-
-Every violation counts one ``stats.protocol_errors`` per frame. ``xfer2`` is a frame with no
-delays at all (so every read in it is garbage): the driver must use ``xfer_segments``.
+Each violated constraint counts one ``stats.protocol_errors`` (and one in
+``timing_errors[name]``). Its effect: a read (or burst) that comes too soon, or whose
+tSRAD is short, returns garbage; a write is still applied (the datasheet says it "may not
+complete", but the Arduino sketches' 120 us writes are reported to work), except while the
+chip ignores the bus (the 50 ms after a reset, the 10 ms CRC test), where it is lost; an
+SROM byte sent sooner than 15 us after the previous one is stored garbled.
 
 Counter semantics [DS3360 Motion, sec. 4]: reading Motion (or a burst) freezes the counters
 into the delta registers and clears them (a second freeze before the deltas are read loses
 them: ``stats.overwritten_x/y``); reading Delta_X_H / Delta_Y_H clears the frozen value.
 
-SROM model (the emulators' own, not PixArt's): the emulator accepts any blob. An image is
-*intact* when it has ``srom_length`` bytes, none garbled by the timing, and (when a reference
+SROM model (the emulators' own, not PixArt's): SROM_Load_Burst takes ``srom_length`` bytes
+(the chip knows its image's length: bytes after it in the same frame are commands again, so
+reading SROM_ID before chip select rises works, as users report of the Arduino sketch). An
+image is *intact* when it has ``srom_length`` bytes, none garbled, and (when a reference
 ``srom`` is given) equals it; then SROM_ID reads ``srom_id`` (0x04, the version QMK and the
 nRF drivers expect of PixArt's current SROM) and the CRC self test answers 0xBEEF, the pass
 value the PMW3360 datasheet lists. Otherwise SROM_ID reads the low byte of the image's
@@ -36,12 +37,14 @@ SQUAL [DS3360 SQUAL, Min_SQ_Run]: ``surface_squal`` (+-8) on a surface, 0..3 whi
 from __future__ import annotations
 
 import random
+from collections import Counter
 from collections.abc import Sequence
 from typing import Any
 
 from ..emulated import CountingCore
 from ..motion import MotionSource
 from . import regs as R  # noqa: N812 (the register facts, short)
+from . import timing as T  # noqa: N812 (the timing constraints, short)
 
 __all__ = ["EmulatedPMW33xx", "EmulatedPMW3360", "EmulatedPMW3389"]
 
@@ -53,6 +56,12 @@ class EmulatedPMW33xx(CountingCore):
     upload must equal; None: any intact image), ``srom_id``, ``srom_length``,
     ``surface_squal``, ``require_srom`` (count only while an SROM runs; default False, so
     the sim works without PixArt's blob) and ``product_id`` (what Product_ID answers).
+
+    The bus as the chip sees it: ``sclk_hz`` (bit rate; default the 2 MHz maximum, the
+    shortest bytes), ``cs_setup_us`` (chip select falling -> first SCLK that the host's
+    controller gives by itself; assumed half a clock period) and ``min_cs_high_us`` (chip
+    select high between two calls at least this long even when the clock did not move, as a
+    test's fake clock does; a real ioctl round trip is longer than 1 us).
     """
 
     regs: R.ChipRegs
@@ -67,6 +76,9 @@ class EmulatedPMW33xx(CountingCore):
         surface_squal: int = 0x40,
         require_srom: bool = False,
         product_id: int | None = None,
+        sclk_hz: float = R.MAX_SPI_HZ,
+        cs_setup_us: float | None = None,
+        min_cs_high_us: float = 1.0,
         **core: Any,
     ) -> None:
         self.srom_reference = None if srom is None else bytes(srom)
@@ -80,12 +92,19 @@ class EmulatedPMW33xx(CountingCore):
         self.srom_image: bytes | None = None
         self.srom_intact = False
         self._squal_rng = random.Random(core.get("seed", 0) + 1)
+        self.byte_us = 8e6 / sclk_hz
+        self.cs_setup_us = 0.5e6 / sclk_hz if cs_setup_us is None else cs_setup_us
+        self.min_cs_high_us = min_cs_high_us
+        self.timing_errors: Counter[str] = Counter()
+        self._prev: T.Command | None = None  # the last command, on the chip's timeline (us)
+        self._cs_rise_us: float | None = None  # when chip select last rose (chip time, us)
+        self._host_at_rise = 0.0  # the host clock (s) of that frame
         super().__init__(
             motion=motion,
             **core,
             cpi=self._decode_cpi(self.regs.cpi.registers),
         )
-        self._power_on(now=self.clock(), ready=True)
+        self._power_on(None)
         self.stats.resets = 0
 
     # --- chip state -----------------------------------------------------------------------
@@ -107,19 +126,30 @@ class EmulatedPMW33xx(CountingCore):
         self.latch_x = self.latch_y = 0
         self.burst_armed = False
         self._srom_state: str | None = None
-        self._srom_t = 0.0
-        self._crc_t: float | None = None
+        self._srom_t = 0.0  # us, chip time
+        self._crc_t: float | None = None  # us, chip time
 
-    def _power_on(self, now: float, ready: bool = False) -> None:
+    def _power_on(self, at_us: float | None) -> None:
+        """Power comes back (or a reset) at chip time ``at_us``: the chip answers 50 ms later,
+        as after a Power_Up_Reset (None: no wait here, the emulator's first power-up is long
+        past, or the Power_Up_Reset command itself carries the wait)."""
         self.srom_image = None
         self.srom_intact = False
         self._defaults()
-        self._ready_at = now if ready else now + R.T_RESET_S
+        if at_us is not None:
+            wait, name = T.wait_after("Power_Up_Reset", R.POWER_UP_RESET_VALUE)
+            self._prev = T.Command("write", at_us, at_us, at_us, at_us, wait, name)
         self._update_counting()
         self.stats.resets += 1
 
+    def _chip_time_us(self, host_now: float) -> float:
+        """Chip time (us) at host time ``host_now``, chip select high since the last frame."""
+        if self._cs_rise_us is None:
+            return host_now * 1e6
+        return self._cs_rise_us + max(0.0, host_now - self._host_at_rise) * 1e6
+
     def power_cycle(self) -> None:
-        self._power_on(self.clock())
+        self._power_on(self._chip_time_us(self.clock()))
 
     def clear_latches(self) -> tuple[int, int]:
         x, y = self.latch_x, self.latch_y
@@ -210,6 +240,7 @@ class EmulatedPMW33xx(CountingCore):
         ]
 
     def _read(self, name: str | None, now: float) -> int:
+        """Register ``name``'s value, read at chip time ``now`` (us)."""
         if name is None:
             return 0
         self.burst_armed = False  # a non-burst read [DS3360 sec. 4 step 7]
@@ -232,7 +263,7 @@ class EmulatedPMW33xx(CountingCore):
         if name == "Observation":
             return self._observation()
         if name in ("Data_Out_Upper", "Data_Out_Lower"):
-            if self._crc_t is None or now - self._crc_t < R.T_CRC_S:
+            if self._crc_t is None or now - self._crc_t < R.T_CRC_S * 1e6:
                 return 0  # no result yet
             crc = self.srom_crc()
             return crc >> 8 if name == "Data_Out_Upper" else crc & 0xFF
@@ -242,29 +273,30 @@ class EmulatedPMW33xx(CountingCore):
             return self._surface()[name]
         return self.r.get(name, 0)
 
-    def _write(self, name: str | None, value: int, now: float) -> None:
+    def _write(self, name: str | None, value: int, now: float, end: float | None = None) -> None:
+        """Register ``name`` <- ``value``: the command starts at chip time ``now`` and ends at
+        ``end`` (us; the waits it starts run from its end)."""
+        end = now if end is None else end
         if name is None or name in ("Product_ID", "Inverse_Product_ID", "SROM_ID", "Revision_ID"):
             return
         if name == "Power_Up_Reset":
             if value == R.POWER_UP_RESET_VALUE:
-                self._power_on(now)
+                self._power_on(None)
             return
         if name == "Motion_Burst":
             self.burst_armed = True
             return
         if name == "SROM_Enable":
             if value == R.SROM_INIT:
-                self._srom_state, self._srom_t = "init", now
+                self._srom_state, self._srom_t = "init", end
             elif value == R.SROM_START:
-                ok = self._srom_state == "init" and now - self._srom_t >= R.T_SROM_INIT_S
-                self._srom_state = "armed" if ok else None
-                if not ok:
-                    self._bad = True
+                ok = self._srom_state == "init" and now - self._srom_t >= R.T_SROM_INIT_S * 1e6
+                self._srom_state = "armed" if ok else None  # (too soon: counted as a gap)
             elif value == R.SROM_CRC:
                 keep_image, keep_intact = self.srom_image, self.srom_intact
                 self._defaults()  # the self test resets the registers [DS3360 SROM_Enable]
                 self.srom_image, self.srom_intact = keep_image, keep_intact
-                self._crc_t = now
+                self._crc_t = end
             return
         self.r[name] = value
         enc = self.regs.cpi
@@ -287,25 +319,18 @@ class EmulatedPMW33xx(CountingCore):
         if enc.valid(vx) and enc.decode(vx) != self.cpi_x:
             self.set_cpi_x(enc.decode(vx))
 
-    def _upload(self, data: list[int], gaps: list[float], i: int) -> None:
-        """SROM_Load_Burst: bytes data[i+1:], each after a gap >= 15 us."""
+    def _upload(self, data: list[int], garbled: list[bool]) -> None:
+        """SROM_Load_Burst's bytes; ``garbled[k]``: byte k came sooner than 15 us after the
+        one before it (latched mid-byte)."""
         if self._srom_state != "armed":
-            self._bad = True  # no download started: the bytes go nowhere
-            return
+            return  # no download started: the bytes go nowhere (the SROM does not run)
         image = bytearray()
-        garbled = False
-        for k in range(i + 1, len(data)):
-            b = data[k]
-            if gaps[k - 1] < R.T_SROM_BYTE_US:
-                b ^= 1 << self._rng.randrange(8)  # latched mid-byte: garbled
-                garbled = True
-            image.append(b)
-        if garbled:
-            self._bad = True
+        for b, bad in zip(data, garbled, strict=True):
+            image.append(b ^ (1 << self._rng.randrange(8)) if bad else b)
         self._srom_state = None
         self.srom_image = bytes(image)
         self.srom_intact = (
-            not garbled
+            not any(garbled)
             and len(image) == self.srom_length
             and (self.srom_reference is None or self.srom_reference == bytes(image))
         )
@@ -317,21 +342,13 @@ class EmulatedPMW33xx(CountingCore):
         """One frame without delays (reads in it return garbage)."""
         return self.xfer_segments([(list(data), 0)])[0]
 
-    def xfer_segments(self, segments: Sequence[tuple[list[int], int]]) -> list[list[int]]:
+    def xfer_segments(self, segments: Sequence[tuple[list[int], float]]) -> list[list[int]]:
         now = self.clock()
         mode = self.spi_fault(now)
         if mode == "no_response":
             return [[0xFF] * len(seg) for seg, _d in segments]
         self.advance(now)
-        data: list[int] = []
-        gaps: list[float] = []
-        for seg, delay in segments:
-            if seg:
-                data += list(seg)
-                gaps += [0.0] * (len(seg) - 1) + [float(delay)]
-            elif gaps:
-                gaps[-1] += delay  # an empty segment only waits
-        out = self._frame(data, gaps, now)
+        out = self._frame(segments, now)
         if mode == "corrupt":
             self.corrupt(out)
         result, k = [], 0
@@ -342,58 +359,128 @@ class EmulatedPMW33xx(CountingCore):
             self.stats.history.append((tuple(tuple(s) for s, _ in segments), tuple(out)))
         return result
 
-    def _garbage(self, out: list[int], start: int) -> None:
-        for k in range(start, len(out)):
+    def _garbage(self, out: list[int], start: int, stop: int | None = None) -> None:
+        for k in range(start, len(out) if stop is None else stop):
             out[k] = self._rng.randrange(256)
 
-    def _frame(self, data: list[int], gaps: list[float], now: float) -> list[int]:
-        n = len(data)
+    def _violation(self, name: str) -> None:
+        self.timing_errors[name] += 1
+        self.stats.protocol_errors += 1
+
+    def _layout(
+        self, segments: Sequence[tuple[list[int], float]], host_now: float
+    ) -> tuple[list[int], list[float], float | None, float, float]:
+        """The frame's bytes, each byte's start (us, chip time; it ends byte_us later), how
+        long chip select was high before it (None: first frame), when it fell and rose."""
+        if self._cs_rise_us is None:
+            cs_high, fall = None, host_now * 1e6
+        else:
+            cs_high = max((host_now - self._host_at_rise) * 1e6, self.min_cs_high_us)
+            fall = self._cs_rise_us + cs_high
+        t = fall + self.cs_setup_us
+        data: list[int] = []
+        starts: list[float] = []
+        for seg, delay in segments:
+            for b in seg:
+                data.append(int(b))
+                starts.append(t)
+                t += self.byte_us
+            t += float(delay)
+        return data, starts, cs_high, fall, t
+
+    def _frame(self, segments: Sequence[tuple[list[int], float]], host_now: float) -> list[int]:
+        data, s, cs_high, fall, rise = self._layout(segments, host_now)
+        n, bu = len(data), self.byte_us
         out = [0] * n
-        self._bad = False
         names = self._addr_names
-        if n and now < self._ready_at:
-            self._bad = True  # talking to the chip within 50 ms of the reset
-            self._garbage(out, 0)
-            n = 0
+        first_gap = cs_high  # chip select rose before the frame's first command only
+        prev_frame = self._prev
+        if n and T.short(s[0] - fall, R.T_NCS_SCLK_US):
+            early: str | None = T.TNCS_SCLK
+        else:
+            early = None
         i = 0
         while i < n:
             cmd = data[i]
             name = names.get(cmd & R.ADDRESS_MASK)
-            if cmd & R.WRITE_FLAG:
-                if name == "SROM_Load_Burst":
-                    self._upload(data, gaps, i)
-                    break
+            write = bool(cmd & R.WRITE_FLAG)
+            if write and name == "SROM_Load_Burst":
+                stop = min(n, i + 1 + self.srom_length)
+                last = max(stop - 1, i)
+                c = T.Command(
+                    "srom_burst", s[i], s[i] + bu, s[min(i + 1, last)] + bu, s[last] + bu,
+                    R.T_SROM_END_US, T.SROM_END_WAIT,
+                )  # fmt: skip
+                self._check_gap(c, first_gap, early)
+                garbled = [
+                    T.short(s[k] - s[k - 1] - bu, R.T_SROM_BYTE_US) for k in range(i + 1, stop)
+                ]
+                for _ in range(sum(garbled)):
+                    self._violation(T.SROM_BYTE)
+                self._upload(data[i + 1 : stop], garbled)
+                i = stop
+            elif write:
                 if i + 1 >= n:
-                    self._bad = True  # an address without its data byte
+                    self._violation("write without its data byte")
                     break
-                self._write(name, data[i + 1], now)
-                need = R.T_SWW_US
-            else:
-                if name == "Motion_Burst":
-                    if gaps[i] < R.T_SRAD_MOTBR_US or not self.burst_armed:
-                        self._bad = True
-                        self._garbage(out, i + 1)
-                        break
+                wait, wait_name = T.wait_after(name, data[i + 1])
+                c = T.Command(
+                    "write", s[i], s[i] + bu, s[i + 1] + bu, s[i + 1] + bu, wait, wait_name
+                )
+                broken = self._check_gap(c, first_gap, early)
+                if broken not in T.BUS_IGNORED:
+                    self._write(name, data[i + 1], c.start, c.end)
+                i += 2
+            elif name == "Motion_Burst":
+                last = min(n - 1, i + R.BURST_LENGTH)
+                c = T.Command(
+                    "motion_burst", s[i], s[i] + bu, s[min(i + 1, last)] + bu, s[last] + bu
+                )
+                bad = self._check_gap(c, first_gap, early) is not None
+                if i + 1 < n and T.short(s[i + 1] - c.addr_end, R.T_SRAD_MOTBR_US):
+                    self._violation(T.TSRAD_MOTBR)
+                    bad = True
+                if not self.burst_armed:
+                    self._violation("motion burst not armed")
+                    bad = True
+                if bad:
+                    self._garbage(out, i + 1)  # the counters stay for the next burst
+                else:
                     report = self._burst()
-                    for k in range(i + 1, min(n, i + 1 + R.BURST_LENGTH)):
+                    for k in range(i + 1, last + 1):
                         out[k] = report[k - i - 1]
-                    break
+                i = n  # the burst holds the port until chip select rises [DS3360 sec. 4]
+            else:
                 if i + 1 >= n:
                     break  # an address alone: nothing happens
-                if gaps[i] < R.T_SRAD_US:
-                    self._bad = True
-                    out[i + 1] = self._rng.randrange(256)
-                else:
-                    out[i + 1] = self._read(name, now)
-                need = R.T_SRR_US
-            if gaps[i + 1] < need:
-                self._bad = True  # the next command (or the next frame) comes too soon
-                self._garbage(out, i + 2)
-                break
-            i += 2
-        if self._bad:
-            self.stats.protocol_errors += 1
+                c = T.Command("read", s[i], s[i] + bu, s[i + 1] + bu, s[i + 1] + bu)
+                bad = self._check_gap(c, first_gap, early) is not None
+                if T.short(s[i + 1] - c.addr_end, R.T_SRAD_US):
+                    self._violation(T.TSRAD)
+                    bad = True
+                out[i + 1] = self._rng.randrange(256) if bad else self._read(name, c.start)
+                i += 2
+            first_gap, early = None, None
+        last_cmd = self._prev if self._prev is not prev_frame else None
+        if (
+            last_cmd
+            and last_cmd.kind == "write"
+            and T.short(rise - last_cmd.end, R.T_SCLK_NCS_WRITE_US)
+        ):
+            self._violation(T.TSCLK_NCS_WRITE)  # chip select rose too soon after a write
+        if n:
+            self._cs_rise_us, self._host_at_rise = rise, host_now
         return out
+
+    def _check_gap(self, c: T.Command, cs_high: float | None, early: str | None) -> str | None:
+        """Count what ``c`` breaks after the previous command (and a short tNCS-SCLK before
+        it); ``c`` becomes the previous command. Returns the first constraint broken."""
+        broken = T.gap_violation(self._prev, c, cs_high)
+        self._prev = c
+        for name in (early, broken):
+            if name:
+                self._violation(name)
+        return broken or early
 
     def close(self) -> None:
         pass

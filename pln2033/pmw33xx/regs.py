@@ -25,19 +25,23 @@ ADDRESS_MASK = 0x7F
 SPI_MODE = 3  # CPOL=1, CPHA=1 [QMK PMW3389_SPI_MODE 3; TSH SPI_MODE_CPOL|SPI_MODE_CPHA]
 MAX_SPI_HZ = 2_000_000  # fSCLK 2.0 MHz [DS3360 AC table]
 
-# --- timing, microseconds [DS3360 AC table; the same numbers in TSH and NRF for the PMW3389] ---
-T_SRAD_US = 160  # read: last address bit -> first data bit
+# --- timing, microseconds [DS3360 Table 4 "AC Electrical Specifications", p. 15-16, re-read
+# for issue 26; the same numbers in TSH and NRF for the PMW3389]. Each is a minimum between two
+# SCLK edges, wherever chip select is (pln2033/pmw33xx/timing.py measures them so).
+T_SRAD_US = 160  # read: last address bit (rising) -> first data bit (falling)
 T_SRAD_MOTBR_US = 35  # the same for the motion burst
-T_SWW_US = 180  # write -> next write
-T_SWR_US = 180  # write -> next read
-T_SRW_US = 20  # read -> next write (tSRR: -> next read, also 20)
+T_SWW_US = 180  # write: last bit of its data -> last bit of the NEXT write's first data byte
+T_SWR_US = 180  # write: last bit of its data -> last bit of the next read's address byte
+T_SRW_US = 20  # read: last bit of its data -> first bit of the next command's address
 T_SRR_US = 20
-T_BEXIT_US = 1  # NCS high after a burst: 500 ns, rounded up
-T_SROM_BYTE_US = 15  # between SROM_Load_Burst bytes [DS3360 fig. 22; QMK wait_us(15); NRF T_BRSEP]
-T_SROM_END_US = 200  # after the last SROM byte [QMK wait_us(200)]
-T_RESET_S = 0.050  # Power_Up_Reset -> valid motion (tMOT-RST 50 ms) [DS3360 sec. 7 step 4]
-T_SROM_INIT_S = 0.010  # SROM_Enable 0x1D -> 0x18 [DS3360 sec. 5 step 4]
-T_CRC_S = 0.010  # SROM_Enable 0x15 -> Data_Out valid [DS3360 SROM_Enable description]
+T_BEXIT_US = 0.5  # NCS high after a motion burst (500 ns; Figure 22 draws >= 1 us for the SROM)
+T_NCS_SCLK_US = 0.12  # NCS falling -> first SCLK (120 ns)
+T_SCLK_NCS_WRITE_US = 35  # last SCLK of a write -> NCS rising ("for valid MOSI data transfer")
+T_SROM_BYTE_US = 15  # address -> byte 1 and between SROM_Load_Burst bytes [DS3360 fig. 22]
+T_SROM_END_US = 200  # last SROM byte -> next command ("soonest to read SROM_ID") [DS3360 fig. 22]
+T_RESET_S = 0.050  # Power_Up_Reset -> next command [DS3360 sec. 7 step 4; tMOT-RST 50 ms]
+T_SROM_INIT_S = 0.010  # SROM_Enable 0x1D -> 0x18 [DS3360 sec. 5 step 4, fig. 22]
+T_CRC_S = 0.010  # SROM_Enable 0x15 -> Data_Out; SPI unused meanwhile [DS3360 SROM_Enable]
 
 # --- command values ------------------------------------------------------------------------------
 POWER_UP_RESET_VALUE = 0x5A  # [DS3360 Power_Up_Reset]

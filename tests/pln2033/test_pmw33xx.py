@@ -331,16 +331,19 @@ def test_a_too_short_read_delay_gives_garbage_and_a_protocol_error(option, value
     assert emu.stats.protocol_errors >= 1
 
 
-def test_xfer2_without_delays_is_garbage_and_a_write_too_close_to_the_next_is_refused():
-    _, emu, drv = make()
+def test_xfer2_without_delays_is_garbage_and_a_write_too_close_to_the_next_is_counted():
+    clock, emu, drv = make()
     drv.initialise(1600)
     n = emu.stats.protocol_errors
-    emu.xfer2([0x00, 0x00])
-    assert emu.stats.protocol_errors == n + 1
-    emu.xfer_segments([([0x0F | 0x80, 0x77], 10), ([0x0F], 160), ([0], 20)])  # tSWW missed
-    assert emu.stats.protocol_errors == n + 2
-    emu.xfer_segments([([0x0F | 0x80, 0x77], 180)])  # tSWW kept: 12000 cpi
-    assert emu.cpi_y == 12000 and emu.stats.protocol_errors == n + 2
+    emu.xfer2([0x00, 0x00])  # a read without tSRAD
+    assert emu.stats.protocol_errors == n + 1 and emu.timing_errors == {"tSRAD": 1}
+    clock.t += 0.001
+    emu.xfer_segments([([0x0F | 0x80, 0x77], 40), ([0x0F], 160), ([0], 20)])  # tSWR missed
+    assert emu.stats.protocol_errors == n + 2 and emu.timing_errors["tSWR"] == 1
+    assert emu.cpi_y == 12000  # the write itself is applied (counted, not dropped)
+    clock.t += 0.001
+    emu.xfer_segments([([0x0F | 0x80, 0x31], 180)])  # tSWW kept: 5000 cpi
+    assert emu.cpi_y == 5000 and emu.stats.protocol_errors == n + 2
 
 
 def test_register_dump_hands_back_the_counts_it_cleared():
