@@ -20,7 +20,7 @@ accelerometer reads the true sensor-frame acceleration (change of the true veloc
 between updates; no gravity, tilt or centripetal terms). With the accelerometer bit set the
 firmware's rejection rule runs: measured |vx|+|vy| < 0.25 m/s while the estimate is above
 0.5 m/s (the filters' velocity, as in the firmware) sets the optical warning and the
-velocity follows the accelerometer alone. The
+position follows the filters' velocity, carried by the accelerometer alone. The
 heading comes from ``heading_source`` scaled by the angular scalar, plus the gyro's residual
 bias: ``gyro_bias_rps`` until the first calibration, then what the calibration left
 (``gyro_noise_rps`` / sqrt(samples), minus the mean true yaw rate during it when the robot
@@ -267,9 +267,9 @@ class EmulatedOTOS(CountingCore):
                 abs(mx) + abs(my) < regs.REJECT_MEASURED_MPS
                 and abs(self.kf_x.x[1]) + abs(self.kf_y.x[1]) > regs.REJECT_ESTIMATED_MPS
             )
-            if rejected:  # IMU only: the velocity follows the accelerometer
+            if rejected:  # IMU only: the filters' velocity, carried by the accelerometer
                 status |= regs.STATUS_WARN_OPTICAL
-                mx, my = self.vx + ax * _T, self.vy + ay * _T
+                mx, my = self.kf_x.x[1], self.kf_y.x[1]
             else:
                 status &= ~regs.STATUS_WARN_OPTICAL
                 self.kf_x.update(mx, kalman.R_VEL * var, 1)

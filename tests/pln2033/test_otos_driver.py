@@ -239,6 +239,29 @@ def test_a_lift_below_the_firmware_threshold_sets_no_warning_and_the_pose_stops(
     assert emu.stats.lift_events == 1
 
 
+@pytest.mark.parametrize(("speed", "warn"), [(0.3, False), (0.8, True)])
+def test_a_poor_surface_follows_the_same_firmware_rule(speed, warn):
+    ft = FakeClock()
+    emu = EmulatedOTOS(
+        motion=ConstantVelocity(0.0, speed), clock=ft, low_quality_windows=[(2.0, 2.03)]
+    )
+    drv = OTOS(emu, sleep=ft.sleep, clock=ft, imu_samples=0)
+    drv.initialise(1000)
+    seen = []
+    while ft.t < 2.2:
+        ft.t += 0.001
+        m = drv.read_motion()
+        seen.append((ft.t, m.quality, m.dy))
+    low = [t for t, q, dy in seen if q == 0]
+    window = sum(dy for t, q, dy in seen if 2.003 <= t <= 2.03)
+    if warn:  # the IMU carries the 0.8 m/s through the 30 ms: counts keep coming
+        assert low and 2.0 <= low[0] <= 2.004 and low[-1] <= 2.034
+        assert window == pytest.approx(speed * 0.027 / INCH_M * 1000, rel=0.05)
+    else:  # no warning, and the pose stops
+        assert low == [] and window == 0
+    assert emu.stats.low_quality_events == 1
+
+
 def test_heading_drifts_at_rest_without_calibration_and_not_after_it():
     ft, emu, drv = make(motion=Stationary(), imu_samples=0)
     emu.gyro_noise_rps = 0.0

@@ -18,13 +18,12 @@ import time
 import types
 
 import pytest
+import qwiic_i2c  # the test extra (pyproject.toml) installs them: a missing one is an error
+import qwiic_otos
+import smbus2.smbus2 as smbus2_mod
 from fakes import FakeClock
 
 from pln2033.otos import ConstantYawRate, EmulatedOTOS, regs
-
-qwiic_otos = pytest.importorskip("qwiic_otos")
-qwiic_i2c = pytest.importorskip("qwiic_i2c")
-smbus2_mod = pytest.importorskip("smbus2.smbus2")
 
 BUS_HZ = 100_000
 M = 0  # kLinearUnitMeters
