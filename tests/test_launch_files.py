@@ -145,11 +145,9 @@ def test_launch_file_statically(path):
         assert module and module.startswith(pkg + "."), f"{exe} is no console script of {pkg}"
         assert f'"{module}"' in tested, f"the tests never run {module}"
         assert _const(_kw(node, "name")) == node_name(module)
-        for entry in _kw(node, "parameters").elts:
-            if isinstance(entry, ast.Dict):
-                names = {_const(k) for k in entry.keys}
-                unknown = names - parameter_names(module)
-                assert not unknown, f"{exe} declares no parameter {unknown}"
+        for names in _parameter_overrides(tree, node):
+            unknown = names - parameter_names(module)
+            assert not unknown, f"{exe} declares no parameter {unknown}"
     for call in calls(tree, "ExecutableInPackage"):
         exe, pkg = _const(call.args[0]), _const(call.args[1])
         assert scripts()[exe].startswith(pkg + ".")
@@ -157,6 +155,27 @@ def test_launch_file_statically(path):
         assert source.is_file(), f"{source} (share/{pkg}/...) does not exist"
         if source.suffix == ".yaml":
             check_params_file(source)
+
+
+def _parameter_overrides(tree: ast.Module, node: ast.Call) -> list[set[str]]:
+    """The parameter names a Node call sets: its ``parameters=[..., {dict}]`` literals, or,
+    where it is built in a function (launch's OpaqueFunction), every dict literal and
+    ``d["name"] = ...`` of that function."""
+    entries = _kw(node, "parameters")
+    if isinstance(entries, ast.List):
+        found = [{_const(k) for k in e.keys} for e in entries.elts if isinstance(e, ast.Dict)]
+        if all(isinstance(e, ast.Dict | ast.Call) for e in entries.elts):
+            return found
+    function = next(
+        f
+        for f in tree.body
+        if isinstance(f, ast.FunctionDef) and any(n is node for n in ast.walk(f))
+    )
+    found = [{_const(k) for k in d.keys} for d in ast.walk(function) if isinstance(d, ast.Dict)]
+    for sub in ast.walk(function):
+        if isinstance(sub, ast.Assign) and isinstance(sub.targets[0], ast.Subscript):
+            found.append({_const(sub.targets[0].slice)})
+    return found
 
 
 def check_params_file(path: Path) -> None:
@@ -225,6 +244,96 @@ def test_robot_starts_the_usual_set_and_the_monitor_only_on_request():
         executables |= {_const(_kw(n, "executable")) for n in calls(target, "Node")}
         executables |= {_const(c.args[0]) for c in calls(target, "ExecutableInPackage")}
     assert {"mm-beagle", "mm-odometry", "mm-fusion", "mm-monitor"} <= executables
+
+
+#: each node's launch file -> its parameters-file argument and that argument's default
+NODE_PARAMS = {
+    "beagle.launch.py": ("beagle_params", ("mm_beagle", "mm_beagle.yaml")),
+    "odometry.launch.py": ("odometry_params", ("mm_pc", "mm_odometry.yaml")),
+    "fusion.launch.py": ("fusion_params", ("mm_pc", "mm_fusion.yaml")),
+}
+
+
+def _declarations(tree: ast.AST) -> dict[str, ast.Call]:
+    return {_const(c.args[0]): c for c in calls(tree, "DeclareLaunchArgument")}
+
+
+def _config_default(declaration: ast.Call) -> tuple[str, str] | None:
+    """(package, file) of a default ``PathJoinSubstitution([FindPackageShare(pkg), "config",
+    file])`` or robot.launch.py's ``_config(pkg, file)``, else None."""
+    default = _kw(declaration, "default_value")
+    if not isinstance(default, ast.Call):
+        return None
+    if _call_name(default) == "_config":
+        return _const(default.args[0]), _const(default.args[1])
+    if _call_name(default) == "PathJoinSubstitution":
+        first, *rest = default.args[0].elts
+        if [_const(r) for r in rest[:-1]] == ["config"]:
+            return _const(first.args[0]), _const(rest[-1])
+    return None
+
+
+def test_each_node_launch_file_has_a_params_argument_of_its_own():
+    """One name per node (beagle_params, ...), never a shared params_file: included side by
+    side, a shared name would carry the first file's value into the others (issue 25)."""
+    for name, (argument, config) in NODE_PARAMS.items():
+        tree = tree_of(ROOT / package_of_launch(name) / "launch" / name)
+        declared = _declarations(tree)
+        with_config = {a for a, c in declared.items() if _config_default(c)}
+        assert with_config == {argument}, (name, with_config)
+        assert _config_default(declared[argument]) == config, name
+        assert "params_file" not in declared, name
+        nodes = calls(tree, "Node")
+        assert nodes
+        for node in nodes:  # each node reads it (directly or through a list built before)
+            function = next(
+                f for f in tree.body if isinstance(f, ast.FunctionDef)
+                and any(n is node for n in ast.walk(f))
+            )  # fmt: skip
+            read = {_const(c.args[0]) for c in calls(function, "LaunchConfiguration")}
+            assert argument in read, (name, argument)
+    arguments = [a for a, _ in NODE_PARAMS.values()]
+    assert len(set(arguments)) == len(arguments)
+
+
+def package_of_launch(name: str) -> str:
+    (path,) = [p for p in LAUNCH_FILES if p.name == name]
+    return package_of(path)
+
+
+def test_robot_includes_cannot_leak_arguments_into_each_other():
+    """ros2/launch (jazzy) does not scope an include: IncludeLaunchDescription sets its
+    launch_arguments in the including context and the included DeclareLaunchArgument sets
+    its default there only where the name is still unset, so the next include reads the
+    first one's value (robot.launch.py gave all three nodes mm_beagle.yaml this way). So:
+    every argument an included file declares and is not given must be declared by no
+    other include and not by robot.launch.py (whose own arguments would reach it unasked),
+    each params argument is passed explicitly from robot.launch.py's argument of the same
+    name with the same default, and each include runs in a scoped GroupAction."""
+    tree = tree_of(ROOT / "mm_beagle/launch/robot.launch.py")
+    robot = _declarations(tree)
+    included = _includes(tree)
+    for k, (pkg, name, given) in enumerate(included):
+        declared = declared_arguments(tree_of(ROOT / pkg / "launch" / name))
+        implicit = declared - given
+        for other_pkg, other, other_given in included[:k] + included[k + 1 :]:
+            shared = implicit & (declared_arguments(tree_of(ROOT / other_pkg / "launch" / other))
+                                 | other_given)  # fmt: skip
+            assert not shared, f"{name} takes {shared} from whatever {other} set"
+        assert not implicit & set(robot), f"{name} takes {implicit & set(robot)} unasked"
+        if name in NODE_PARAMS:
+            argument, config = NODE_PARAMS[name]
+            assert argument in given, f"robot.launch.py does not pass {argument} to {name}"
+            assert _config_default(robot[argument]) == config, argument
+    (helper,) = [f for f in tree.body if isinstance(f, ast.FunctionDef) and f.name == "_include"]
+    (group,) = calls(helper, "GroupAction")
+    assert any(n is calls(helper, "IncludeLaunchDescription")[0] for n in ast.walk(group))
+    scoped = _kw(group, "scoped")
+    assert scoped is None or scoped.value is True, "the include's group must be scoped"
+    forwarding = _kw(group, "forwarding")
+    assert forwarding is None or forwarding.value is True, (
+        "forwarding=False would also drop an outer PushRosNamespace / SetRemap"
+    )
 
 
 def test_monitor_launch_passes_only_options_mm_monitor_knows():

@@ -1,10 +1,12 @@
-"""mm-beagle alone: ``ros2 launch mm_beagle beagle.launch.py [backend:=sim] [params_file:=F]``.
+"""mm-beagle alone: ``ros2 launch mm_beagle beagle.launch.py [backend:=sim] [beagle_params:=F]``.
 
-The parameters come from ``params_file`` (default: the installed config/mm_beagle.yaml, every
-parameter with its default); ``backend`` overrides the file's, since it is the one a user
-switches most (spidev on the board, sim on a PC without sensors, remote for an agent).
-``chips:=pmw3360,pln2033`` and ``sim_chips:=...`` (one chip per device, comma-separated, or
-one for all) override the file's only when given.
+The parameters come from ``beagle_params`` (default: the installed config/mm_beagle.yaml,
+every parameter with its default); the argument is named for this node, not
+``params_file``, so that robot.launch.py's other includes never see it. ``backend``
+overrides the file's, since it is the one a user switches most (spidev on the board, sim
+on a PC without sensors, remote for an agent). ``chips:=pmw3360,pln2033``,
+``sim_chips:=...`` (one chip per device, comma-separated, or one for all) and
+``frame_prefix:=r1/`` (many robots on one /tf) override the file's only when given.
 """
 
 from launch import LaunchDescription
@@ -20,15 +22,17 @@ def _node(context):
     given = {
         "chips": LaunchConfiguration("chips").perform(context),
         "sim_chips": LaunchConfiguration("sim_chips").perform(context),
+        "frame_prefix": LaunchConfiguration("frame_prefix").perform(context),
     }
-    overrides.update({k: [v] for k, v in given.items() if v})  # the node splits "a,b"
+    # the node splits "a,b"; frame_prefix is one string
+    overrides.update({k: v if k == "frame_prefix" else [v] for k, v in given.items() if v})
     return [
         Node(
             package="mm_beagle",
             executable="mm-beagle",
             name="mm_beagle",
             namespace=LaunchConfiguration("namespace"),
-            parameters=[LaunchConfiguration("params_file"), overrides],
+            parameters=[LaunchConfiguration("beagle_params"), overrides],
             output="screen",
         )
     ]
@@ -38,7 +42,7 @@ def generate_launch_description() -> LaunchDescription:
     return LaunchDescription(
         [
             DeclareLaunchArgument(
-                "params_file",
+                "beagle_params",
                 default_value=PathJoinSubstitution(
                     [FindPackageShare("mm_beagle"), "config", "mm_beagle.yaml"]
                 ),
@@ -56,6 +60,11 @@ def generate_launch_description() -> LaunchDescription:
                 "sim_chips",
                 default_value="",
                 description="sim backend: emulated chip per device ('' = the file's / chips)",
+            ),
+            DeclareLaunchArgument(
+                "frame_prefix",
+                default_value="",
+                description="put before every frame id, e.g. r1/ ('' = the file's)",
             ),
             DeclareLaunchArgument("namespace", default_value="", description="node namespace"),
             OpaqueFunction(function=_node),

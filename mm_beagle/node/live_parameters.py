@@ -15,7 +15,7 @@ from rcl_interfaces.msg import SetParametersResult
 from mm_beagle.poller import chip_config
 from mm_beagle.poller import shared_state as ss
 from mm_beagle.poller.poller_client import PollerError
-from mm_pc.ros.tf import frame_ids_problem
+from mm_pc.ros.tf import frame_ids_problem, prefixed
 
 
 class LiveParameters:
@@ -42,9 +42,10 @@ class LiveParameters:
         if "diagnostics_period" in changes:
             node.settings.diagnostics_period = float(changes["diagnostics_period"])
             node.diagnostics.set_period(node.settings.diagnostics_period)
+        o = node.settings.odometry
         for frame in ("odom_frame", "base_frame"):
             if frame in changes:
-                setattr(node.settings.odometry, frame, str(changes[frame]))
+                setattr(o, frame, prefixed(o.frame_prefix, str(changes[frame])))
         if "base_frame" in changes and node.onboard is not None:
             node.onboard.send_static_frames()
         for name, value in changes.items():

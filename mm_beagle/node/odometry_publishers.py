@@ -29,7 +29,7 @@ class OnboardOdometryPublisher:
         self.node = node
         o = node.settings.odometry
         self.onboard = OnboardOdometry(o, node.devices, node.poller.state)
-        self.sensor_frames = sensor_frame_names(node.devices, o.sensor_frames)
+        self.sensor_frames = sensor_frame_names(node.devices, o.sensor_frames, o.frame_prefix)
         self.uncertainty = PoseUncertainty()
         self.tf = TfPublisher(node, o.publish_tf)
         self.send_static_frames()

@@ -19,7 +19,13 @@ from mm_beagle.poller.options import OPTIONS, poller_config_from
 from mm_beagle.poller.poller import PollerConfig
 from mm_pc.ros.parameters import declare_all, float_range, int_range, mark_live, ranged
 from mm_pc.ros.parameters import read_only as _plain
-from mm_pc.ros.tf import frame_ids_problem, sensor_frame_names
+from mm_pc.ros.tf import (
+    frame_ids_problem,
+    frame_prefix_parameter,
+    frame_prefix_problem,
+    prefixed,
+    sensor_frame_names,
+)
 
 #: the poller's backends and the node's own: an mm-beagle-agent on the board polls them
 BACKENDS = (*OPTIONS["backend"].choices, "remote")
@@ -116,6 +122,7 @@ PARAMETERS = {
         [""],
         _plain("odometry: TF frame of each sensor, in device order ('' = mouse_ + device name)"),
     ),
+    "frame_prefix": frame_prefix_parameter(),
     "sim_trajectory": _from_option("sim_trajectory"),
     "sim_speed": _from_option("sim_speed"),
     "sim_loop": _from_option("sim_loop"),
@@ -137,7 +144,8 @@ mark_live(PARAMETERS, LIVE)
 
 @dataclass
 class OdometrySettings:
-    """The node's own odometry (off when rate == 0)."""
+    """The node's own odometry (off when rate == 0); ``odom_frame`` and ``base_frame`` as
+    published, after ``frame_prefix`` (``sensor_frames`` as given: prefixed where named)."""
 
     rate: float
     method: str
@@ -148,6 +156,7 @@ class OdometrySettings:
     base_frame: str
     publish_tf: bool = False
     sensor_frames: tuple[str, ...] = ()
+    frame_prefix: str = ""
 
 
 @dataclass
@@ -198,11 +207,14 @@ def declare(node: Node) -> NodeSettings:
         sensor=p["odometry_sensor"],
         mounts=_triples(flat),
         calibration_file=p["calibration_file"],
-        odom_frame=p["odom_frame"],
-        base_frame=p["base_frame"],
+        odom_frame=prefixed(p["frame_prefix"], p["odom_frame"]),
+        base_frame=prefixed(p["frame_prefix"], p["base_frame"]),
         publish_tf=p["publish_tf"],
         sensor_frames=tuple(p["sensor_frames"]),
+        frame_prefix=p["frame_prefix"],
     )
+    if problem := frame_prefix_problem(p["frame_prefix"]):
+        raise ValueError(problem)
     if odometry.rate > 0:  # checked before the poller starts
         if problem := frame_ids_problem(p, ("odom_frame", "base_frame")):
             raise ValueError(problem)

@@ -53,6 +53,7 @@ from mm_pc.core.fusion.inputs import seconds_to_stamp
 from mm_pc.core.uncertainty import UNOBSERVED_VARIANCE, planar_covariance_6x6
 from mm_pc.ros import spin as ros_spin
 from mm_pc.ros.parameters import declare_all, float_range, int_range, read_only
+from mm_pc.ros.tf import frame_ids_problem, frame_prefix_parameter, frame_prefix_problem, prefixed
 from mm_pc.sim.field_run import FieldSim, simulate_field_run
 
 GPS_MIN_SATELLITES = 5
@@ -113,11 +114,16 @@ PARAMETERS = {
     "gps_frame": ("gps", read_only("frame_id of the NavSatFix")),
     "imu_frame": ("imu", read_only("frame_id of the Imu")),
     "range_frame": ("range_antenna", read_only("frame_id of the Range messages")),
+    "frame_prefix": frame_prefix_parameter(),
     "queue_depth": (
         200,
         read_only("publisher queue depth", **int_range(1, 10**5)),
     ),
 }
+
+
+#: the frame parameters, each published after ``frame_prefix``
+FRAMES = tuple(name for name in PARAMETERS if name.endswith("_frame"))
 
 
 def relative_poses(poses: np.ndarray, start: np.ndarray) -> np.ndarray:
@@ -168,6 +174,9 @@ class FieldSimNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("field_sim", **kwargs)
         p = declare_all(self, PARAMETERS)
+        if problem := frame_ids_problem(p, FRAMES) or frame_prefix_problem(p["frame_prefix"]):
+            raise ValueError(problem)
+        p.update({name: prefixed(p["frame_prefix"], p[name]) for name in FRAMES})  # read-only
         self.p = p
         self.dropout = _check_dropout(p["mouse_dropout"])
         self.sim: FieldSim = simulate_field_run(int(p["seed"]))

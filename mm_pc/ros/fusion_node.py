@@ -87,7 +87,14 @@ from mm_pc.core.uncertainty import (
 from mm_pc.ros import spin as ros_spin
 from mm_pc.ros.parameters import declare_all, float_range, int_range, mark_live, read_only
 from mm_pc.ros.reset import create_reset_service
-from mm_pc.ros.tf import TfPublisher, frame_ids_problem, planar_transform
+from mm_pc.ros.tf import (
+    TfPublisher,
+    frame_ids_problem,
+    frame_prefix_parameter,
+    frame_prefix_problem,
+    planar_transform,
+    prefixed,
+)
 from mm_pc.ros.throttle import WarnThrottle
 
 COMPASS_INPUTS = ("imu", "heading", "none")
@@ -128,6 +135,8 @@ PARAMETERS = {
     "gps_frame": ("", read_only("required NavSatFix frame_id ('' = any)")),
     "imu_frame": ("", read_only("required Imu frame_id ('' = any)")),
     "range_frame": ("", read_only("required Range frame_id ('' = any)")),
+    # map_frame and base_frame only: the required input frames above are taken as given
+    "frame_prefix": frame_prefix_parameter(),
     "gps_origin_lat": (48.2, read_only("latitude of the plot's south-west corner (deg)")),
     "gps_origin_lon": (16.37, read_only("longitude of the plot's south-west corner (deg)")),
     "gps_scale": (
@@ -314,7 +323,9 @@ class FusionNode(Node):
             if p["beacon_topic"]
             else ()
         )
-        if problem := frame_ids_problem(p, ("map_frame", "base_frame")):
+        if problem := frame_ids_problem(p, ("map_frame", "base_frame")) or frame_prefix_problem(
+            p["frame_prefix"]
+        ):
             raise ValueError(problem)
         x0 = _triple("initial_pose", p["initial_pose"])
         s0 = _triple("initial_sigma", p["initial_sigma"], positive=True)
@@ -334,7 +345,7 @@ class FusionNode(Node):
         self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.tf = TfPublisher(self, p["publish_tf"])
         self.path = Path()
-        self.path.header.frame_id = p["map_frame"]
+        self.path.header.frame_id = self.frame("map_frame")
         self._published_stamp: float | None = None
         self._published_wall = 0.0
         self._last_motion_wall = time.monotonic()
@@ -350,9 +361,14 @@ class FusionNode(Node):
         create_reset_service(self, self.reset)
         self.get_logger().info(
             f"fusing {', '.join(self.inputs) or 'nothing'}; start pose {x0}; publishing "
-            f"{self.get_fully_qualified_name()}/odom and /path in frame {p['map_frame']}"
-            + (f", TF {p['map_frame']} -> odom" if p["publish_tf"] else "")
+            f"{self.get_fully_qualified_name()}/odom and /path in frame {self.frame('map_frame')}"
+            + (f", TF {self.frame('map_frame')} -> odom" if p["publish_tf"] else "")
         )
+
+    def frame(self, name: str) -> str:
+        """The frame id published (and required of odometry inputs) for the frame parameter
+        ``name`` (map_frame, base_frame), after ``frame_prefix``."""
+        return prefixed(self.p["frame_prefix"], self.p[name])
 
     def _timed(self) -> dict:
         """rate parameter -> the callback its steady-clock timer runs."""
@@ -408,7 +424,7 @@ class FusionNode(Node):
                     1.0 / changes[name], callback, clock=self._steady
                 )
         if "map_frame" in changes:
-            self.path.header.frame_id = changes["map_frame"]
+            self.path.header.frame_id = self.frame("map_frame")
         for name, value in changes.items():
             self.get_logger().info(f"parameter {name} set to {value}")
         return SetParametersResult(successful=True)
@@ -437,7 +453,7 @@ class FusionNode(Node):
                     OdometryMsg,
                     p["mouse_odom_topic"],
                     "mouse",
-                    lambda m: odometry_input(m, "mouse", p["base_frame"]),
+                    lambda m: odometry_input(m, "mouse", self.frame("base_frame")),
                 )
             )
         if p["wheel_odom_topic"]:
@@ -446,7 +462,7 @@ class FusionNode(Node):
                     OdometryMsg,
                     p["wheel_odom_topic"],
                     "wheel",
-                    lambda m: odometry_input(m, "wheel", p["base_frame"]),
+                    lambda m: odometry_input(m, "wheel", self.frame("base_frame")),
                 )
             )
         if p["gps_topic"]:
@@ -484,7 +500,7 @@ class FusionNode(Node):
                     PointStamped,
                     p["perimeter_topic"],
                     "perimeter",
-                    lambda m: perimeter_input(m, p["map_frame"]),
+                    lambda m: perimeter_input(m, self.frame("map_frame")),
                 )
             )
         for b in self.beacons:
@@ -583,8 +599,8 @@ class FusionNode(Node):
         pose = ekf.pose
         msg = OdometryMsg()
         msg.header.stamp = self._stamp()
-        msg.header.frame_id = self.p["map_frame"]
-        msg.child_frame_id = self.p["base_frame"]
+        msg.header.frame_id = self.frame("map_frame")
+        msg.child_frame_id = self.frame("base_frame")
         msg.pose.pose.position.x, msg.pose.pose.position.y = pose.x, pose.y
         o = msg.pose.pose.orientation
         o.x, o.y, o.z, o.w = yaw_to_quaternion(pose.yaw_wrapped)
@@ -622,7 +638,7 @@ class FusionNode(Node):
         map_odom = compose(self.core.ekf.pose, inverse(mouse.pose))
         self.tf.send(
             planar_transform(
-                msg.header.stamp, self.p["map_frame"], mouse.frame_id, map_odom.x, map_odom.y,
+                msg.header.stamp, msg.header.frame_id, mouse.frame_id, map_odom.x, map_odom.y,
                 map_odom.yaw,
             )
         )  # fmt: skip

@@ -8,6 +8,9 @@ subscriber still gets the mounts). ./compile builds tf2_msgs where no system
 ROS provides it (mm_interfaces/vendor/tf2_msgs, same type hash as Jazzy's).
 
 Frames: REP 103/105 (odom -> base_link, map -> odom); poses in metres and rad.
+Many robots on one /tf: every node that names frames takes ``frame_prefix`` (as
+robot_state_publisher's: put before every frame id it publishes, '' = none), so robot
+r1's tree is r1/odom -> r1/base_link -> r1/mouse_*; :func:`prefixed` is the one rule.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from tf2_msgs.msg import TFMessage
 
 from mm_pc.core.angles import yaw_to_quaternion
 from mm_pc.core.geometry import SensorMount
+from mm_pc.ros.parameters import read_only
 
 __all__ = [
     "DYNAMIC_QOS",
@@ -29,8 +33,11 @@ __all__ = [
     "TfPublisher",
     "frame_id_problem",
     "frame_ids_problem",
+    "frame_prefix_parameter",
+    "frame_prefix_problem",
     "mount_transforms",
     "planar_transform",
+    "prefixed",
     "sensor_frame_names",
 ]
 
@@ -70,8 +77,32 @@ def frame_ids_problem(values: dict, names: tuple[str, ...]) -> str:
     return ""
 
 
-def sensor_frame_names(devices: Sequence[str], given: Sequence[str] = ()) -> list[str]:
-    """One TF frame per sensor: ``given`` (checked) or derived from the device names.
+def frame_prefix_parameter() -> tuple[str, object]:
+    """The ``frame_prefix`` entry of a node's parameter table (read-only, '' = none)."""
+    return (
+        "",
+        read_only(
+            "put before every frame id this node publishes, as robot_state_publisher's "
+            "frame_prefix: 'r1/' makes odom r1/odom (many robots on one /tf); '' = none"
+        ),
+    )
+
+
+def frame_prefix_problem(value: object) -> str:
+    """'' if ``value`` can go before frame ids ('' or e.g. 'r1/'), else why not."""
+    return frame_id_problem("frame_prefix", value) if str(value) else ""
+
+
+def prefixed(prefix: str, frame: str) -> str:
+    """``frame`` as published under ``prefix`` (plain concatenation, as robot_state_publisher)."""
+    return f"{prefix}{frame}"
+
+
+def sensor_frame_names(
+    devices: Sequence[str], given: Sequence[str] = (), prefix: str = ""
+) -> list[str]:
+    """One TF frame per sensor: ``given`` (checked) or derived from the device names,
+    each after ``prefix`` (see :func:`prefixed`).
 
     Derived: ``mouse_`` + the last path part with every other character as '_'
     ('/dev/spidev1.0' -> 'mouse_spidev1_0'). ValueError says what is wrong.
@@ -90,7 +121,9 @@ def sensor_frame_names(devices: Sequence[str], given: Sequence[str] = ()) -> lis
         problem = frame_id_problem("sensor_frames", n)
         if problem:
             raise ValueError(problem)
-    return names
+    if problem := frame_prefix_problem(prefix):
+        raise ValueError(problem)
+    return [prefixed(prefix, n) for n in names]
 
 
 def planar_transform(
