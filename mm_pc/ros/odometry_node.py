@@ -59,8 +59,11 @@ from mm_pc.ros.reset import create_reset_service
 from mm_pc.ros.tf import (
     TfPublisher,
     frame_ids_problem,
+    frame_prefix_parameter,
+    frame_prefix_problem,
     mount_transforms,
     planar_transform,
+    prefixed,
     sensor_frame_names,
 )
 
@@ -107,6 +110,7 @@ PARAMETERS = {
         [""],
         read_only("TF frame of each sensor, in device order ('' = mouse_ + the device name)"),
     ),
+    "frame_prefix": frame_prefix_parameter(),
     "path_length": (
         10000,
         read_only("poses kept in the path", **int_range(2, 10**6)),
@@ -169,9 +173,11 @@ class OdometryNode(Node):
         self.mounts = mounts
         self.odometry = Odometry(mounts, method=p["method"], sensor=p["sensor"])
         self.uncertainty = PoseUncertainty()
-        if problem := frame_ids_problem(p, ("odom_frame", "base_frame")):
+        if problem := frame_ids_problem(p, ("odom_frame", "base_frame")) or frame_prefix_problem(
+            p["frame_prefix"]
+        ):
             raise ValueError(problem)
-        self.sensor_frames = sensor_frame_names(devices, p["sensor_frames"])
+        self.sensor_frames = sensor_frame_names(devices, p["sensor_frames"], p["frame_prefix"])
         self.client = DeadlineClient(
             self.create_client(GetSensorData, f"{p['beagle']}/get_sensor_data"),
             p["reply_timeout"],
@@ -191,7 +197,7 @@ class OdometryNode(Node):
         self.odom_pub = self.create_publisher(OdometryMsg, "~/odom", 10)
         self.path_pub = self.create_publisher(Path, "~/path", 1)
         self.path = Path()
-        self.path.header.frame_id = p["odom_frame"]
+        self.path.header.frame_id = self.frame("odom_frame")
         self._last: dict[str, tuple[float, float, int]] = {}  # id -> totals, stamp
         self.samples_used = 0
         self.tf = TfPublisher(self, p["publish_tf"])
@@ -204,14 +210,22 @@ class OdometryNode(Node):
         self.get_logger().info(
             f"odometry ({p['method']}) from {self.beagle} at {p['rate']:g} Hz; "
             f"publishing {self.get_fully_qualified_name()}/odom and /path"
-            + (f", TF {p['odom_frame']} -> {p['base_frame']}" if p["publish_tf"] else "")
+            + (
+                f", TF {self.frame('odom_frame')} -> {self.frame('base_frame')}"
+                if p["publish_tf"]
+                else ""
+            )
         )
+
+    def frame(self, name: str) -> str:
+        """The frame id published for the frame parameter ``name`` (after ``frame_prefix``)."""
+        return prefixed(self.p["frame_prefix"], self.p[name])
 
     def send_static_frames(self) -> None:
         """base_link -> each sensor frame at its mount, latched on /tf_static."""
         self.tf.send_static(
             mount_transforms(
-                self.get_clock().now().to_msg(), self.p["base_frame"], self.sensor_frames,
+                self.get_clock().now().to_msg(), self.frame("base_frame"), self.sensor_frames,
                 self.mounts,
             )
         )  # fmt: skip
@@ -222,7 +236,7 @@ class OdometryNode(Node):
         self.uncertainty.reset()
         self.path.poses.clear()
         return (
-            f"pose back to (0, 0, 0) in {self.p['odom_frame']}, covariance cleared, path "
+            f"pose back to (0, 0, 0) in {self.frame('odom_frame')}, covariance cleared, path "
             "cleared (polls not yet integrated, at most one request interval, count after it)"
         )
 
@@ -253,7 +267,7 @@ class OdometryNode(Node):
             self.client.timeout_s = self.samples_client.timeout_s = changes["reply_timeout"]
         self.p.update(changes)
         if "odom_frame" in changes:
-            self.path.header.frame_id = changes["odom_frame"]
+            self.path.header.frame_id = self.frame("odom_frame")
         if "base_frame" in changes:
             self.send_static_frames()
         for name, value in changes.items():
@@ -432,14 +446,14 @@ class OdometryNode(Node):
             node_stamp(self, poll.sec * 1_000_000_000 + poll.nanosec),
             data.cpi,
             self.uncertainty,
-            self.p["odom_frame"],
-            self.p["base_frame"],
+            self.frame("odom_frame"),
+            self.frame("base_frame"),
         )
         self.odom_pub.publish(msg)
         self._last_stamp = msg.header.stamp
         self.tf.send(
             planar_transform(
-                msg.header.stamp, self.p["odom_frame"], self.p["base_frame"], after.x, after.y,
+                msg.header.stamp, msg.header.frame_id, msg.child_frame_id, after.x, after.y,
                 after.yaw,
             )
         )  # fmt: skip
