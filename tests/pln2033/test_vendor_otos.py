@@ -396,13 +396,20 @@ def test_pinned_lookup_table_is_speed_independent(bench):
     assert ratios == pytest.approx([0.9, 0.9], abs=0.005)
 
 
-def test_pinned_no_tilt_and_no_raw_imu_registers(bench):
+def test_pinned_no_tilt_no_centripetal_no_raw_imu_and_burst_deltas_only(bench):
     ft, emu, _kernel, otos = started(bench)
-    emu.motion = Ramp(ft.t, a=0.6, v=0.3)
+    emu.motion = Ramp(ft.t, a=1e9, v=0.3)
     emu.heading_source = ConstantYawRate(1.0, t_start=ft.t)
     ft.t += 1.0
     assert otos.getStatus() & regs.STATUS_WARN_TILT == 0
+    # turning at 1 rad/s at 0.3 m/s: a real accelerometer feels 0.3 m/s^2 towards the centre
+    a = otos.getAcceleration()
+    assert math.hypot(a.x, a.y) < 0.01
     assert bytes(emu.mem[regs.LSM_RAW : regs.LSM_RAW + 12]) == bytes(12)
+    burst = emu.mem[regs.PAA_BURST : regs.PAA_BURST + regs.PAA_BURST_LEN]
+    assert bytes(burst[:2]) == bytes(2) and bytes(burst[6:]) == bytes(6)
+    dy = regs.signed16(burst[4], burst[5])
+    assert dy == pytest.approx(0.3 * regs.IMU_SAMPLE_S / 0.0254 * regs.PAA_CPI, abs=2)
 
 
 def test_vendor_burst_of_36_bytes_is_refused_by_smbus2_on_linux(bench):
