@@ -1,6 +1,7 @@
 """mm-bench executors: CPU per reply of a bare get_sensor_data client under each executor.
 
-A client that only asks (one request out at a time, at ``rate_hz``) and counts the
+A client that only asks (one request out at a time, at ``rate_hz``; one unanswered
+for 2 s is given up and asked again: mm_pc.ros.deadline_client) and counts the
 replies, against a real ``mm-beagle`` on emulated sensors in another process: what each
 rclpy executor the monitor can spin costs per reply before the monitor does anything
 with it. Both executors are measured in the same run, alternating, so their ratio
@@ -22,23 +23,23 @@ def _measure(executor_name: str, rate_hz: float, seconds: float) -> dict:
     from rclpy.context import Context
 
     from mm_pc.bench.gui import cpu_figures
+    from mm_pc.ros.deadline_client import DeadlineClient
     from mm_pc.ros.services import service_types
 
     ctx = Context()
     rclpy.init(context=ctx)
     node = rclpy.create_node("mm_bench_executor", context=ctx, start_parameter_services=False)
     srv = service_types()["get_sensor_data"]
-    client = node.create_client(srv, "/mm_beagle/get_sensor_data")
-    state = {"replies": 0, "out": False}
+    client = DeadlineClient(node.create_client(srv, "/mm_beagle/get_sensor_data"), 2.0)
+    state = {"replies": 0}
 
-    def done(_future) -> None:
-        state["replies"] += 1
-        state["out"] = False
+    def done(res) -> None:
+        state["replies"] += res is not None  # None: given up, asked again at the next tick
 
     def tick() -> None:
-        if not state["out"] and client.service_is_ready():
-            state["out"] = True
-            client.call_async(srv.Request(id="")).add_done_callback(done)
+        client.expire()
+        if not client.busy:
+            client.call(srv.Request(id=""), done)
 
     node.create_timer(1.0 / rate_hz, tick)
     if executor_name == "events":
@@ -75,7 +76,7 @@ def _measure(executor_name: str, rate_hz: float, seconds: float) -> dict:
         node.destroy_node()
         ctx.try_shutdown()
     cpu_s = (c1.user + c1.system) - (c0.user + c0.system)
-    return cpu_figures(cpu_s, t1 - t0, r1 - r0)
+    return {**cpu_figures(cpu_s, t1 - t0, r1 - r0), "requests_unanswered": client.abandoned}
 
 
 def bench_executors(rate_hz: float = 500.0, seconds: float = 8.0, rounds: int = 2) -> dict:
