@@ -17,6 +17,7 @@ from __future__ import annotations
 from contextlib import suppress
 from dataclasses import dataclass
 
+from PySide6.QtCore import Qt
 from PySide6.QtWidgets import (
     QCheckBox,
     QDialog,
@@ -86,6 +87,9 @@ class FilterDialog(QDialog):
         buttons = QDialogButtonBox(QDialogButtonBox.Close)
         buttons.addButton(self.apply_button, QDialogButtonBox.ApplyRole)
         buttons.addButton(self.clear_button, QDialogButtonBox.ResetRole)
+        for b in buttons.buttons():  # Enter in a field applies that field, never closes
+            b.setAutoDefault(False)
+            b.setDefault(False)
         buttons.rejected.connect(self.reject)
         lay = QVBoxLayout(self)
         lay.addWidget(self.note)
@@ -195,6 +199,14 @@ class FilterDialog(QDialog):
             self.ctx.session.set_filter(dev, windows[dev], row.fx.isChecked(), row.fy.isChecked())
         self._say("applied: " + "; ".join(f"{d}: {self._describe(d)}" for d in self.rows))
         return True
+
+    def keyPressEvent(self, event) -> None:  # noqa: N802 - Qt API
+        """Enter or Return never closes the dialog: in a window field it applies that row
+        (its returnPressed), elsewhere it does nothing; Escape still closes."""
+        if event.key() in (Qt.Key_Return, Qt.Key_Enter):
+            event.accept()
+            return
+        super().keyPressEvent(event)
 
     def clear_filters(self) -> None:
         self.ctx.session.clear_filters()

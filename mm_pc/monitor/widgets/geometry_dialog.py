@@ -45,9 +45,29 @@ from PySide6.QtWidgets import (
 from mm_pc.core.geometry import DEFAULT_GEOMETRY, RobotGeometry, SensorMount
 from mm_pc.monitor.context import MonitorContext
 from mm_pc.monitor.model.geometry_file import geometry_from_yaml, geometry_to_yaml
+from mm_pc.monitor.settings import last_folder, remember_folder
 from mm_pc.monitor.widgets.style import ERROR_STYLE, parse_number
 
-__all__ = ["GeometryDialog", "parse_number"]
+__all__ = ["GeometryDialog", "calibration_file_note", "parse_number"]
+
+#: the settings key of the folder the Load… and Save… dialogs open in
+FOLDER_KIND = "geometry"
+
+
+def calibration_file_note(text: str) -> str:
+    """'' or, when ``text`` is a calibration file (a mapping of ``sensors``, no ``mounts``),
+    what to do with it instead of loading it as a geometry."""
+    import yaml
+
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError:
+        return ""
+    if isinstance(data, dict) and "sensors" in data and "mounts" not in data:
+        return ("this is a calibration file (each sensor's angle and scales), not a robot "
+                "geometry: open it with mm-monitor --calibration FILE, or make a new one "
+                "with the Calibration wizard")
+    return ""
 
 @dataclass
 class _MountRow:
@@ -210,7 +230,11 @@ class GeometryDialog(QDialog):
     def load(self, path: str | Path) -> bool:
         """Fill the fields from a YAML file (Apply uses it); False and a message on error."""
         try:
-            geometry, sensor = geometry_from_yaml(Path(path).read_text(encoding="utf-8"))
+            text = Path(path).read_text(encoding="utf-8")
+            note = calibration_file_note(text)
+            if note:
+                raise ValueError(f"{Path(path).name}: {note}")
+            geometry, sensor = geometry_from_yaml(text)
         except (OSError, ValueError) as e:
             self._fail(f"not loaded: {e}")
             return False
@@ -236,16 +260,31 @@ class GeometryDialog(QDialog):
         super().done(result)
 
     def _save_clicked(self) -> None:
-        path, _ = QFileDialog.getSaveFileName(self, "Save geometry", "", "YAML (*.yaml *.yml)")
+        path, _ = QFileDialog.getSaveFileName(self, "Save geometry", last_folder(FOLDER_KIND),
+                                              "YAML (*.yaml *.yml)")
         if path:
+            remember_folder(FOLDER_KIND, path)
             self.save(path)
 
     def _load_clicked(self) -> None:
-        path, _ = QFileDialog.getOpenFileName(self, "Load geometry", "", "YAML (*.yaml *.yml)")
+        path, _ = QFileDialog.getOpenFileName(self, "Load geometry", last_folder(FOLDER_KIND),
+                                              "YAML (*.yaml *.yml)")
         if path:
+            remember_folder(FOLDER_KIND, path)
             self.load(path)
 
     def _fail(self, text: str) -> None:
         self.error.setText(text)
+        self.error.setToolTip(text)
         self.error.show()
         self.status.setText("")
+        self._fit_height()
+
+    def _fit_height(self) -> None:
+        """Grow the dialog by what the shown error needs, so the rows above keep their
+        height (they were squashed when the dialog kept its size)."""
+        lay = self.layout()
+        lay.activate()
+        need = max(lay.totalHeightForWidth(self.width()), lay.totalMinimumSize().height())
+        if need > self.height():
+            self.resize(self.width(), need)
