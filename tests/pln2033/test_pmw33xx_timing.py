@@ -239,3 +239,60 @@ def test_a_power_cycle_makes_the_chip_deaf_for_50_ms():
     assert emu.timing_errors == {T.POWER_UP_WAIT: 1}
     clock.t += 0.050
     assert emu.xfer_segments([([0x00], 160), ([0], 20)])[1] == [0x42]
+
+
+def qmk_style_init(chip: str, emu, clock) -> list:
+    """The bring-up as QMK's pmw33xx driver times it (its waits, read for facts, no code):
+    1 us after chip select falls; a write keeps it low 35 us, then 145 us high; a read waits
+    160 us, 1 us, then 19 us high; the upload 15 us per byte and 200 us after the last,
+    SROM_ID read straight after; reset 50 ms, SROM init 10 ms. Returns the SROM_ID read."""
+
+    def write(reg: int, value: int) -> None:
+        emu.xfer_segments([([], 1), ([reg | W, value], 35)])
+        clock.t += 145e-6
+
+    def read(reg: int) -> int:
+        rx = emu.xfer_segments([([], 1), ([reg], 160), ([0], 1)])
+        clock.t += 19e-6
+        return rx[2][0]
+
+    emu.xfer_segments([([], 40)])  # chip select low 40 us, then high 40 us: the port reset
+    clock.t += 40e-6
+    write(0x3A, 0x5A)
+    clock.t += 0.050
+    for reg in (0x02, 0x03, 0x04, 0x05, 0x06):
+        read(reg)
+    write(0x13, 0x1D)
+    clock.t += 0.010
+    write(0x13, 0x18)
+    segs = [([], 1), ([0x62 | W], 15)] + [([b], 15) for b in BLOB]
+    segs += [([], 200), ([0x2A], 160), ([0], 1)]  # SROM_ID before chip select rises
+    srom_id = emu.xfer_segments(segs)[-1][0]
+    clock.t += 19e-6
+    write(0x10, 0x00)
+    clock.t += 0.010
+    if chip == "pmw3389":
+        write(0x0F, 0x00)  # Resolution_H, then _L: 1600 cpi
+        write(0x0E, 0x1F)
+    else:
+        write(0x0F, 0x0F)  # Config1: 1600 cpi
+    clock.t += 0.001
+    write(0x10, 0x00)
+    write(0x11, 0x00)  # Angle_Tune
+    write(0x63, 0x02)  # Lift_Config
+    for reg in (0x00, 0x3F, 0x2A):  # the signature
+        read(reg)
+    write(0x50, 0x00)
+    for _ in range(10):  # bursts at 1 kHz, chip select raised after each
+        emu.xfer_segments([([], 1), ([0x50], 35), ([0] * 12, 0)])
+        clock.t += 0.001
+    return [srom_id]
+
+
+@pytest.mark.parametrize("chip", ["pmw3360", "pmw3389"])
+def test_qmk_timed_bring_up_is_clean(chip):
+    clock = FakeClock(1.0)
+    emu = make_emulator(chip, clock=clock, srom=BLOB)
+    assert qmk_style_init(chip, emu, clock) == [0x04]
+    assert emu.stats.protocol_errors == 0 and not emu.timing_errors
+    assert emu.srom_intact and emu.cpi_y == 1600
