@@ -9,6 +9,10 @@ Sources (docs/sensors.md has the full list and where they disagree):
 - [QMK] qmk/qmk_firmware drivers/sensors/pmw3360.h, pmw3389.h, pmw3389.c, pmw33xx_common.c/h.
 - [TSH] teamspatzenhirn/pmw3389_zephyr_driver drivers/sensor/pmw3389/pmw3389.c.
 - [NRF] Nordic's Zephyr PMW3389 header (nRF Desktop style pmw3389.h: PMW3389_PRODUCT_ID 0x47).
+- [MJK] mrjohnk/PMW3389DM "proper startup banner.txt": a real PMW3389's printout, Product_ID
+  0x47, Inverse_Product_ID 0xB8, SROM_Version 0xE8.
+- [ARD] SunjunKim/PMW3360_Arduino sketches (PMW3360DM-Burst/-Mouse.ino): ADNS-9800-era waits
+  (tSRAD 35-100 us, writes 20 + 100 us apart), reported to work; not this project's figures.
 
 No register here comes from the PMW3389 datasheet itself (not in the stored sources): the
 PMW3389 map is QMK's (addresses as [NRF]'s), its timing is the PMW3360's (identical in [TSH]
@@ -241,7 +245,10 @@ _DEFAULTS_3389 = {
 _DEFAULTS_3389.pop("LiftCutoff_Tune_Timeout")
 _DEFAULTS_3389.pop("LiftCutoff_Tune_Min_Length")
 
-PMW3389_PRODUCT_ID = 0x47  # [TSH Expected_Product_ID 0x47, inverse 0xB8; NRF]; QMK says 0x42
+# [TSH Expected_Product_ID 0x47, inverse 0xB8; NRF; MJK a real chip's banner]. QMK's pmw3389.c
+# signature {0x42, 0xBD, 0x04} is the PMW3360's (its own PMW3389 SROM starts 0x01, 0xE8, and
+# MJK's chip reports SROM_Version 0xE8): driver option product_id=0x42 follows QMK anyway.
+PMW3389_PRODUCT_ID = 0x47
 
 
 def pmw3389_regs(resolution_offset: int = 1) -> ChipRegs:
