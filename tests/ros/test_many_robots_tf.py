@@ -175,3 +175,54 @@ def test_two_robots_with_frame_prefixes_share_tf_without_colliding(tmp_path, ros
     for r in ROBOTS:
         assert f"TF {r}/odom -> {r}/base_link" in logs[f"{r} odometry"], logs[f"{r} odometry"]
         assert f"TF {r}/map -> odom" in logs[f"{r} fusion"], logs[f"{r} fusion"]
+
+
+def test_remapping_tf_per_namespace_keeps_two_robots_apart(tmp_path, ros_command):
+    """The other remedy: same frame names, ``-r /tf:=tf -r /tf_static:=tf_static`` in each
+    robot's namespace, so each tree is on /NS/tf and /NS/tf_static and nothing on /tf."""
+    from tf2_msgs.msg import TFMessage
+
+    from mm_pc.ros.tf import DYNAMIC_QOS, STATIC_QOS
+
+    remap = ["-r", "/tf:=tf", "-r", "/tf_static:=tf_static"]
+    procs = {}
+    for r in ROBOTS:
+        cmd = ros_command("mm_pc.ros.odometry_node", {"rate": 20.0}, f"/{r}") + remap
+        procs[r] = subprocess.Popen(
+            cmd, env=dict(os.environ), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+        )
+    client = BeagleClient("tf_remap_client")
+    got: dict[str, list] = {}
+    for topic, qos in [("/tf", DYNAMIC_QOS), ("/tf_static", STATIC_QOS)] + [
+        (f"/{r}/{name}", qos) for r in ROBOTS
+        for name, qos in (("tf", DYNAMIC_QOS), ("tf_static", STATIC_QOS))
+    ]:  # fmt: skip
+        got[topic] = []
+        client.node.create_subscription(
+            TFMessage, topic, lambda m, topic=topic: got[topic].extend(m.transforms), qos
+        )
+    logs = {}
+    try:
+        with (
+            beagle_process(ROBOTS["r1"], dict(os.environ), str(tmp_path / "r1.log"), "/r1"),
+            beagle_process(ROBOTS["r2"], dict(os.environ), str(tmp_path / "r2.log"), "/r2"),
+        ):
+            wait_until(
+                lambda: all(got[f"/{r}/{n}"] for r in ROBOTS for n in ("tf", "tf_static"))
+                and any(t.transform.translation.x > 0.05 for t in list(got["/r1/tf"])),
+                60,
+                "odom -> base_link and the mounts on /r1/tf(_static) and /r2/tf(_static)",
+            )
+    finally:
+        client.close()
+        for r, proc in procs.items():
+            stop_process(proc)
+            logs[r] = proc.communicate(timeout=5)[0]
+    assert not got["/tf"] and not got["/tf_static"]  # nothing on the shared topics
+    for r in ROBOTS:
+        assert procs[r].returncode == 0 and "Traceback" not in logs[r], logs[r]
+        parents = parents_of(got[f"/{r}/tf"] + got[f"/{r}/tf_static"])
+        assert parents == {"base_link": {"odom"}, **{m: {"base_link"} for m in MICE}}
+        for mouse in MICE:
+            assert lookup_chain(parents, mouse, "odom") == [mouse, "base_link", "odom"]
+    assert all(t.transform.translation.x == 0.0 for t in got["/r2/tf"])  # r2 stands still
