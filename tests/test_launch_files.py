@@ -397,3 +397,117 @@ def test_params_file_reaches_its_node_in_any_namespace(tmp_path, path, namespace
             node.destroy_node()
         finally:
             rclpy.shutdown(context=context)
+
+
+FAKE_NODE = """#!{python}
+import json, sys
+args = sys.argv[1:]
+files = [args[i + 1] for i, a in enumerate(args) if a == "--params-file"]
+record = {{"argv": args, "params_files": files,
+          "params": [open(f).read() for f in files]}}
+with open({out!r} + "/" + {name!r} + ".json", "w") as out:
+    json.dump(record, out)
+"""
+
+
+def _fake_prefix(tmp_path: Path) -> tuple[Path, Path]:
+    """An ament prefix whose packages share this tree's launch/ and config/ and whose
+    executables only write down how they were started (out/<executable>.json)."""
+    import sys
+
+    prefix, out = tmp_path / "prefix", tmp_path / "out"
+    out.mkdir()
+    index = prefix / "share" / "ament_index" / "resource_index" / "packages"
+    index.mkdir(parents=True)
+    for pkg in PACKAGES:
+        (index / pkg).touch()
+        (prefix / "share" / pkg).mkdir()
+        for folder in ("launch", "config"):
+            (prefix / "share" / pkg / folder).symlink_to(ROOT / pkg / folder)
+        lib = prefix / "lib" / pkg
+        lib.mkdir(parents=True)
+        for exe, module in scripts().items():
+            if module.startswith(pkg + "."):
+                script = lib / exe
+                script.write_text(FAKE_NODE.format(python=sys.executable, out=str(out), name=exe))
+                script.chmod(0o755)
+    return prefix, out
+
+
+def _run_launch(
+    path: Path, arguments: dict[str, str], prefix: Path, out: Path, monkeypatch, outer=()
+):
+    """``ros2 launch`` of ``path`` with ``arguments`` as ros2launch does it (an include of the
+    file with the command line's arguments), after the actions ``outer`` in one group (as a
+    file of the user's that includes it); {executable: its argv and parameters files}."""
+    import json
+    import os
+
+    from launch import LaunchDescription, LaunchService
+    from launch.actions import GroupAction, IncludeLaunchDescription
+    from launch.launch_description_sources import PythonLaunchDescriptionSource
+
+    ament = os.environ.get("AMENT_PREFIX_PATH", "")
+    monkeypatch.setenv("AMENT_PREFIX_PATH", f"{prefix}{os.pathsep}{ament}")
+    source = PythonLaunchDescriptionSource(str(path))
+    include = IncludeLaunchDescription(source, launch_arguments=arguments.items())
+    service = LaunchService()
+    service.include_launch_description(LaunchDescription([GroupAction([*outer, include])]))
+    assert service.run() == 0
+    return {p.stem: json.loads(p.read_text()) for p in out.glob("*.json")}
+
+
+def _params_file_of(run: dict, exe: str) -> str:
+    """The one parameters file of ``exe`` that is not launch_ros's temporary one."""
+    (named,) = [f for f in run[exe]["params_files"] if "launch_params_" not in f]
+    return named
+
+
+@pytest.mark.skipif(not HAVE_LAUNCH, reason="launch/launch_ros not installed (no PyPI wheel)")
+def test_robot_launch_starts_each_node_with_its_own_parameters_file(tmp_path, monkeypatch):
+    """The resolved command lines (real launch, executables that only record them): each
+    node its own package's file; a node's own argument reaches only that node; an old-style
+    params_file:= reaches none; namespace and frame_prefix reach all three."""
+    prefix, out = _fake_prefix(tmp_path)
+    robot = ROOT / "mm_beagle/launch/robot.launch.py"
+    run = _run_launch(robot, {"backend": "sim"}, prefix, out, monkeypatch)
+    assert set(run) == {"mm-beagle", "mm-odometry", "mm-fusion"}
+    for exe, config in (("mm-beagle", "mm_beagle/config/mm_beagle.yaml"),
+                        ("mm-odometry", "mm_pc/config/mm_odometry.yaml"),
+                        ("mm-fusion", "mm_pc/config/mm_fusion.yaml")):  # fmt: skip
+        assert _params_file_of(run, exe).endswith("share/" + config), run[exe]
+    assert "backend: sim" in "".join(run["mm-beagle"]["params"])
+
+    for p in out.glob("*.json"):
+        p.unlink()
+    custom = tmp_path / "odo.yaml"
+    custom.write_text("/**/mm_odometry:\n  ros__parameters:\n    rate: 5.0\n")
+    run = _run_launch(
+        robot, {"odometry_params": str(custom), "params_file": "/nowhere.yaml",
+                "namespace": "r1", "frame_prefix": "r1/"}, prefix, out, monkeypatch,
+    )  # fmt: skip
+    assert _params_file_of(run, "mm-odometry") == str(custom)
+    assert _params_file_of(run, "mm-beagle").endswith("share/mm_beagle/config/mm_beagle.yaml")
+    assert _params_file_of(run, "mm-fusion").endswith("share/mm_pc/config/mm_fusion.yaml")
+    for exe, record in run.items():
+        assert "/nowhere.yaml" not in record["params_files"], exe
+        assert "__ns:=/r1" in record["argv"], (exe, record["argv"])
+        assert "frame_prefix: r1/" in "".join(record["params"]), (exe, record["params"])
+
+
+@pytest.mark.skipif(not HAVE_LAUNCH, reason="launch/launch_ros not installed (no PyPI wheel)")
+def test_robot_launch_passes_an_outer_namespace_and_tf_remap_to_its_nodes(tmp_path, monkeypatch):
+    """Many robots by /tf remapping: a user's file includes robot.launch.py after
+    PushRosNamespace and SetRemap; the scoped groups inside still forward them."""
+    from launch_ros.actions import PushRosNamespace, SetRemap
+
+    prefix, out = _fake_prefix(tmp_path)
+    outer = [PushRosNamespace("r2"), SetRemap("/tf", "tf"), SetRemap("/tf_static", "tf_static")]
+    robot = ROOT / "mm_beagle/launch/robot.launch.py"
+    run = _run_launch(robot, {"backend": "sim"}, prefix, out, monkeypatch, outer)
+    assert set(run) == {"mm-beagle", "mm-odometry", "mm-fusion"}
+    for exe, record in run.items():
+        argv = record["argv"]
+        assert "__ns:=/r2" in argv and "/tf:=tf" in argv and "/tf_static:=tf_static" in argv, (
+            exe, argv,
+        )  # fmt: skip
