@@ -45,7 +45,7 @@ FRAME_HZ = 30.0
 #: the status bar's sample count is renewed at most this often (s)
 ROWS_LABEL_PERIOD_S = 0.5
 #: the Control dock's width (px); with the Direction dock and the tabs the window fits 1024 px
-CONTROL_DOCK_WIDTH = 270
+CONTROL_DOCK_WIDTH = 255
 #: the window's size on a first start (clamped to the screen, title bar included)
 DEFAULT_SIZE = (1280, 800)
 #: the window manager's frame before the window is shown (left, top, right, bottom; px):
@@ -199,6 +199,34 @@ class ElidingStatusBar(QStatusBar):
                 self.setToolTip(self._full if text != self._full else "")
 
 
+class _DockScroll(QScrollArea):
+    """A dock's scroll area: scrolls up and down, never sideways; as wide as its content
+    needs with the vertical scroll bar shown (at least ``min_width``), so no text in it is
+    cut when the content grows (a sensor's CPI row arrives with the first reply)."""
+
+    def __init__(self, content: QWidget, min_width: int = 0) -> None:
+        super().__init__()
+        self.min_width = min_width
+        self.setWidgetResizable(True)
+        self.setWidget(content)
+        self.setHorizontalScrollBarPolicy(Qt.ScrollBarAlwaysOff)
+        content.installEventFilter(self)
+
+    def minimumSizeHint(self):  # noqa: N802 - Qt API
+        hint = super().minimumSizeHint()
+        content = self.widget()
+        if content is not None:
+            need = (content.minimumSizeHint().width() + 2 * self.frameWidth()
+                    + self.verticalScrollBar().sizeHint().width())
+            hint.setWidth(max(self.min_width, need))
+        return hint
+
+    def eventFilter(self, obj, event) -> bool:  # noqa: N802 - Qt API
+        if obj is self.widget() and event.type() == QEvent.LayoutRequest:
+            self.updateGeometry()
+        return super().eventFilter(obj, event)
+
+
 class _ExportShortcut(QObject):
     """Lets the window's Ctrl+E through while a text field has the focus.
 
@@ -345,7 +373,9 @@ class MainWindow(QMainWindow):
         self.method_box.currentIndexChanged.connect(
             lambda i: self.set_method(self.method_box.itemData(i))
         )
-        pform.addRow("Method", self.method_box)
+        # the box on a row of its own: the longest name ("Least squares, 2 sensors") fits
+        pform.addRow(QLabel("Method"))
+        pform.addRow(self.method_box)
         self.method_error = QLabel("")
         self.method_error.setStyleSheet(ERROR_STYLE)
         self.method_error.setWordWrap(True)
@@ -373,12 +403,8 @@ class MainWindow(QMainWindow):
         self.resolution_panel = ResolutionPanel(self.ctx, self)
         lay.addWidget(self.resolution_panel)
         lay.addStretch(1)
-        scroll = QScrollArea()
-        scroll.setWidgetResizable(True)
-        scroll.setWidget(panel)
         # wide enough for the CPI rows (labels wrap; no horizontal scroll bar)
-        scroll.setMinimumWidth(CONTROL_DOCK_WIDTH)
-        scroll.setHorizontalScrollBarPolicy(Qt.ScrollBarAlwaysOff)
+        scroll = _DockScroll(panel, CONTROL_DOCK_WIDTH)
         dock = QDockWidget("Control", self)
         dock.setObjectName("control_dock")
         dock.setWidget(scroll)
@@ -389,10 +415,7 @@ class MainWindow(QMainWindow):
         from mm_pc.monitor.widgets.direction_widget import DirectionPanel
 
         self.direction_panel = DirectionPanel(self.ctx, self)
-        scroll = QScrollArea()
-        scroll.setWidgetResizable(True)
-        scroll.setWidget(self.direction_panel)
-        scroll.setHorizontalScrollBarPolicy(Qt.ScrollBarAlwaysOff)
+        scroll = _DockScroll(self.direction_panel)
         dock = QDockWidget("Direction", self)
         dock.setObjectName("direction_dock")
         dock.setWidget(scroll)

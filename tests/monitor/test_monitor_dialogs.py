@@ -207,7 +207,9 @@ def test_wizard_fits_the_whole_mount_saves_and_applies_it(qtbot, ctx, screenshot
     assert ctx.session.calibration == cal
     assert not ctx.session.calibrating
     assert "saved to" in wiz.save_page.status.text()
-    assert str(path) in panel.label.text() and "fit" in panel.label.text()
+    # the file's name in the panel (a narrow dock), its whole path in the tooltip
+    assert path.name in panel.label.text() and "fit" in panel.label.text()
+    assert str(path) in panel.label.toolTip()
     wiz.accept()
 
     # the calibration comes before the pose math, the fitted positions are the mounts:

@@ -17,6 +17,7 @@ from PySide6.QtCore import QRect, Qt
 from PySide6.QtWidgets import (
     QAbstractButton,
     QComboBox,
+    QGraphicsView,
     QLabel,
     QLineEdit,
     QStatusBar,
@@ -26,6 +27,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from mm_pc.core.calibration import Calibration, SensorCalibration
 from mm_pc.monitor.context import MonitorConfig, MonitorContext
 from mm_pc.monitor.main_window import MainWindow
 from mm_pc.monitor.model.session import MonitorSession
@@ -67,11 +69,19 @@ def _label_problem(label: QLabel) -> str | None:
     text = _plain(label.text())
     if not text.strip() or (label.pixmap() is not None and not label.pixmap().isNull()):
         return None
-    if label.wordWrap():
-        return None
     if _elided_ok(text, label.toolTip()):
         return None
     room = label.contentsRect().width() - 2 * max(label.margin(), 0) - max(label.indent(), 0)
+    if label.wordWrap():  # each word must fit, and every line must be shown
+        words = text.split()
+        word = max(words, key=label.fontMetrics().horizontalAdvance)
+        need = label.fontMetrics().horizontalAdvance(word)
+        if need > room:
+            return f"wrapped label {text!r}: the word {word!r} needs {need} px in {room} px"
+        tall = label.heightForWidth(label.width())
+        if tall > label.height() + 1:
+            return f"wrapped label {text!r}: {tall} px high in {label.height()} px"
+        return None
     need = _widest_line(label.fontMetrics(), text)
     return None if need <= room else f"label {text!r}: {need} px in {room} px"
 
@@ -88,7 +98,9 @@ def _button_problem(button: QAbstractButton) -> str | None:
 
 
 def _combo_problem(box: QComboBox) -> str | None:
-    text = box.currentText()
+    """The widest item must fit: the user may pick any of them."""
+    items = [box.itemText(i) for i in range(box.count())]
+    text = max(items, key=box.fontMetrics().horizontalAdvance, default="")
     if not text:
         return None
     opt = QStyleOptionComboBox()
@@ -145,6 +157,27 @@ def _table_problems(table: QTableView) -> list[str]:
     return out
 
 
+def _legend_problems(view: QGraphicsView) -> list[str]:
+    """A pyqtgraph legend's names end inside the legend's column (or the view)."""
+    import pyqtgraph as pg
+
+    out = []
+    for item in view.items():
+        if not isinstance(item, pg.LegendItem) or not item.isVisible():
+            continue
+        box = item.parentItem()
+        edge = (box.sceneBoundingRect().right() if box is not None
+                else view.viewport().width())
+        edge = min(edge, view.viewport().width())
+        for _sample, label in item.items:
+            if not label.isVisible():
+                continue
+            right = label.item.sceneBoundingRect().right()
+            if right > edge + 1:
+                out.append(f"legend {label.text!r}: ends at {right:.0f} px, room to {edge:.0f}")
+    return out
+
+
 def clipped_texts(window: QWidget) -> list[str]:
     """What the shown widgets of ``window`` cut off, one line each."""
     found: list[str] = []
@@ -155,8 +188,8 @@ def clipped_texts(window: QWidget) -> list[str]:
         if isinstance(w, QLabel):
             problem = _label_problem(w)
         elif isinstance(w, QAbstractButton) and w.metaObject().className() in (
-            "QPushButton", "QCheckBox", "QRadioButton"
-        ):
+            "QPushButton", "QCheckBox", "QRadioButton", "QToolButton"
+        ) and not (w.metaObject().className() == "QToolButton" and w.autoRaise()):
             problem = _button_problem(w)
         elif isinstance(w, QComboBox):
             problem = _combo_problem(w)
@@ -164,6 +197,8 @@ def clipped_texts(window: QWidget) -> list[str]:
             problem = _line_edit_problem(w)
         elif isinstance(w, QTableView):
             found += [f"{type(w).__name__}: {p}" for p in _table_problems(w)]
+        elif isinstance(w, QGraphicsView):
+            found += [f"{type(w).__name__}: {p}" for p in _legend_problems(w)]
         if problem:
             found.append(f"{type(w.window()).__name__}/{_path(w)}: {problem}")
     bar = window.statusBar()
@@ -191,6 +226,12 @@ def window(qapp, feed, tmp_path):
     config = MonitorConfig(rate_hz=15.0, calibration_file=tmp_path / "cal.yaml")
     w = MainWindow(MonitorContext(MonitorSession(), None, config), None)
     feed(w.ctx, rate_hz=50.0, seconds=3.0)
+    # a whole-mount calibration from the default file: the Pose panel's longest summary
+    cal = Calibration({dev: SensorCalibration(angle_offset=-0.0123, scale_x=1.0123,
+                                              scale_y=0.9876, x=0.049, y=-0.0395 * (1 - 2 * k))
+                       for k, dev in enumerate(w.ctx.session.devices)},
+                      method="", date="2026-12-03T17:30:00")
+    w.ctx.set_calibration(cal, "/home/someone/.config/mouse-monitor/calibration.yaml")
     w.show()
     yield w
     w.close()
@@ -206,6 +247,10 @@ def _walk(qapp, w, size) -> dict[str, list[str]]:
     w.resize(*size)
     settle(qapp, w)
     w.statusBar().showMessage(REPLAY_SUMMARY)
+    maps = w.views["Maps"]
+    maps.progress.show()  # what "Simulate mowing run" shows while it builds
+    maps.cancel_button.show()
+    maps.sim_legend.show()
     per_tab = {}
     for i in range(w.tabs.count()):
         w.tabs.setCurrentIndex(i)
@@ -243,6 +288,25 @@ def test_map_keeps_a_usable_size_and_graphs_scroll(window, qapp, size):
         assert right <= canvas.viewport().width() + 1, (k, key, right, canvas.width())
     if graphs.width() > scroll.viewport().width():  # what does not fit scrolls
         assert scroll.horizontalScrollBar().maximum() > 0
+
+
+def test_health_shows_the_message_row_at_1024_by_700(window, qapp):
+    window.resize(1024, 700)
+    health = window.views["Health"]
+    health.on_diagnostics({
+        dev: {"level": "1", "message": "late polls: 12 % of the reads came late",
+              "last_error": ""} for dev in window.ctx.session.devices
+    })
+    window.tabs.setCurrentIndex(window.tabs.indexOf(window.tabs.widget(5)))
+    assert window.tabs.tabText(window.tabs.currentIndex()) == "Health"
+    settle(qapp, window)
+    table, page = health.table, window.tabs.currentWidget()
+    last = table.rowCount() - 1
+    assert table.verticalHeaderItem(last).text() == "Message"
+    cell = table.visualRect(table.model().index(last, 0))
+    assert cell.bottom() <= table.viewport().height(), (cell, table.viewport().height())
+    bottom = table.viewport().mapTo(page.viewport(), cell.bottomLeft()).y()
+    assert 0 <= bottom <= page.viewport().height(), (bottom, page.viewport().height())
 
 
 def test_the_whole_window_fits_a_small_screen_at_first_start(qapp):

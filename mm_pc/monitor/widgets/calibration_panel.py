@@ -8,6 +8,8 @@ force (the file stays; the status line says so).
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from PySide6.QtWidgets import QLabel, QPushButton, QVBoxLayout, QWidget
 
 from mm_pc.monitor.context import MonitorContext
@@ -54,7 +56,10 @@ class CalibrationPanel(QWidget):
 
     def refresh(self) -> None:
         cal = self.ctx.session.calibration
-        self.label.setText(describe_calibration(cal, self.ctx.calibration_source))
+        source = self.ctx.calibration_source
+        # the file's name only (a path does not wrap in the narrow dock); all of it in the tip
+        self.label.setText(describe_calibration(cal, Path(source).name if source else ""))
+        self.label.setToolTip(describe_calibration(cal, source))
         self.clear_button.setEnabled(not cal.is_identity)
 
     def clear(self) -> None:

@@ -140,6 +140,10 @@ class HealthView(QWidget):
         self.table.verticalHeader().setSectionResizeMode(QHeaderView.ResizeToContents)
         self.table.setTextElideMode(Qt.ElideRight)
         self.table.setWordWrap(False)
+        # every row shown, down to "Message" that explains a WARN: the table never scrolls
+        # inside itself (the page scrolls when the window is lower still)
+        self.table.setVerticalScrollBarPolicy(Qt.ScrollBarAlwaysOff)
+        self._fit_table()
         self.diag_state = QLabel("no /diagnostics received yet")
         self.session_label = QLabel()
         self.session_label.setWordWrap(True)
@@ -227,7 +231,18 @@ class HealthView(QWidget):
                 self.table.horizontalHeaderItem(c).setToolTip(f"sensor {c + 1}: {dev}")
         for c, dev in enumerate(devices):
             self._fill_column(c, self.diagnostics[dev])
+        self._fit_table()
         self.diag_state.setText(f"/diagnostics: {len(devices)} sensor(s), updated just now")
+
+    def _fit_table(self) -> None:
+        """The table as high as all its rows and its header (px)."""
+        rows = self.table.verticalHeader()
+        height = sum(max(rows.sectionSize(r), rows.sectionSizeHint(r))
+                     for r in range(self.table.rowCount()))
+        height += self.table.horizontalHeader().sizeHint().height() + 2 * self.table.frameWidth()
+        if self.table.horizontalScrollBar().isVisible():
+            height += self.table.horizontalScrollBar().height()
+        self.table.setMinimumHeight(height)
 
     def _fill_column(self, c: int, values: dict) -> None:
         level = _level(values.get("level"))

@@ -186,14 +186,15 @@ class ResolutionPanel(QGroupBox):
             row.online = self.ctx.bridge is not None
             row.edit.setEnabled(row.online)
             row.set_button.setEnabled(row.online)
-            base = 4 * len(self.rows)  # name; field, Set, now; read back; error
+            # name; field, Set; now; read back; error (one column fits a 255 px dock)
+            base = 5 * len(self.rows)
             self.grid.addWidget(row.name, base, 0, 1, 3)
             self.grid.addWidget(row.edit, base + 1, 0)
             self.grid.addWidget(row.set_button, base + 1, 1)
-            self.grid.addWidget(row.current, base + 1, 2)
             self.grid.setColumnStretch(0, 1)
-            self.grid.addWidget(row.read_back, base + 2, 0, 1, 3)
-            self.grid.addWidget(row.error, base + 3, 0, 1, 3)
+            self.grid.addWidget(row.current, base + 2, 0, 1, 3)
+            self.grid.addWidget(row.read_back, base + 3, 0, 1, 3)
+            self.grid.addWidget(row.error, base + 4, 0, 1, 3)
             self.rows[dev] = row
         if self.ctx.bridge is None:
             self.note.setText("offline: no node to set the resolution on")
