@@ -32,7 +32,8 @@ class DeadlineClient:
         self._clock = clock
         #: calls sent, answered (any reply), given up (deadline passed or service gone)
         self.sent = self.answered = self.abandoned = 0
-        #: ``clock()`` of the last answer, or of the construction before any
+        #: ``clock()`` of the last answer; before any, of the first call (of the
+        #: construction while none went out: a service never offered is silent too)
         self.last_answer = clock()
         self.ever_answered = False
         self._longest = 0.0  # the longest silence ended by an answer since take_silence()
@@ -54,7 +55,10 @@ class DeadlineClient:
         if not self.client.service_is_ready():
             return False
         future = self.client.call_async(request)
-        self._pending[future] = (self._clock() + self.timeout_s, on_done)
+        now = self._clock()
+        self._pending[future] = (now + self.timeout_s, on_done)
+        if not self.sent:
+            self.last_answer = now  # the discovery's time is no silence of the server
         self.sent += 1
         future.add_done_callback(self._on_done)
         return True
@@ -86,7 +90,8 @@ class DeadlineClient:
         return len(late)
 
     def silent_s(self, now: float | None = None) -> float:
-        """Seconds since the last answer (since the construction before the first)."""
+        """Seconds since the last answer (before the first: since the first call, or the
+        construction while none went out)."""
         return (self._clock() if now is None else now) - self.last_answer
 
     def take_silence(self, now: float | None = None) -> float:

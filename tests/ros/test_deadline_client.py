@@ -33,10 +33,13 @@ class FakeRclpyClient:
 
 
 def test_a_lost_reply_is_given_up_at_the_deadline_and_the_next_call_goes_out():
-    clock, raw = FakeClock(10.0), FakeRclpyClient()
+    clock, raw = FakeClock(9.0), FakeRclpyClient()
     c = DeadlineClient(raw, 0.5, clock=clock)
     got: list = []
+    clock.t = 10.0  # 1 s to discover the service: no silence of the server's
+    assert c.silent_s() == pytest.approx(1.0)  # ... until the first call
     assert c.call("req 1", got.append) and c.busy
+    assert c.silent_s() == 0.0
     clock.t = 10.5
     assert c.expire() == 0 and c.busy  # at the deadline: not yet
     clock.t = 10.6
@@ -48,7 +51,7 @@ def test_a_lost_reply_is_given_up_at_the_deadline_and_the_next_call_goes_out():
     assert got == [None, "reply 2"]
     assert (c.sent, c.answered, c.abandoned) == (2, 1, 1)
     assert c.ever_answered and c.silent_s() == pytest.approx(0.0)
-    # the silence that ended at the answer: 0.6 s since the construction
+    # the silence that ended at the answer: 0.6 s since the first call
     assert c.take_silence() == pytest.approx(0.6)
     clock.t = 10.8
     assert c.take_silence() == pytest.approx(0.2)  # the next round: only the new one

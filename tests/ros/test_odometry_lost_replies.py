@@ -180,6 +180,14 @@ def _levels(run: Run) -> list[tuple[int, str]]:
         return [(ord(s.level), s.message) for s in run.status]
 
 
+def wait_for_status(run: Run, predicate, what: str, timeout: float = 10.0):
+    """wait_until on the statuses; a failure lists them."""
+    try:
+        return wait_until(predicate, timeout, what)
+    except AssertionError as e:
+        raise AssertionError(f"{e}; statuses (level, message): {_levels(run)}") from None
+
+
 @pytest.mark.parametrize(
     "service", ["get_sensor_data", "get_samples"], ids=["first_data_reply", "first_polls_reply"]
 )
@@ -196,21 +204,18 @@ def test_a_lost_first_reply_costs_one_interval_not_the_stream(service, ros_comma
             sent = dict(run.beagle.requests)
         assert sent["get_sensor_data"] > 20  # 0 more after the lost one before issue 25
         # WARN about the lost reply, then OK again, with the counts and the last poll's stamp
-        warn = wait_until(
-            lambda: next((m for lv, m in _levels(run) if lv == 1), None), 10, "a WARN"
-        )
-        if service == "get_sensor_data":
-            assert warn.startswith(f"no reply from {ns}/mm_beagle for "), warn
-        else:
-            assert "gap(s) in the single polls" in warn, warn
+        said = f"no reply from {ns}/mm_beagle for " if service == "get_sensor_data" else "gap(s)"
+
+        def the_warn():  # [its index] (a list: index 0 is an answer too)
+            return [i for i, (lv, m) in enumerate(_levels(run)) if lv == 1 and said in m][:1]
+
+        (i_warn,) = wait_for_status(run, the_warn, f"a WARN saying {said!r}")
 
         def ok_after_warn():
             levels = _levels(run)
-            first_warn = next(i for i, (lv, _) in enumerate(levels) if lv == 1)
-            return next((i for i, (lv, _) in enumerate(levels) if i > first_warn and lv == 0),
-                        None)  # fmt: skip
+            return next((i for i, (lv, _) in enumerate(levels) if i > i_warn and lv == 0), None)
 
-        i_ok = wait_until(ok_after_warn, 10, "OK again after the WARN")
+        i_ok = wait_for_status(run, ok_after_warn, "OK again after the WARN")
         with run.lock:
             ok = run.values(run.status[i_ok])
             stamps = {(m.header.stamp.sec, m.header.stamp.nanosec) for m in run.odom}
@@ -256,12 +261,19 @@ def test_every_fifth_reply_lost_the_odometry_goes_on(ros_command):
 
 
 def test_a_silent_beagle_is_an_error_then_ok_again(ros_command):
-    """No get_sensor_data answered for the first 2.5 s: WARN, ERROR past no_reply_error
-    (1 s), then OK once replies come, and the pose is right."""
+    """No get_sensor_data answered for 2.5 s from the first: WARN, ERROR past
+    no_reply_error (1 s), then OK once replies come, and the pose is right."""
     ns = "/odo_silent"
-    t0 = time.monotonic()
-    run = Run(ns, lambda name, n: name == "get_sensor_data" and time.monotonic() - t0 < 2.5,
-              {"rate": 20.0, "reply_timeout": 0.3, "no_reply_error": 1.0}, ros_command)  # fmt: skip
+    first: list[float] = []
+
+    def drop(name: str, n: int) -> bool:
+        if name != "get_sensor_data":
+            return False
+        first[:] = first or [time.monotonic()]
+        return time.monotonic() - first[0] < 2.5
+
+    run = Run(ns, drop, {"rate": 20.0, "reply_timeout": 0.3, "no_reply_error": 1.0},
+              ros_command)  # fmt: skip
     try:
         wait_until(lambda: _advancing(run, 0.2), 30, "odometry past x = 0.2 m")
 
@@ -269,7 +281,7 @@ def test_a_silent_beagle_is_an_error_then_ok_again(ros_command):
             levels = [lv for lv, _ in _levels(run)]
             return 2 in levels and 0 in levels[levels.index(2):]
 
-        wait_until(error_then_ok, 10, "ERROR, then OK")
+        wait_for_status(run, error_then_ok, "ERROR, then OK")
         err = next(m for lv, m in _levels(run) if lv == 2)
         assert err.startswith(f"no reply from {ns}/mm_beagle for "), err
         assert float(err.split(" for ")[1].split(" s")[0]) >= 1.0  # past no_reply_error
