@@ -110,7 +110,8 @@ class Run:
             rclpy.init()
         self.ns = ns
         self.server_node = rclpy.create_node("mm_beagle", namespace=ns)
-        self.beagle = StandInBeagle(self.server_node, drop)
+        # drop None: no services at all (mm_beagle not started)
+        self.beagle = StandInBeagle(self.server_node, drop) if drop else None
         self.listener = rclpy.create_node("lost_replies_listener")
         self.lock = threading.Lock()
         self.odom: list[Odometry] = []
@@ -286,5 +287,28 @@ def test_a_silent_beagle_is_an_error_then_ok_again(ros_command):
         assert err.startswith(f"no reply from {ns}/mm_beagle for "), err
         assert float(err.split(" for ")[1].split(" s")[0]) >= 1.0  # past no_reply_error
         run.check_poses()
+    finally:
+        run.close()
+
+
+def test_no_beagle_at_all_is_a_warning_then_an_error_naming_it(ros_command):
+    """No mm_beagle offered: WARN, then ERROR past no_reply_error, saying it is not offered
+    (before issue 25 the status said OK with polls_integrated 0 for as long as it ran)."""
+    ns = "/odo_no_beagle"
+    run = Run(ns, None, {"rate": 20.0, "reply_timeout": 0.3, "no_reply_error": 2.0}, ros_command)
+    try:
+        def warn_then_error():
+            levels = [lv for lv, _ in _levels(run)]
+            return 1 in levels and 2 in levels[levels.index(1):]
+
+        wait_for_status(run, warn_then_error, "WARN, then ERROR")
+        for lv, m in _levels(run):
+            assert lv > 0, m  # never OK
+            assert m.startswith(f"no reply from {ns}/mm_beagle for "), m
+            assert m.endswith(f"({ns}/mm_beagle/get_sensor_data not offered)"), m
+        with run.lock:
+            values = run.values(run.status[-1])
+        assert (values["requests_sent"], values["polls_integrated"]) == ("0", "0")
+        assert values["last_poll_stamp"] == "" and float(values["s_since_reply"]) > 2.0
     finally:
         run.close()
