@@ -748,10 +748,12 @@ class MainWindow(QMainWindow):
         settings too (rate, method and folders stay)."""
         self.showNormal()
         self.restoreState(self._default_state)
+        self.compact = False  # the default state: the docks side by side
         for dock in (self.control_dock, self.direction_dock):
             dock.setFloating(False)
             dock.show()
         self.resize(*self.default_size())
+        self.set_compact(self.width() < COMPACT_WIDTH)
         self.tabs.setCurrentIndex(0)
         if self.settings is not None:
             self.settings.remove("window")

@@ -316,3 +316,23 @@ def test_the_whole_window_fits_a_small_screen_at_first_start(qapp):
     assert main_window.first_size(avail, frame=(0, 30, 0, 0)) == (1024, 700 - 30 - 30)
     big = QRect(0, 0, 1600, 1000)
     assert main_window.first_size(big, frame=(4, 30, 4, 4)) == main_window.DEFAULT_SIZE
+
+
+def test_narrow_windows_stack_the_docks_and_wide_ones_put_them_back(window, qapp):
+    window.resize(800, 600)
+    settle(qapp, window)
+    assert window.compact
+    assert window.dockWidgetArea(window.direction_dock) == Qt.LeftDockWidgetArea
+    assert window.direction_dock.y() > window.control_dock.y()  # under it, both shown
+    assert window.direction_dock.isVisible() and window.control_dock.isVisible()
+    window.resize(1280, 800)
+    settle(qapp, window)
+    assert not window.compact
+    assert window.dockWidgetArea(window.direction_dock) == Qt.RightDockWidgetArea
+    window.resize(800, 600)
+    settle(qapp, window)
+    window.reset_layout()  # the default size on this screen, docks stacked if it is narrow
+    settle(qapp, window)
+    assert window.compact == (window.width() < 960)
+    side = Qt.LeftDockWidgetArea if window.compact else Qt.RightDockWidgetArea
+    assert window.dockWidgetArea(window.direction_dock) == side
