@@ -54,6 +54,14 @@ def _wait_up(client):
     return wait_until(every_sensor, 60, "a reply serving every sensor", interval=0.2)
 
 
+def _flags_poor_surface(chip: str) -> bool:
+    """The chip marks this module's poor-surface windows as low quality. Not the OTOS at
+    0.2 m/s: its firmware warns only when the optical speed falls below 0.25 m/s while its
+    filters expect more than 0.5 m/s, and its IMU carries the pose meanwhile (issue 26,
+    tests/pln2033/test_otos_driver.py pins the rule)."""
+    return bool(registry.chip_info(chip).quality_name) and chip != "otos"
+
+
 def _wait_polled(client, more_than: dict[str, int], newer_than: float) -> None:
     """Wait until /diagnostics received after ``newer_than`` (monotonic s; the client
     also holds the previous node's) counts more than ``more_than[dev]`` polls of each
@@ -65,7 +73,7 @@ def _wait_polled(client, more_than: dict[str, int], newer_than: float) -> None:
         for dev, chip in zip(DEVICES, CHIPS, strict=True):
             if int(diag[dev]["polls"]) <= more_than[dev]:
                 return False
-            if registry.chip_info(chip).quality_name and int(diag[dev]["low_quality_events"]) == 0:
+            if _flags_poor_surface(chip) and int(diag[dev]["low_quality_events"]) == 0:
                 return False
         return True
 
@@ -85,11 +93,13 @@ def test_sensor_data_names_each_chip_and_its_quality(node, client):
         info = registry.chip_info(chip)
         assert d.chip == chip
         assert d.samples > 500 and d.y_total_disp > 0.05, (chip, d.y_total_disp)
-        if info.quality_name:
+        if _flags_poor_surface(chip):
             assert 0 <= d.quality <= 255
             # 5 windows/s of 20 ms: about 10 % of the polls, treated like lifts
             assert d.low_quality_events_total > 0, chip
             assert d.low_quality_events_total < 0.3 * d.seq
+        elif info.quality_name:  # the OTOS: tracking ok throughout at this speed
+            assert d.quality == 1 and d.low_quality_events_total == 0, chip
         else:
             assert d.quality == -1 and d.low_quality_events_total == 0
 
@@ -108,7 +118,7 @@ def test_get_samples_carry_quality_and_the_low_quality_flag(node, client):
             if not res.success or len(res.dx) <= 500:
                 return None
             poor = any(f & FLAG_LOW_QUALITY for f in res.flags)
-            if registry.chip_info(chip).quality_name and not poor:
+            if _flags_poor_surface(chip) and not poor:
                 return None
         return replies
 
@@ -122,7 +132,7 @@ def test_get_samples_carry_quality_and_the_low_quality_flag(node, client):
         if not info.quality_name:
             assert set(q) == {-1} and not any(poor)
             continue
-        assert any(poor), chip
+        assert any(poor) == _flags_poor_surface(chip), chip
         threshold = info.quality_threshold
         assert all(qq < threshold for qq, p in zip(q, poor, strict=True) if p)
         assert all(qq >= threshold for qq, p in zip(q, poor, strict=True) if not p and qq >= 0)
