@@ -16,6 +16,7 @@ pytest.importorskip("PySide6")
 from PySide6.QtCore import QRect, Qt
 from PySide6.QtWidgets import (
     QAbstractButton,
+    QAbstractScrollArea,
     QComboBox,
     QGraphicsView,
     QLabel,
@@ -62,7 +63,12 @@ def _widest_line(fm, text: str) -> int:
 
 
 def _visible(w: QWidget, window: QWidget) -> bool:
-    return w.isVisibleTo(window) and w.isVisible() and not w.visibleRegion().isEmpty()
+    """Shown and on screen (a scroll area's opaque viewport hides the area's own region)."""
+    if not (w.isVisibleTo(window) and w.isVisible()):
+        return False
+    port = w.viewport() if isinstance(w, QAbstractScrollArea) else None
+    return not w.visibleRegion().isEmpty() or (port is not None
+                                               and not port.visibleRegion().isEmpty())
 
 
 def _label_problem(label: QLabel) -> str | None:
@@ -278,6 +284,12 @@ def test_map_keeps_a_usable_size_and_graphs_scroll(window, qapp, size):
     # the map's toolbar fits: no sideways scrolling, the map has most of the width
     assert map_view.minimumSizeHint().width() <= scroll.viewport().width()
     assert map_view.width() >= 0.55 * size[0], (map_view.width(), size)
+    window.tabs.setCurrentIndex(6)  # Maps, building a run: its toolbar fits too
+    maps = window.views["Maps"]
+    maps.progress.show()
+    maps.cancel_button.show()
+    settle(qapp, window)
+    assert maps.minimumSizeHint().width() <= window.tabs.currentWidget().viewport().width()
     window.tabs.setCurrentIndex(1)
     settle(qapp, window)
     graphs, scroll = window.views["Graphs"], window.tabs.currentWidget()

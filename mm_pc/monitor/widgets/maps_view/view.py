@@ -84,7 +84,7 @@ DEFAULT_SPEED = "20x"
 PLAY_INTERVAL_MS = 33
 GPS_CIRCLES = 5  # accuracy circles for the newest this many GPS fixes
 GPS_TRAIL = 120  # GPS fixes shown (60 s at 2 Hz); all 1374 of a run hide the map
-LEGEND_WIDTH = 190  # px
+LEGEND_WIDTH = 190  # px, the least; as wide as the widest legend
 
 PATH_COLOURS = {key: style[0] for key, style in PATH_STYLES.items()}
 BEACON_COLOUR = "#7b2fbe"
@@ -190,18 +190,24 @@ class MapsView(QWidget):
         self.speed_box.setCurrentText(DEFAULT_SPEED)
         self.speed_box.setToolTip("playback speed of the simulated run")
         self.speed_box.currentTextChanged.connect(self._speed_changed)
-        bar = QHBoxLayout()
-        bar.addWidget(QLabel("Source"))
-        bar.addWidget(self.source_box)
-        bar.addWidget(self.new_map_button)
-        bar.addSpacing(16)
-        bar.addWidget(self.sim_button)
-        bar.addWidget(self.progress)
-        bar.addWidget(self.cancel_button)
-        bar.addWidget(self.seed_box)
-        bar.addWidget(QLabel("Speed"))
-        bar.addWidget(self.speed_box)
-        bar.addStretch(1)
+        # two rows, so the tab fits an 800 px window while a run is built (progress, Cancel)
+        first, second = QHBoxLayout(), QHBoxLayout()
+        first.addWidget(QLabel("Source"))
+        first.addWidget(self.source_box)
+        first.addWidget(self.new_map_button)
+        first.addSpacing(16)
+        first.addWidget(self.progress)
+        first.addWidget(self.cancel_button)
+        first.addStretch(1)
+        second.addWidget(self.sim_button)
+        second.addWidget(self.seed_box)
+        second.addWidget(QLabel("Speed"))
+        second.addWidget(self.speed_box)
+        second.addStretch(1)
+        bar = QVBoxLayout()
+        bar.setSpacing(2)
+        bar.addLayout(first)
+        bar.addLayout(second)
         self._bar = bar
         self.status = QLabel("waiting for the robot's pose")
         self.error = QLabel("")
@@ -223,8 +229,7 @@ class MapsView(QWidget):
         plot.setLabel("left", "y (north)", units="m")
         # the legends live in a column of their own, so they never hide the map
         side = self.legend_box = pg.ViewBox(enableMouse=False)
-        side.setMinimumWidth(LEGEND_WIDTH)
-        side.setMaximumWidth(LEGEND_WIDTH)
+        self._fit_legend_column(LEGEND_WIDTH)
         self.plot_widget.addItem(side, row=0, col=1)
         self.code_legend = _legend(side, (2, 2))
         self._code_samples = _code_samples()
@@ -281,6 +286,18 @@ class MapsView(QWidget):
         self.sim_legend.addItem(self.gps_good, f"GPS fix, last {GPS_TRAIL} (usable)")
         self.sim_legend.addItem(self.gps_bad, "GPS fix (not usable)")
         self.sim_legend.addItem(self.gps_circles, f"GPS accuracy (newest {GPS_CIRCLES})")
+        self._fit_legend_column(LEGEND_WIDTH)
+
+    def _fit_legend_column(self, least: float) -> None:
+        """The legends' column as wide as the widest legend (px; at least ``least``): its
+        names ("raw mouse odometry (dashed)") were cut at the view's edge."""
+        legends = [lg for lg in (getattr(self, "code_legend", None),
+                                 getattr(self, "sim_legend", None)) if lg is not None]
+        for lg in legends:
+            lg.updateSize()
+        width = max([least, *(lg.boundingRect().width() + 6 for lg in legends)])
+        self.legend_box.setMinimumWidth(width)
+        self.legend_box.setMaximumWidth(width)
 
     # -- source --------------------------------------------------------------------------
 
