@@ -159,7 +159,9 @@ def test_two_robots_with_frame_prefixes_share_tf_without_colliding(tmp_path, ros
         assert f"{r}/map" not in parents  # the root of its tree
         for mouse in MICE:
             assert lookup_chain(parents, f"{r}/{mouse}", f"{r}/odom") == [
-                f"{r}/{mouse}", f"{r}/base_link", f"{r}/odom"
+                f"{r}/{mouse}",
+                f"{r}/base_link",
+                f"{r}/odom",
             ]
             assert lookup_chain(parents, f"{r}/{mouse}", f"{r}/map")[-1] == f"{r}/map"
             assert tf2_resolves(transforms, statics, f"{r}/{mouse}", f"{r}/odom") in (True, None)
@@ -208,8 +210,10 @@ def test_remapping_tf_per_namespace_keeps_two_robots_apart(tmp_path, ros_command
             beagle_process(ROBOTS["r2"], dict(os.environ), str(tmp_path / "r2.log"), "/r2"),
         ):
             wait_until(
-                lambda: all(got[f"/{r}/{n}"] for r in ROBOTS for n in ("tf", "tf_static"))
-                and any(t.transform.translation.x > 0.05 for t in list(got["/r1/tf"])),
+                lambda: (
+                    all(got[f"/{r}/{n}"] for r in ROBOTS for n in ("tf", "tf_static"))
+                    and any(t.transform.translation.x > 0.05 for t in list(got["/r1/tf"]))
+                ),
                 60,
                 "odom -> base_link and the mounts on /r1/tf(_static) and /r2/tf(_static)",
             )
