@@ -23,7 +23,10 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("mm_beagle", "mm_pc")
 LAUNCH_FILES = sorted(p for pkg in PACKAGES for p in (ROOT / pkg / "launch").glob("*.launch.py"))
 # The node modules whose PARAMETERS table lives elsewhere.
-PARAM_TABLE_FILE = {"mm_beagle.node.node": "mm_beagle/node/params.py"}
+PARAM_TABLE_FILE = {
+    "mm_beagle.node.node": "mm_beagle/node/params.py",
+    "mm_pc.ros.fusion_node": "mm_pc/ros/fusion_params.py",
+}
 
 
 @cache
