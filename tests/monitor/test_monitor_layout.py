@@ -17,8 +17,11 @@ from PySide6.QtCore import QRect, Qt
 from PySide6.QtWidgets import (
     QAbstractButton,
     QAbstractScrollArea,
+    QBoxLayout,
     QComboBox,
+    QFormLayout,
     QGraphicsView,
+    QGridLayout,
     QLabel,
     QLineEdit,
     QStatusBar,
@@ -184,6 +187,24 @@ def _legend_problems(view: QGraphicsView) -> list[str]:
     return out
 
 
+def _overlaps(host: QWidget) -> list[str]:
+    """Widgets of one box/grid/form layout drawn over each other (a layout squeezed
+    below what its items need: the Health table over the labels under it)."""
+    lay = host.layout()
+    if not isinstance(lay, (QBoxLayout, QGridLayout, QFormLayout)):
+        return []
+    shown = [w for w in host.children()
+             if isinstance(w, QWidget) and w.isVisible() and lay.indexOf(w) >= 0
+             and not w.isWindow()]
+    out = []
+    for i, a in enumerate(shown):
+        for b in shown[i + 1:]:
+            both = a.geometry().intersected(b.geometry())
+            if both.width() > 1 and both.height() > 1:
+                out.append(f"{_path(a)} overlaps {_path(b)} by {both.width()}x{both.height()} px")
+    return out
+
+
 def clipped_texts(window: QWidget) -> list[str]:
     """What the shown widgets of ``window`` cut off, one line each."""
     found: list[str] = []
@@ -207,6 +228,7 @@ def clipped_texts(window: QWidget) -> list[str]:
             found += [f"{type(w).__name__}: {p}" for p in _legend_problems(w)]
         if problem:
             found.append(f"{type(w.window()).__name__}/{_path(w)}: {problem}")
+        found += _overlaps(w)
     bar = window.statusBar()
     shown = QStatusBar.currentMessage(bar)  # what is drawn (the bar may elide it)
     if shown and not _elided_ok(shown, bar.toolTip()):
@@ -249,10 +271,18 @@ def settle(qapp, w, rounds: int = 4) -> None:
         qapp.processEvents()
 
 
+def DIAGNOSTICS(w) -> dict:  # noqa: N802 - a constant's shape, made per window
+    """A /diagnostics round as the bridge hands it over: a WARN with its message."""
+    return {dev: {"level": "1", "state": "up", "polls_per_s": "1000.2",
+                  "message": "late polls: 12 % of the reads came late", "last_error": ""}
+            for dev in w.ctx.session.devices}
+
+
 def _walk(qapp, w, size) -> dict[str, list[str]]:
     w.resize(*size)
     settle(qapp, w)
     w.statusBar().showMessage(REPLAY_SUMMARY)
+    w.views["Health"].on_diagnostics(DIAGNOSTICS(w))
     maps = w.views["Maps"]
     maps.progress.show()  # what "Simulate mowing run" shows while it builds
     maps.cancel_button.show()
@@ -305,10 +335,7 @@ def test_map_keeps_a_usable_size_and_graphs_scroll(window, qapp, size):
 def test_health_shows_the_message_row_at_1024_by_700(window, qapp):
     window.resize(1024, 700)
     health = window.views["Health"]
-    health.on_diagnostics({
-        dev: {"level": "1", "message": "late polls: 12 % of the reads came late",
-              "last_error": ""} for dev in window.ctx.session.devices
-    })
+    health.on_diagnostics(DIAGNOSTICS(window))
     window.tabs.setCurrentIndex(window.tabs.indexOf(window.tabs.widget(5)))
     assert window.tabs.tabText(window.tabs.currentIndex()) == "Health"
     settle(qapp, window)

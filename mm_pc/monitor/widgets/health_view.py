@@ -202,6 +202,8 @@ class HealthView(QWidget):
         split.addWidget(top)
         split.addWidget(self.plots)
         split.setStretchFactor(1, 2)
+        self._top, self._split = top, split
+        self._fit_table()
         QVBoxLayout(self).addWidget(split)
 
         if ctx.bridge is not None:
@@ -234,6 +236,10 @@ class HealthView(QWidget):
         self._fit_table()
         self.diag_state.setText(f"/diagnostics: {len(devices)} sensor(s), updated just now")
 
+    def resizeEvent(self, event) -> None:  # noqa: N802 - Qt API
+        super().resizeEvent(event)
+        self._fit_table()  # the labels wrap to another height at another width
+
     def _fit_table(self) -> None:
         """The table as high as all its rows and its header (px)."""
         rows = self.table.verticalHeader()
@@ -242,7 +248,21 @@ class HealthView(QWidget):
         height += self.table.horizontalHeader().sizeHint().height() + 2 * self.table.frameWidth()
         if self.table.horizontalScrollBar().isVisible():
             height += self.table.horizontalScrollBar().height()
-        self.table.setMinimumHeight(height)
+        self.table.setFixedHeight(height)
+        top, split = getattr(self, "_top", None), getattr(self, "_split", None)
+        if top is None or split is None or not split.isVisible():
+            return  # not laid out yet: the splitter starts from the panes' size hints
+        # the splitter keeps the pane's old height when its content grows: the table was
+        # drawn over the labels under it; give the pane what it needs, from the plots
+        lay = top.layout()
+        lay.activate()
+        # the wrapped labels' height at this width (the minimum size hint ignores it)
+        need = max(lay.totalMinimumSize().height(), lay.totalHeightForWidth(top.width()))
+        if top.minimumHeight() != need:
+            top.setMinimumHeight(need)  # the page scrolls rather than overlap the rows
+        sizes = split.sizes()
+        if sizes and sizes[0] < need:
+            split.setSizes([need, max(0, sum(sizes) - need)])
 
     def _fill_column(self, c: int, values: dict) -> None:
         level = _level(values.get("level"))
