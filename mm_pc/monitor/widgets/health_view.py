@@ -108,6 +108,8 @@ MAX_POINTS = 2000
 #: zoomed in to at most this many rows: thin them afresh (finer than the cache)
 ZOOM_ROWS = 50_000
 STALE_S = 5.0
+#: the plots' least height (px): two plots with their titles and axes readable
+PLOTS_MIN_HEIGHT = 280
 SENSOR_PENS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd")
 
 
@@ -156,6 +158,8 @@ class HealthView(QWidget):
 
         self.plots = pg.GraphicsLayoutWidget()
         self.plots.setBackground("w")
+        # the plots' axes and titles need this much; a lower window scrolls the page
+        self.plots.setMinimumHeight(PLOTS_MIN_HEIGHT)
         self.residual_plot = self.plots.addPlot(row=0, col=0, title="Two-sensor residual")
         # one unit, named once: mm (pyqtgraph's SI prefix showed µm beside a text in m)
         self.residual_plot.setLabel("left", "residual (mm)")
