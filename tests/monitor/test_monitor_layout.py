@@ -286,7 +286,8 @@ def _walk(qapp, w, size) -> dict[str, list[str]]:
     maps = w.views["Maps"]
     maps.progress.show()  # what "Simulate mowing run" shows while it builds
     maps.cancel_button.show()
-    maps.sim_legend.show()
+    maps.source = "sim"  # the simulated run's view (its legend), without running one
+    maps._show_source()
     per_tab = {}
     for i in range(w.tabs.count()):
         w.tabs.setCurrentIndex(i)

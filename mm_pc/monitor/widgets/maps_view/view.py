@@ -289,10 +289,11 @@ class MapsView(QWidget):
         self._fit_legend_column(LEGEND_WIDTH)
 
     def _fit_legend_column(self, least: float) -> None:
-        """The legends' column as wide as the widest legend (px; at least ``least``): its
-        names ("raw mouse odometry (dashed)") were cut at the view's edge."""
+        """The legends' column as wide as the widest legend shown (px; at least ``least``):
+        its names ("raw mouse odometry (dashed)") were cut at the view's edge."""
         legends = [lg for lg in (getattr(self, "code_legend", None),
-                                 getattr(self, "sim_legend", None)) if lg is not None]
+                                 getattr(self, "sim_legend", None))
+                   if lg is not None and lg.isVisibleTo(lg.parentItem())]
         for lg in legends:
             lg.updateSize()
         width = max([least, *(lg.boundingRect().width() + 6 for lg in legends)])
@@ -327,6 +328,7 @@ class MapsView(QWidget):
         sim = self.source == "sim"
         for item in [*self.sim_items, *self.beacon_labels, self.sim_legend]:
             item.setVisible(sim)
+        self._fit_legend_column(LEGEND_WIDTH)
         self.robot.setVisible(not sim)
         self.new_map_button.setEnabled(not sim)
         cmap = self.shown_map
