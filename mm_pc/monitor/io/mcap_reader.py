@@ -7,6 +7,7 @@ An MCAP file or a rosbag2 folder (:func:`.bag_format.bag_files`); layout in
 from __future__ import annotations
 
 import math
+import struct
 from pathlib import Path
 
 from mm_pc.core.sensor_data import Reading, Reply
@@ -22,7 +23,7 @@ from mm_pc.monitor.io.schemas import (
     SENSOR_TYPE,
 )
 
-__all__ = ["open_messages", "read_replies", "read_samples"]
+__all__ = ["open_messages", "read_replies", "read_replies_up_to_cut", "read_samples"]
 
 
 def open_messages(path: str | Path):
@@ -68,6 +69,78 @@ def _open_file(path: Path):
     return messages, types
 
 
+def read_up_to_cut(path: str | Path):
+    """(messages, types, warning) of one MCAP file that may be cut short (a crash, a full
+    disk): the messages of its whole chunks, in file order, and a warning saying how much
+    was read ("" for a whole file). A file that is damaged in another way (bad magic, a
+    CRC error) raises the ValueError of :func:`open_messages`."""
+    from mcap.exceptions import EndOfFile
+    from mcap.records import Channel, DataEnd, Message, Schema
+    from mcap.stream_reader import StreamReader
+
+    path = Path(path)
+    try:
+        messages, types = _open_file(path)
+        return messages, types, ""
+    except ValueError as e:
+        strict_error = e
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
+    messages, whole_bytes, record = [], 0, None
+    with open(path, "rb") as f:
+        if f.read(8) != b"\x89MCAP0\r\n":
+            raise strict_error
+        f.seek(0)
+        try:
+            for record in StreamReader(f, validate_crcs=True).records:
+                if isinstance(record, Schema):
+                    schemas[record.id] = record
+                elif isinstance(record, Channel):
+                    channels[record.id] = record
+                elif isinstance(record, Message) and record.channel_id in channels:
+                    channel = channels[record.channel_id]
+                    messages.append((schemas.get(channel.schema_id), channel, record))
+                    whole_bytes = f.tell()  # after the chunk holding it
+                elif isinstance(record, DataEnd):
+                    break  # every message is read; the cut is in the index after them
+        except (EndOfFile, struct.error):  # the cut (a short read): what came before is whole
+            if whole_bytes == 0:
+                raise ValueError(
+                    f"{path} is cut short (a crash or a full disk?) before its first whole "
+                    f"block of messages ({path.stat().st_size} bytes): nothing to replay"
+                ) from None
+        except Exception:
+            raise strict_error from None
+        else:
+            if whole_bytes == 0 or not isinstance(record, DataEnd):
+                raise strict_error  # it read to the end: the file is damaged, not cut
+    size = path.stat().st_size
+    types = {c.topic: (schemas[c.schema_id].name if c.schema_id in schemas else "")
+             for c in channels.values()}  # fmt: skip
+    if isinstance(record, DataEnd):
+        warning = (
+            f"{path.name} is cut short (a crash or a full disk?): all {len(messages)} messages "
+            f"were read; only the index at its end ({size} bytes) is missing"
+        )
+    else:
+        warning = (
+            f"{path.name} is cut short (a crash or a full disk?): read {len(messages)} "
+            f"messages from the first {whole_bytes} of its {size} bytes; the rest is lost"
+        )
+    return messages, types, warning
+
+
+def read_replies_up_to_cut(path: str | Path) -> tuple[list[Reply], str]:
+    """(replies, warning) like :func:`read_replies`, but a single MCAP file cut short gives
+    the replies of its whole messages and a warning saying how much was read ("" when the
+    file is whole); see :func:`read_up_to_cut`."""
+    path = Path(path)
+    if not path.is_file():  # a rosbag2 folder or a missing file: read strictly
+        return read_replies(path), ""
+    messages, types, warning = read_up_to_cut(path)
+    return _replies_of(path, messages, types), warning
+
+
 def read_replies(path: str | Path) -> list[Reply]:
     """The replies recorded in ``path`` (by :class:`McapRecorder`, or any MCAP file with
     ``mm_interfaces/msg/SensorData`` messages), in recorded order.
@@ -78,10 +151,14 @@ def read_replies(path: str | Path) -> list[Reply]:
     (``received_s`` = log_time in s, ``rtt_s`` = 0). Raises ValueError for a
     missing, non-MCAP or damaged file, or one without sensor data.
     """
+    messages, types = open_messages(path)
+    return _replies_of(path, messages, types)
+
+
+def _replies_of(path, messages, types) -> list[Reply]:
     ros = ros_types()
     deserialize_message, SensorData = ros.deserialize, ros.SensorData  # noqa: N806
     Float64MultiArray = ros.Float64MultiArray  # noqa: N806
-    messages, types = open_messages(path)
     meta = [m for s, c, m in messages if c.topic == META_TOPIC and s and s.name == META_TYPE]
     # a monitor recording's replies are on SENSOR_TOPIC (the live topic's SensorData is
     # another stream); a foreign bag's SensorData on any topic
