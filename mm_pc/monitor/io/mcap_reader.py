@@ -138,7 +138,21 @@ def read_replies_up_to_cut(path: str | Path) -> tuple[list[Reply], str]:
     if not path.is_file():  # a rosbag2 folder or a missing file: read strictly
         return read_replies(path), ""
     messages, types, warning = read_up_to_cut(path)
-    return _replies_of(path, messages, types), warning
+    replies = _replies_of(path, messages, types)
+    if warning and len(replies) >= 2 and not _as_whole(replies[-1], replies[-2]):
+        replies.pop()  # the cut fell between its messages
+        warning += "; the last reply, cut in two, is left out"
+    if warning:
+        warning += f"; {len(replies)} replies to replay"
+    return replies, warning
+
+
+def _as_whole(last: Reply, before: Reply) -> bool:
+    """Does ``last`` have as many readings and fetched polls as ``before``?"""
+    def polls(r: Reply) -> int:
+        return sum(v is not None for v in (r.polls or {}).values())
+
+    return len(last.readings) >= len(before.readings) and polls(last) >= polls(before)
 
 
 def read_replies(path: str | Path) -> list[Reply]:
