@@ -8,6 +8,7 @@ the raw reply to a recorder if one is attached, and announces it.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,7 +21,13 @@ from mm_pc.core.sensor_data import Reply
 from mm_pc.monitor.model.session import MonitorSession
 from mm_pc.monitor.settings import config_dir
 
-__all__ = ["MonitorConfig", "MonitorContext", "default_calibration_path"]
+__all__ = ["DATA_STATES", "STALE_STATES", "MonitorConfig", "MonitorContext",
+           "default_calibration_path"]
+
+#: where the values on screen come from: the link's state, or the window's mode
+DATA_STATES = ("live", "waiting", "lost", "paused", "replay", "offline")
+#: states in which the newest values are old: views grey them and say since when
+STALE_STATES = ("lost", "paused")
 
 
 def default_calibration_path() -> Path:
@@ -51,6 +58,7 @@ class MonitorContext(QObject):
     calibration_changed = Signal()  # a new calibration is in force
     odometry_changed = Signal()  # pose method, geometry or sensor changed
     status_message = Signal(str)  # a line for the status bar
+    data_state_changed = Signal(str)  # one of DATA_STATES
 
     def __init__(
         self, session: MonitorSession, bridge=None, config: MonitorConfig | None = None
@@ -66,6 +74,30 @@ class MonitorContext(QObject):
         self.calibration_source = ""
         #: the robot's mounts and axis length as edited in the geometry dialog
         self.robot_geometry: RobotGeometry = DEFAULT_GEOMETRY
+        #: one of DATA_STATES, set by the window from the link state, pause and replay
+        self.data_state = "offline" if bridge is None else "waiting"
+        #: wall-clock time (time.time(), s) the newest reply was processed; None before
+        self.last_data_time: float | None = None
+
+    def set_data_state(self, state: str) -> None:
+        """Say where the values come from now (one of DATA_STATES); the views are told
+        when it changes."""
+        if state not in DATA_STATES:
+            raise ValueError(f"data state must be one of {DATA_STATES}, got {state!r}")
+        if state != self.data_state:
+            self.data_state = state
+            self.data_state_changed.emit(state)
+
+    @property
+    def stale(self) -> bool:
+        """True when the values on screen are old (link lost, polling paused)."""
+        return self.data_state in STALE_STATES
+
+    def no_data_since(self) -> str:
+        """"no data since HH:MM:SS" (local time of the newest reply), or "no data yet"."""
+        if self.last_data_time is None:
+            return "no data yet"
+        return "no data since " + time.strftime("%H:%M:%S", time.localtime(self.last_data_time))
 
     def on_reply(self, reply: Reply) -> None:
         """Process one reply (GUI thread) and tell the views."""
@@ -77,6 +109,7 @@ class MonitorContext(QObject):
         if not replies:
             return
         known = bool(self.session.devices)
+        self.last_data_time = time.time()
         self.session.process_batch(replies)
         for reply in replies:
             if self.recorder is None:

@@ -58,6 +58,8 @@ COMPACT_WIDTH = 960
 ACHIEVED_OK = 0.9
 #: style of a figure that is below what was asked (orange: not an error, a warning)
 WARNING_STYLE = "color: #b35900; font-weight: bold"
+#: style of a figure that has no meaning now (paused, replaying): grey, not a warning
+IDLE_STYLE = "color: #666666"
 
 STATE_TEXT = {
     "waiting": ("waiting for {beagle}", "#a66f00"),
@@ -138,6 +140,18 @@ class RateEditor(QWidget):
         """
         self.achieved_hz = achieved_hz
         wanted = self.ctx.config.rate_hz
+        state = self.ctx.data_state
+        if state in ("paused", "replay", "lost"):  # no live rate to achieve: say why
+            text, style = {
+                "paused": (f"paused: no requests ({wanted:g} Hz when resumed)", IDLE_STYLE),
+                "replay": (f"replaying a recording (live {wanted:g} Hz after Back to live)",
+                           IDLE_STYLE),
+                "lost": (f"{wanted:g} Hz asked; link lost, {self.ctx.no_data_since()}",
+                         WARNING_STYLE),
+            }[state]
+            self.now.setText(text)
+            self.now.setStyleSheet(style)
+            return False
         if achieved_hz is None:
             self.now.setText(f"now: {wanted:g} Hz")
             self.now.setStyleSheet("")
@@ -536,6 +550,29 @@ class MainWindow(QMainWindow):
         self.state_label.setStyleSheet(f"color: {colour}; font-weight: bold")
         for label in (self.rtt_label, self.rate_label):  # the link's figures: not the replay's
             label.setVisible(state != "replay")
+        self._update_data_state(state == "replay")
+
+    def _update_data_state(self, replaying: bool = False) -> None:
+        """Tell the views where the values come from (live, lost, paused, replay, ...)."""
+        bar = getattr(self, "replay_bar", None)
+        bridge = self.ctx.bridge
+        link = getattr(self, "link_state", "offline")
+        if replaying or (bar is not None and bar.active):
+            state = "replay"
+        elif bridge is None:
+            state = "offline"
+        elif link == "lost":
+            state = "lost"
+        elif not getattr(bridge, "polling", True):
+            state = "paused"
+        else:
+            state = "live" if link == "connected" else "waiting"
+        self.ctx.set_data_state(state)
+        editor = getattr(self, "rate_editor", None)
+        if editor is not None:
+            editor.show_achieved(editor.achieved_hz)
+            if state != "live":
+                self.rate_label.setStyleSheet("")
 
     def _on_stats(self, stats) -> None:
         if stats.rtt_p50_s == stats.rtt_p50_s:  # not NaN
@@ -555,6 +592,7 @@ class MainWindow(QMainWindow):
         self.pause_button.setChecked(not polling)
         self.pause_button.blockSignals(False)
         self.pause_button.setText("Pause polling" if polling else "Resume polling")
+        self._update_data_state()
 
     def set_paused(self, paused: bool) -> None:
         if self.ctx.bridge is not None:

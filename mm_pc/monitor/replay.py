@@ -2,8 +2,10 @@
 
 :func:`start_replay` / File > Replay read and check the whole file first (a bad
 file changes nothing; the reason goes to a dialog, the status bar and the log:
-logger ``mm_pc.monitor.replay``). Nothing is asked before that; the speed is
-chosen on the replay bar (:mod:`~.widgets.replay_bar`), also while it runs.
+logger ``mm_pc.monitor.replay``). A file cut short (a crash, a full disk) is replayed
+up to its last whole message, with a warning saying how much was read (:func:`warn_cut`).
+Nothing is asked before that; the speed is chosen on the replay bar
+(:mod:`~.widgets.replay_bar`), also while it runs.
 Entering replay mode prepares the window:
 
 * a live bridge stops feeding the session: its polling is paused and its
@@ -40,7 +42,7 @@ from PySide6.QtCore import QObject, Qt, QTimer, Signal
 from PySide6.QtWidgets import QFileDialog, QMessageBox, QProgressBar
 
 from mm_pc.core.sensor_data import Reply
-from mm_pc.monitor.io.mcap_reader import read_replies
+from mm_pc.monitor.io.mcap_reader import read_replies_up_to_cut
 from mm_pc.monitor.model.session import MonitorSession
 from mm_pc.monitor.settings import last_folder, open_settings, remember_folder
 
@@ -282,9 +284,29 @@ def pose_source(replies: list[Reply]) -> str:
     )
 
 
-def load_recording(path: str | Path, speed=1.0) -> tuple[float, list]:
-    """(speed, replies) of a recording; ValueError saying what is wrong with either."""
-    return parse_speed(speed), read_replies(Path(path))
+def load_recording(path: str | Path, speed=1.0) -> tuple[float, list, str]:
+    """(speed, replies, warning) of a recording; ValueError saying what is wrong with either.
+
+    A file cut short (a crash, a full disk) gives the replies of its whole messages and a
+    warning saying how much was read; "" for a whole file."""
+    speed = parse_speed(speed)
+    replies, warning = read_replies_up_to_cut(Path(path))
+    return speed, replies, warning
+
+
+def warn_cut(window, warning: str, dialog: bool) -> None:
+    """A recording cut short is replayed up to its last whole message: say so in the log and
+    (with ``dialog``) a warning box (window-modal, not blocking; ``window.replay_warning``)."""
+    log.warning("replay: %s", warning)
+    if not dialog:
+        return
+    text = ("The recording is incomplete; it is replayed up to its last whole message."
+            f"\n\n{warning}")
+    box = QMessageBox(QMessageBox.Warning, "Replay", text, QMessageBox.Ok, window)
+    box.setAttribute(Qt.WA_DeleteOnClose)
+    window.replay_warning = box
+    box.destroyed.connect(lambda *_: setattr(window, "replay_warning", None))
+    box.open()
 
 
 def refuse(window, message: str, dialog: bool) -> None:
@@ -363,18 +385,19 @@ def start_replay(window, path: str | Path, speed=1.0, dialog: bool = False) -> R
     ``dialog``), and nothing changed.
     """
     try:
-        speed, replies = load_recording(path, speed)
+        speed, replies, warning = load_recording(path, speed)
     except ValueError as e:
         refuse(window, str(e), dialog)
         return None
-    return begin_replay(window, Path(path), replies, speed, dialog)
+    return begin_replay(window, Path(path), replies, speed, dialog, warning)
 
 
 def begin_replay(
-    window, path: Path, replies: list, speed: float, dialog: bool = False
+    window, path: Path, replies: list, speed: float, dialog: bool = False, warning: str = ""
 ) -> Replayer | None:
     """Enter replay mode with ``replies`` (read from ``path``); None (and why, see
-    :func:`refuse`) if they cannot be shown."""
+    :func:`refuse`) if they cannot be shown. ``warning``: the file was cut short (see
+    :func:`warn_cut`); it leads the status bar's messages of this replay."""
     devices = next((tuple(r.id for r in rep.readings) for rep in replies if rep.readings), ())
     if not devices:
         refuse(window, f"{path} holds no sensor readings", dialog)
@@ -395,10 +418,12 @@ def begin_replay(
     _prepare_session(ctx, devices)
     replayer = Replayer(ctx, replies, speed, parent=window)
 
+    cut = f"{warning}; " if warning else ""
+
     def ended() -> None:
         st = ctx.session.stats
         window.statusBar().showMessage(
-            f"replay of {path.name} ended: {replayer.position} of {len(replies)} replies; "
+            f"{cut}replay of {path.name} ended: {replayer.position} of {len(replies)} replies; "
             f"pose from {st.polls} single polls, {st.per_reply} replies per reply, "
             f"{st.gaps} gap(s); live data waits for Back to live",
             10000,
@@ -412,8 +437,11 @@ def begin_replay(
     _set_mode_controls(window, True)
     _set_time_base(window, f"t: seconds from the first reply of the recording {path.name}",
                    path.stem)  # fmt: skip
+    window.replay_cut_warning = warning
+    if warning:
+        warn_cut(window, warning, dialog)
     window.statusBar().showMessage(
-        f"replaying {path.name}: {len(replies)} replies, {replayer.total_s:.1f} s at "
+        f"{cut}replaying {path.name}: {len(replies)} replies, {replayer.total_s:.1f} s at "
         f"{'max speed' if math.isinf(speed) else speed_name(speed)}; " + pose_source(replies)
     )
     replayer.start()
@@ -471,11 +499,11 @@ def load_in_background(window, path: str | Path, speed, dialog: bool = True):
         busy.deleteLater()
         window.replay_reading = None
         try:
-            speed_, replies = future.result()
+            speed_, replies, warning = future.result()
         except ValueError as e:
             refuse(window, str(e), dialog)
             return
-        begin_replay(window, path, replies, speed_, dialog)
+        begin_replay(window, path, replies, speed_, dialog, warning)
 
     timer.timeout.connect(check)
     timer.start(100)

@@ -12,6 +12,8 @@ between rows (:func:`gain_peak`). It is based on speed and time, not on the
 largest displacement of the last rows, so one long reply (after a pause, a
 registers refresh or a 1 kHz fetch) does not shrink the arrows to dots for
 seconds; that reply's own arrow is drawn clipped at the circle's edge.
+When the values are stale (link lost, polling paused: ``ctx.stale``) the arrow is
+not drawn and the dial says so ("link lost: no data since 14:03:12") in grey.
 """
 
 from __future__ import annotations
@@ -38,6 +40,10 @@ GAIN_PERCENTILE = 95.0
 TAIL_ROWS = 1024
 #: Part of the circle's radius the largest recent displacement may fill.
 FILL = 0.9
+#: Colour of the texts of a dial whose values are stale.
+STALE_COLOUR = "#888888"
+#: What a dial says in each stale state (then ctx.no_data_since()).
+STALE_WORDS = {"lost": "link lost", "paused": "paused"}
 
 
 def auto_gain(peak_m: float, radius_px: float) -> float:
@@ -101,6 +107,8 @@ class DirectionWidget(QWidget):
         self.gain = GAINS_PX_PER_MM[0] * 1e3  # px/m in force
         self.dx = self.dy = 0.0  # m, sensor frame
         self.speed = 0.0  # m/s
+        #: "" while the values are live; else why they are not ("paused: no data since …")
+        self.stale_text = ""
         self.setMinimumSize(140, 140)
         # paintEvent fills the whole rect: Qt need not paint the panel and window under it
         self.setAttribute(Qt.WidgetAttribute.WA_OpaquePaintEvent)
@@ -123,6 +131,13 @@ class DirectionWidget(QWidget):
             self.gain = self.gain_setting
         self.update()
 
+    def set_stale(self, text: str) -> None:
+        """``text`` (why the values are old) hides the arrow and replaces the speed; ""
+        shows them again."""
+        if text != self.stale_text:
+            self.stale_text = text
+            self.update()
+
     def vector_px(self) -> tuple[float, float]:
         """The drawn arrow (px): (dx, dy) times the gain, sensor frame (X right, Y up)."""
         return self.dx * self.gain, self.dy * self.gain
@@ -133,17 +148,23 @@ class DirectionWidget(QWidget):
         p.setRenderHint(QPainter.RenderHint.Antialiasing)
         w, h = self.width(), self.height()
         cx, cy, r = w / 2, h / 2 + 4, self.radius_px()
+        bold, small = self._fonts()
+        right = Qt.AlignmentFlag.AlignRight
+        small_line = QFontMetricsF(small).height()
+        if self.stale_text:  # no arrow: an old displacement must not look like motion
+            _text(p, bold, STALE_COLOUR, QRectF(4, 2, w - 8, QFontMetricsF(bold).height()),
+                  right, "– mm/s")
+            _text(p, small, STALE_COLOUR, QRectF(4, cy + r + 2, w - 8, 2 * small_line),
+                  Qt.AlignmentFlag.AlignHCenter | Qt.TextFlag.TextWordWrap, self.stale_text)
+            p.end()
+            return
         vx, vy = self.vector_px()
         length = math.hypot(vx, vy)
         if length > r > 0:  # a long reply's arrow stops at the circle (the gain fits speed)
             vx, vy = vx * r / length, vy * r / length
         self._draw_arrow(p, cx, cy, vx, vy)
-
-        bold, small = self._fonts()
-        right = Qt.AlignmentFlag.AlignRight
         _text(p, bold, "#202020", QRectF(4, 2, w - 8, QFontMetricsF(bold).height()), right,
               f"{self.speed * 1e3:.1f} mm/s")
-        small_line = QFontMetricsF(small).height()
         mode = "auto" if self.gain_setting is None else "fixed"
         _text(p, small, "#606060", QRectF(4, h - small_line - 2, w - 8, small_line), right,
               f"gain ×{self.gain / 1e3:g} px/mm ({mode})")
@@ -236,13 +257,27 @@ class DirectionPanel(QWidget):
         lay.addLayout(self.box, 1)
         ctx.devices_known.connect(self._ensure_widgets)
         ctx.session_reset.connect(self._invalidate)
+        ctx.data_state_changed.connect(self._show_stale)
         self._ensure_widgets()
+
+    def stale_text(self) -> str:
+        """What the dials say instead of a value ("" while the values are live)."""
+        state = self.ctx.data_state
+        if state not in STALE_WORDS:
+            return ""
+        return f"{STALE_WORDS[state]}: {self.ctx.no_data_since()}"
+
+    def _show_stale(self, *_args) -> None:
+        text = self.stale_text()
+        for w in self.widgets:
+            w.set_stale(text)
 
     def _ensure_widgets(self, *_args) -> None:
         devices = self.ctx.session.devices
         for k in range(len(self.widgets), len(devices)):
             w = DirectionWidget(k, devices[k], self)
             w.gain_setting = self.gain_box.currentData()
+            w.set_stale(self.stale_text())
             self.box.addWidget(w, 1)
             w.show()  # the layout would only show it from the event loop
             self.widgets.append(w)

@@ -47,6 +47,7 @@ from PySide6.QtWidgets import (
 
 from mm_pc.monitor.context import MonitorContext
 from mm_pc.monitor.model.chips import chip_key, chip_title, quality_label, quality_threshold
+from mm_pc.monitor.model.outages import OutageFinder, with_breaks
 from mm_pc.monitor.model.peak_decimator import PeakDecimator, bucket_peak
 
 __all__ = ["DIAG_COLUMNS", "LEVEL_COLOURS", "HealthView"]
@@ -111,6 +112,9 @@ STALE_S = 5.0
 #: the plots' least height (px): two plots with their titles and axes readable
 PLOTS_MIN_HEIGHT = 280
 SENSOR_PENS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd")
+#: the table's look when its values are old (link lost, or no /diagnostics for STALE_S)
+STALE_BACKGROUND = "#e6e6e6"
+STALE_TEXT = "#808080"
 
 
 class HealthView(QWidget):
@@ -129,6 +133,10 @@ class HealthView(QWidget):
         self.bridge_stats = None
         self._caches: dict[str, PeakDecimator] = {}
         self._hist_key: tuple = ()
+        self._outage_finder = OutageFinder()
+        self._outages = np.empty((0, 2))
+        #: why the table's values are old ("" while they are fresh); shown in its cells
+        self.stale_reason = ""
 
         # one row per quantity, one column per sensor: twelve quantities side by side did
         # not fit (the last column was cut off); two or four sensors do
@@ -215,6 +223,7 @@ class HealthView(QWidget):
             ctx.bridge.stats_updated.connect(self.on_bridge_stats)
         ctx.session_reset.connect(self._invalidate)
         ctx.odometry_changed.connect(self._invalidate)
+        ctx.data_state_changed.connect(lambda _s: self._show_stale())
         self.residual_plot.getViewBox().sigXRangeChanged.connect(self._range_changed)
         self._show_counters()
 
@@ -235,10 +244,38 @@ class HealthView(QWidget):
             self.table.setHorizontalHeaderLabels(devices)
             for c, dev in enumerate(devices):
                 self.table.horizontalHeaderItem(c).setToolTip(f"sensor {c + 1}: {dev}")
+        self.stale_reason = ""
         for c, dev in enumerate(devices):
             self._fill_column(c, self.diagnostics[dev])
         self._fit_table()
         self.diag_state.setText(f"/diagnostics: {len(devices)} sensor(s), updated just now")
+        self._show_stale()
+
+    def _stale_reason(self) -> str:
+        """Why the table's values are old ("" when they are not)."""
+        if self.ctx.data_state == "lost":
+            return f"link lost: {self.ctx.no_data_since()}"
+        if self._diag_time is not None and time.monotonic() - self._diag_time > STALE_S:
+            since = time.strftime("%H:%M:%S", time.localtime(
+                time.time() - (time.monotonic() - self._diag_time)))
+            return f"no /diagnostics since {since}"
+        return ""
+
+    def _show_stale(self) -> None:
+        """Grey the table and say why when its values are old: Status says "no data", State
+        the reason, instead of the node's last "up" / "WARN"; fresh values restore them."""
+        reason = self._stale_reason()
+        if reason == self.stale_reason:
+            return
+        self.stale_reason = reason
+        devices = list(self.diagnostics)
+        for c, dev in enumerate(devices):
+            self._fill_column(c, self.diagnostics[dev])
+        if reason:
+            self.diag_state.setText(f"/diagnostics: {reason}; the table shows the last "
+                                    "values, greyed")
+        elif devices:
+            self.diag_state.setText("/diagnostics: the values of before, until the next update")
 
     def resizeEvent(self, event) -> None:  # noqa: N802 - Qt API
         super().resizeEvent(event)
@@ -271,9 +308,15 @@ class HealthView(QWidget):
     def _fill_column(self, c: int, values: dict) -> None:
         level = _level(values.get("level"))
         name, colour = LEVEL_COLOURS.get(level, (str(level), "#ffffff"))
-        brush = QBrush(QColor(colour))
+        stale = self.stale_reason
+        brush = QBrush(QColor(STALE_BACKGROUND if stale else colour))
+        foreground = QBrush(QColor(STALE_TEXT if stale else "#000000"))
         for r, (title, key, tip) in enumerate(DIAG_COLUMNS):
             text = name if key == "level" else str(values.get(key, "–"))
+            if stale and key == "level":
+                text = "no data"
+            elif stale and key == "state":
+                text = stale
             item = self.table.item(r, c)
             if item is None:
                 item = QTableWidgetItem()
@@ -281,6 +324,7 @@ class HealthView(QWidget):
             item.setText(text)
             item.setToolTip(f"{text}\n{title}: {tip}" if key in TEXT_COLUMNS else f"{title}: {tip}")
             item.setBackground(brush)
+            item.setForeground(foreground)
 
     def on_bridge_stats(self, stats) -> None:
         self.bridge_stats = stats
@@ -288,6 +332,7 @@ class HealthView(QWidget):
 
     def _invalidate(self) -> None:
         self._caches.clear()
+        self._outage_finder.reset()
         self._version = -1
         self._last_plot = 0.0
 
@@ -300,7 +345,8 @@ class HealthView(QWidget):
     def refresh(self) -> None:
         """Redraw what changed (cheap when nothing did)."""
         self._show_counters()
-        if self._diag_time is not None:
+        self._show_stale()
+        if self._diag_time is not None and self.ctx.data_state != "lost":
             age = time.monotonic() - self._diag_time
             if age > STALE_S:
                 self.diag_state.setText(f"/diagnostics: no update for {age:.0f} s (stale)")
@@ -325,21 +371,25 @@ class HealthView(QWidget):
         t, y = cache.thinned(t_all, y_all, MAX_POINTS, lowest)
         vb = self.residual_plot.getViewBox()
         if vb.autoRangeEnabled()[0] or len(t_all) == 0:
-            return t, y
+            return with_breaks(t, y, self._outages)
         x0, x1 = vb.viewRange()[0]
         lo, hi = np.searchsorted(t_all, [x0, x1])
         lo, hi = max(int(lo) - 1, 0), min(int(hi) + 1, len(t_all))
         if hi - lo <= ZOOM_ROWS:
-            return bucket_peak(t_all[lo:hi], y_all[lo:hi], MAX_POINTS, lowest)
+            t, y = bucket_peak(t_all[lo:hi], y_all[lo:hi], MAX_POINTS, lowest)
+            return with_breaks(t, y, self._outages)
         keep = (t >= t_all[lo]) & (t <= t_all[hi - 1])
-        return t[keep], y[keep]
+        return with_breaks(t[keep], y[keep], self._outages)
 
     def _draw(self, hist, method: str) -> None:
         key = (id(hist), hist.dropped_rows)
         if key != self._hist_key:
             self._hist_key = key
             self._caches.clear()
+            self._outage_finder.reset()
         t_all = hist.column("t")
+        # an outage (no rows for a while) is drawn as a break, not a line across it
+        self._outages = self._outage_finder.update(t_all)
         rt, ry = self._thinned(hist, "residual", t_all)
         self.residual_curve.setData(rt, ry * 1e3)
         if method == "two-sensor":

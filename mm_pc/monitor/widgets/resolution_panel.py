@@ -18,6 +18,8 @@ saying why and what to do instead (calibrate the scale, docs/pose-math.md).
 
 from __future__ import annotations
 
+import time
+
 from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import (
     QGridLayout,
@@ -38,6 +40,8 @@ __all__ = ["CPI_MAX", "CPI_MIN", "CPI_STEP", "ResolutionPanel", "validate_cpi"]
 
 #: how often (ms) the panel looks for a new CPI in the history
 REFRESH_MS = 200
+#: a refusal stays beside its field this long (s), or until the next change succeeds
+ERROR_SHOW_S = 15.0
 
 _DEFAULT_CPI = chip_info(DEFAULT_CHIP).cpi  # an old node names no chip: a PLN2033
 CPI_MIN, CPI_MAX, CPI_STEP = _DEFAULT_CPI.min, _DEFAULT_CPI.max, _DEFAULT_CPI.step
@@ -102,6 +106,7 @@ class _SensorRow:
         self.read_back = QLabel("")
         self.read_back.setWordWrap(True)
         self.error = QLabel("")
+        self.error_at: float | None = None  # time.monotonic() the error was shown
         self.error.setStyleSheet(RED)
         self.error.setWordWrap(True)
         self.name = QLabel(device)
@@ -214,19 +219,19 @@ class ResolutionPanel(QGroupBox):
         """
         row = self.rows[device]
         if row.fixed():
-            row.error.setText(fixed_tip(row.chip))
+            self._set_error(row, fixed_tip(row.chip))
             return False
         try:
             cpi = validate_cpi(row.edit.text(), row.allowed(), row.chip)
         except ValueError as e:
-            row.error.setText(str(e))
+            self._set_error(row, str(e))
             self._restore_field(device)
             return False
         if self.ctx.bridge is None:
-            row.error.setText("offline: no node to set the resolution on")
+            self._set_error(row, "offline: no node to set the resolution on")
             self._restore_field(device)
             return False
-        row.error.setText("")
+        self._set_error(row, "")
         row.read_back.setStyleSheet("")
         row.read_back.setText(f"asking the node for {cpi} CPI…")
         self.ctx.bridge.set_resolution(device, cpi)
@@ -249,10 +254,10 @@ class ResolutionPanel(QGroupBox):
         if row is None:
             return
         if ok:
-            row.error.setText("")
+            self._set_error(row, "")
             row.read_back.setText(f"read back: {cpi} CPI")
         else:
-            row.error.setText(message or "the node refused the resolution")
+            self._set_error(row, message or "the node refused the resolution")
             row.read_back.setText(f"read back: {cpi} CPI" if cpi else "")
             self._restore_field(device, cpi)
 
@@ -270,14 +275,21 @@ class ResolutionPanel(QGroupBox):
         known = cpi or self.cpi_in_force(device)
         self.rows[device].edit.setText(str(known) if known else "")
 
-        # the CPI in force changes rarely: a look five times a second, not a slot per reply
-        # (at 500 Hz that is 500 queued calls a second for nothing; docs/benchmarks.md, gui)
-        self._timer = QTimer(self)
-        self._timer.setInterval(REFRESH_MS)
-        self._timer.timeout.connect(self.refresh)
-        self._timer.start()
+    @staticmethod
+    def _set_error(row: _SensorRow, text: str) -> None:
+        """Show (or clear, with "") a row's error; it goes after ERROR_SHOW_S by itself."""
+        row.error.setText(text)
+        row.error_at = time.monotonic() if text else None
+
+    def _expire_errors(self) -> None:
+        now = time.monotonic()
+        for row in self.rows.values():
+            if row.error_at is not None and now - row.error_at > ERROR_SHOW_S:
+                self._set_error(row, "")
     def refresh(self) -> None:
-        """Show the CPI of the newest history row (cheap: only when it changed)."""
+        """Show the CPI of the newest history row (cheap: only when it changed); an error
+        older than ERROR_SHOW_S goes."""
+        self._expire_errors()
         hist = self.ctx.session.history
         if hist is None or hist.version == self._version or not len(hist):
             return
