@@ -1,9 +1,10 @@
 """colcon builds the ROS packages mm_beagle and mm_pc, and what it installs runs.
 
-What a system-ROS user does (`colcon build` over the repository), here against the venv's
-ament index: colcon-core/colcon-ros come from PyPI (the `test` extra), mm_interfaces is
-./compile's CMake build on AMENT_PREFIX_PATH (hence --packages-ignore). Everything goes to
-tmp_path (build, install and log bases): the work tree is left as it was.
+What a system-ROS user does (`colcon build` over the repository, with and without
+`--symlink-install`), here against the venv's ament index: colcon-core/colcon-ros come
+from PyPI (the `test` extra), mm_interfaces is ./compile's CMake build on
+AMENT_PREFIX_PATH (hence --packages-ignore). Everything goes to tmp_path (build, install
+and log bases): the work tree is left as it was. `colcon test` runs a package's tests.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import os
 import re
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -59,10 +61,11 @@ def compile_colcon_args(tmp: Path) -> list[str]:
     return args
 
 
-@pytest.fixture(scope="module")
-def colcon_install(tmp_path_factory):
+@pytest.fixture(scope="module", params=["copy", "symlink"])
+def colcon_install(request, tmp_path_factory):
     """One colcon build of the repository into a temporary folder, with the arguments
-    ./compile uses: (install base, log text)."""
+    ./compile uses, plain ("copy") and with --symlink-install ("symlink"): (install base,
+    log text). The mode is ``request.param``; the tmp folder holds build/ beside install/."""
     assert (ROOT / "install" / "COLCON_IGNORE").is_file(), (
         "./compile marks install/ COLCON_IGNORE (else colcon crawls the venv): run ./compile setup"
     )
@@ -72,6 +75,8 @@ def colcon_install(tmp_path_factory):
     colcon = shutil.which("colcon")
     assert colcon, "colcon is not on PATH (the test extra installs it)"
     cmd = [colcon, *compile_colcon_args(tmp)]
+    if request.param == "symlink":
+        cmd.append("--symlink-install")
     out = subprocess.run(cmd, cwd=tmp, capture_output=True, text=True, timeout=180)
     assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-3000:]
     assert _git_status() == before, "colcon build changed the work tree"
@@ -102,10 +107,27 @@ def test_installed_tree_has_what_ros2_run_and_launch_look_for(colcon_install, pk
     expected = sorted(n for n, top in _scripts().items() if top == pkg)
     assert sorted(p.name for p in (prefix / "lib" / pkg).iterdir()) == expected
     site = prefix / "lib" / PY / "site-packages"
+    if _mode(install) == "symlink":
+        # the share files link to the work tree; the packages are links in the build folder
+        # (on the install's PYTHONPATH), nothing copied into site-packages
+        first = sorted(os.listdir(share / "launch"))[0]
+        assert (share / "launch" / first).resolve() == ROOT / pkg / "launch" / first
+        build = install.parent / "build" / pkg
+        tops = {pkg, "pln2033"} if pkg == "mm_pc" else {pkg}
+        for top in tops:
+            assert (build / top).is_symlink() and (build / top).resolve() == ROOT / top
+        assert not (site / pkg).exists()
+        return
     assert (site / pkg / "__init__.py").is_file()
     assert not (site / pkg / "setup.py").exists()  # the build file is not a module
     assert (site / pkg / "config").is_dir()
     assert (site / "pln2033" / "pln2033" / "default_regmap.yaml").is_file() == (pkg == "mm_pc")
+
+
+def _mode(install: Path) -> str:
+    """How colcon installed: "symlink" (--symlink-install: develop, an egg-link) or "copy"."""
+    site = install / "mm_pc" / "lib" / PY / "site-packages"
+    return "symlink" if (site / "mm-pc.egg-link").is_file() else "copy"
 
 
 def _in_colcon_env(install: Path, script: str, cwd: Path) -> subprocess.CompletedProcess:
@@ -130,8 +152,13 @@ def test_installed_packages_are_found_by_the_ament_index(colcon_install, tmp_pat
     lines = out.stdout.split()
     assert lines[0] == str(install / "mm_beagle/share/mm_beagle")
     assert lines[1] == str(install / "mm_pc")
-    assert lines[2].startswith(str(install / "mm_beagle/lib"))  # the copy, not the work tree
-    assert lines[3].startswith(str(install / "mm_pc/lib"))
+    if _mode(install) == "copy":  # the copy, not the work tree (nor the venv's pip install)
+        assert lines[2].startswith(str(install / "mm_beagle/lib"))
+        assert lines[3].startswith(str(install / "mm_pc/lib"))
+    else:  # the build folder's links to the work tree
+        assert lines[2] == str(install.parent / "build/mm_beagle/mm_beagle/__init__.py")
+        assert lines[3] == str(install.parent / "build/mm_pc/pln2033/__init__.py")
+        assert Path(lines[2]).resolve() == ROOT / "mm_beagle" / "__init__.py"
 
 
 @pytest.mark.parametrize(
@@ -166,8 +193,6 @@ def test_installed_monitor_answers_help(colcon_install, tmp_path):
 
 def test_setup_py_is_inert_when_imported_from_the_pip_wheel(tmp_path):
     """pip's wheel carries mm_beagle/setup.py as a module; importing it builds nothing."""
-    import sys
-
     for module in ("mm_beagle.setup", "mm_pc.setup"):
         out = subprocess.run(
             [sys.executable, "-c", f"import {module}"], cwd=tmp_path, capture_output=True,
@@ -210,4 +235,52 @@ def test_robot_launch_runs_the_chain_from_the_colcon_install(colcon_install, tmp
         assert re.search(rf"\[{exe}-\d+\]: process started", text), exe
         assert re.search(rf"\[{exe}-\d+\]: process has finished cleanly", text), exe
     accepted = re.search(r"mouse: accepted (\d+)", text)  # fusion heard odometry from beagle
+    assert accepted and int(accepted.group(1)) > 0, text[-2000:]
+
+
+def test_colcon_test_runs_the_package_tests(colcon_install, tmp_path):
+    """`colcon test` on each build: pytest in the package folder against the install, here
+    only tests/sim (--pytest-args; by default setup.cfg's testpaths, which
+    tests/test_ros_package_xml.py checks)."""
+    install, _log = colcon_install
+    base = install.parent
+    cmd = [
+        shutil.which("colcon"), "--log-base", str(tmp_path / "log"), "test",
+        "--base-paths", str(ROOT), "--packages-ignore", "mm_interfaces",
+        "--packages-select", "mm_pc",
+        "--build-base", str(base / "build"), "--install-base", str(install),
+        "--pytest-args", "../tests/sim", "-p", "no:cacheprovider",
+    ]  # fmt: skip
+    out = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-3000:]
+    report = (base / "build" / "mm_pc" / "pytest.xml").read_text()
+    suite = re.search(r"<testsuite [^>]*>", report).group(0)
+    counts = {k: int(v) for k, v in re.findall(r'(tests|failures|errors)="(\d+)"', suite)}
+    collected = subprocess.run(
+        [sys.executable, "-m", "pytest", "--collect-only", "-q", "-p", "no:cacheprovider",
+         "tests/sim"], cwd=ROOT, capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    want = int(re.search(r"(\d+) tests? collected", collected.stdout).group(1))
+    assert counts == {"tests": want, "failures": 0, "errors": 0}, suite
+    assert want > 0 and 'classname="mm_pc.' in report  # colcon's --junit-prefix
+
+
+@pytest.mark.skipif(not HAVE_LAUNCH, reason="launch/launch_ros not installed (no PyPI wheel)")
+def test_robot_launch_runs_from_compiles_own_ament_index(tmp_path):
+    """After ./compile alone (no colcon): `ros2 launch mm_beagle robot.launch.py` finds the
+    package, its launch files and executables in the venv's ament index."""
+    from mm_beagle.tools.harness import isolated_ros_env
+
+    (tmp_path / "run.py").write_text(RUN_ROBOT)
+    env = isolated_ros_env()  # this environment, with a private ROS domain
+    out = subprocess.run(
+        [sys.executable, "run.py"], cwd=tmp_path, env=env, capture_output=True, text=True,
+        timeout=90,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-3000:]
+    text = out.stdout + out.stderr
+    for exe in ("mm-beagle", "mm-odometry", "mm-fusion"):
+        assert re.search(rf"\[{exe}-\d+\]: process started", text), exe
+        assert re.search(rf"\[{exe}-\d+\]: process has finished cleanly", text), exe
+    accepted = re.search(r"mouse: accepted (\d+)", text)
     assert accepted and int(accepted.group(1)) > 0, text[-2000:]
