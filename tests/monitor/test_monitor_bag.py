@@ -184,6 +184,64 @@ def test_every_channel_of_a_file_decodes_with_rosbags_and_mcap_ros2(tmp_path):
     )
 
 
+def metadata_records(path: Path) -> dict[str, list[dict[str, str]]]:
+    """name -> the fields of each MCAP Metadata record of that name, read by the mcap library."""
+    out: dict[str, list[dict[str, str]]] = {}
+    with open(path, "rb") as f:
+        for record in make_reader(f).iter_metadata():
+            out.setdefault(record.name, []).append(dict(record.metadata))
+    return out
+
+
+def test_a_file_carries_rosbag2s_metadata_record_as_jazzy_writes_it(tmp_path):
+    from rosbags.rosbag2 import Reader
+
+    path = tmp_path / "all.mcap"
+    rec, replies = write_everything(path)
+    records = metadata_records(path)
+    assert sorted(records) == ["mm_monitor", "rosbag2"]
+    ((fields,),) = [records["rosbag2"]]
+    # the name and keys rosbag2's MCAP plugin reads (read_metadata): Jazzy's
+    # serialized_metadata, and the ROS_DISTRO key Humble and Iron wrote
+    assert sorted(fields) == ["ROS_DISTRO", "serialized_metadata"]
+    assert fields["ROS_DISTRO"] == "jazzy"
+    info = yaml.safe_load(fields["serialized_metadata"])
+    assert "rosbag2_bagfile_information" not in info  # the inner mapping, as rosbag2's
+    assert info["version"] == 9 and info["storage_identifier"] == "mcap"
+    assert info["ros_distro"] == "jazzy"
+    assert info["relative_file_paths"] == ["all.mcap"]
+    counts = rec.topic_counts()
+    topics = {t["topic_metadata"]["name"]: t for t in info["topics_with_message_count"]}
+    assert {name: t["message_count"] for name, t in topics.items()} == counts
+    assert info["message_count"] == sum(counts.values()) == info["files"][0]["message_count"]
+    assert counts[SENSOR_TOPIC] == 2 * len(replies)
+    types = {name: t["topic_metadata"] for name, t in topics.items()}
+    assert types[SENSOR_TOPIC]["type"] == "mm_interfaces/msg/SensorData"
+    assert types["/tf_static"]["offered_qos_profiles"][0]["durability"] == "transient_local"
+    assert types[SENSOR_TOPIC]["type_description_hash"].startswith("RIHS01_")
+    with open(path, "rb") as f:
+        stats = make_reader(f).get_summary().statistics
+    assert stats.message_count == info["message_count"]
+    assert info["starting_time"]["nanoseconds_since_epoch"] == stats.message_start_time
+    assert info["duration"]["nanoseconds"] == stats.message_end_time - stats.message_start_time
+    assert info["duration"]["nanoseconds"] > 0
+    with Reader(path) as reader:  # rosbags still reads the bare file
+        assert reader.message_count == sum(counts.values())
+        assert {t: i.msgcount for t, i in reader.topics.items()} == counts
+        assert reader.duration == stats.message_end_time - stats.message_start_time + 1
+    assert [r.readings for r in read_replies(path)] == [r.readings for r in replies]
+
+
+def test_an_empty_recording_has_a_rosbag2_record_of_no_messages(tmp_path):
+    McapRecorder(tmp_path / "empty.mcap").close()
+    ((fields,),) = [metadata_records(tmp_path / "empty.mcap")["rosbag2"]]
+    info = yaml.safe_load(fields["serialized_metadata"])
+    assert info["message_count"] == 0 and info["duration"] == {"nanoseconds": 0}
+    assert {t["topic_metadata"]["name"] for t in info["topics_with_message_count"]} == {
+        SENSOR_TOPIC, META_TOPIC
+    }  # fmt: skip
+
+
 def test_a_folder_gets_a_rosbag2_metadata_yaml_that_rosbags_reads(tmp_path):
     from rosbags.rosbag2 import Reader
 
@@ -203,6 +261,9 @@ def test_a_folder_gets_a_rosbag2_metadata_yaml_that_rosbags_reads(tmp_path):
         assert qos[SENSOR_TOPIC].reliability.name == "RELIABLE"
     info = yaml.safe_load((folder / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     assert info["version"] == 9 and info["storage_identifier"] == "mcap"
+    # the file's rosbag2 record holds the very same metadata
+    ((fields,),) = [metadata_records(folder / "run_0.mcap")["rosbag2"]]
+    assert yaml.safe_load(fields["serialized_metadata"]) == info
     assert info["relative_file_paths"] == ["run_0.mcap"]
     assert info["files"][0]["message_count"] == info["message_count"]
     store = source_typestore()
@@ -336,6 +397,9 @@ def test_an_old_recording_with_getsamples_responses_still_replays_per_poll(tmp_p
     with open(old, "rb") as f:
         kinds = {s.name for s, _c, _m in make_reader(f).iter_messages()}
     assert LEGACY_POLLS_TYPE in kinds  # the file is the old layout
+    # recordings made before the rosbag2 metadata record replay without it
+    assert metadata_records(old) == {}
+    assert "rosbag2" in metadata_records(new)
 
 
 def test_the_live_topics_and_their_qos():

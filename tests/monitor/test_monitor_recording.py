@@ -149,7 +149,7 @@ def test_file_is_ros2_mcap_that_rclpy_decodes(recording):
         assert text.startswith("# Displacement of one sensor")
         assert "\n" + "=" * 80 + "\nMSG: builtin_interfaces/Time\n" in text
         assert "uint32 nanosec" in text
-        meta = dict(next(iter(reader.iter_metadata())).metadata)
+        meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}["mm_monitor"]
         assert meta["beagle"] == "/robot/mm_beagle"
         assert meta["devices"] == ",".join(DEVICES)
         assert meta["rate_hz"] == "100"

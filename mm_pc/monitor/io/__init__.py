@@ -35,7 +35,9 @@ Every message of one reply has the reply's number (from 0) as its MCAP
 (the monotonic ``received_s`` shifted by system-minus-monotonic at the first
 reply), so tools show wall-clock times. ``publish_time`` is the node's poll
 stamp for sensor data. A metadata record ``mm_monitor`` holds the start time,
-the beagle node's name, the devices, the sample rate and the reply count.
+the beagle node's name, the devices, the sample rate and the reply count; a
+metadata record ``rosbag2`` (``serialized_metadata``, ``ROS_DISTRO``) the bag's
+metadata as rosbag2 Jazzy's MCAP writer stores it (:func:`.bag_format.rosbag2_record`).
 
 :func:`.mcap_reader.read_replies` gives the replies back exactly (every :class:`Reading`
 field, ``received_s`` and ``rtt_s``), so a replay runs the very same

@@ -3,7 +3,9 @@ and its ``metadata.yaml`` (rosbag2 Jazzy, bag format version 9, storage ``mcap``
 
 A recording path ending in ``.mcap`` is a single MCAP file; any other path is a
 rosbag2 folder: ``<dir>/<dir name>_0.mcap`` plus ``<dir>/metadata.yaml``, which
-``ros2 bag info/play`` and rosbags read. No rclpy here (the recorder and the
+``ros2 bag info/play`` and rosbags read. Either way the MCAP file carries the
+bag's metadata in a Metadata record ``rosbag2`` (:func:`rosbag2_record`), as
+Jazzy's MCAP storage plugin writes it. No rclpy here (the recorder and the
 bridge hand their QoS over as the plain dicts below).
 """
 
@@ -20,21 +22,29 @@ __all__ = [
     "BAG_VERSION",
     "DEFAULT_QOS",
     "DIAGNOSTICS_QOS",
+    "ROSBAG2_RECORD",
+    "ROS_DISTRO",
     "SENSOR_DATA_QOS",
     "TF_QOS",
     "TF_STATIC_QOS",
     "LiveTopic",
     "bag_files",
+    "bag_info",
     "live_topics",
     "qos_profile",
     "qos_yaml",
     "recording_target",
+    "rosbag2_record",
     "type_hash",
     "write_metadata",
 ]
 
 #: rosbag2's metadata.yaml version of Jazzy (QoS profiles as a YAML list, type hashes)
 BAG_VERSION = 9
+#: the ROS 2 distribution the bag format and the message types are those of
+ROS_DISTRO = "jazzy"
+#: the name of the MCAP Metadata record rosbag2's MCAP storage plugin reads and writes
+ROSBAG2_RECORD = "rosbag2"
 
 _ZERO = {"sec": 0, "nsec": 0}
 #: rmw's "default" for deadline/lifespan/lease duration, as rosbag2 writes it
@@ -183,14 +193,13 @@ class _PlainDumper(yaml.SafeDumper):
         return True
 
 
-def write_metadata(
-    folder: Path,
+def bag_info(
     mcap_name: str,
     topics: list[tuple[str, str, list[dict], int]],
     start_ns: int,
     end_ns: int,
-) -> Path:
-    """Write ``folder/metadata.yaml`` for one MCAP file ``mcap_name``.
+) -> dict:
+    """The bag's metadata (``rosbag2_bagfile_information``) of one MCAP file ``mcap_name``.
 
     ``topics``: (name, type, offered QoS profiles, message count) of each
     channel; ``start_ns``/``end_ns``: the first and last message's log time
@@ -199,7 +208,7 @@ def write_metadata(
     duration = max(0, int(end_ns) - int(start_ns))
     count = sum(t[3] for t in topics)
     start = {"nanoseconds_since_epoch": int(start_ns)}
-    info = {
+    return {
         "version": BAG_VERSION,
         "storage_identifier": "mcap",
         "duration": {"nanoseconds": duration},
@@ -230,14 +239,30 @@ def write_metadata(
             }
         ],
         "custom_data": {"recorded_by": "mm_monitor"},
-        "ros_distro": "jazzy",
+        "ros_distro": ROS_DISTRO,
     }
+
+
+def _dump(data: dict) -> str:
+    return yaml.dump(data, Dumper=_PlainDumper, sort_keys=False)
+
+
+def rosbag2_record(info: dict) -> dict[str, str]:
+    """The fields of the MCAP Metadata record :data:`ROSBAG2_RECORD` for the bag ``info``.
+
+    ``serialized_metadata``: ``info`` as YAML without the
+    ``rosbag2_bagfile_information`` key, as rosbag2 Jazzy's MCAP storage plugin
+    writes it (``update_metadata``) and reads it back for ``ros2 bag info`` of a bare
+    file; ``ROS_DISTRO``: the key Humble's and Iron's plugin wrote instead (Jazzy reads
+    it too, and keeps the distro inside ``serialized_metadata``).
+    """
+    return {"serialized_metadata": _dump(info), "ROS_DISTRO": ROS_DISTRO}
+
+
+def write_metadata(folder: Path, info: dict) -> Path:
+    """Write ``folder/metadata.yaml`` with the bag ``info`` (:func:`bag_info`)."""
     out = folder / "metadata.yaml"
     tmp = out.with_suffix(".yaml.tmp")
-    tmp.write_text(
-        yaml.dump(
-            {"rosbag2_bagfile_information": info}, Dumper=_PlainDumper, sort_keys=False
-        )
-    )
+    tmp.write_text(_dump({"rosbag2_bagfile_information": info}))
     tmp.replace(out)
     return out

@@ -16,8 +16,11 @@ from pathlib import Path
 from mm_pc.core.sensor_data import Reply
 from mm_pc.monitor.io.bag_format import (
     DEFAULT_QOS,
+    ROSBAG2_RECORD,
+    bag_info,
     qos_yaml,
     recording_target,
+    rosbag2_record,
     type_hash,
     write_metadata,
 )
@@ -240,12 +243,20 @@ class McapRecorder:
         return {t[0]: t[3] for t in self._topics.values()}
 
     def close(self) -> None:
-        """Write the metadata and the index, close the file, then a folder's metadata.yaml
-        (idempotent)."""
+        """Write the metadata records and the index, close the file, then a folder's
+        metadata.yaml (idempotent).
+
+        Two Metadata records: ``mm_monitor`` (the recording's own facts) and
+        ``rosbag2`` (the bag's metadata, the same as a folder's metadata.yaml:
+        :func:`~mm_pc.monitor.io.bag_format.rosbag2_record`).
+        """
         with self._lock:
             if self.closed:
                 return
             self.closed = True
+            info = bag_info(
+                self.file.name, list(self._topics.values()), self._first_ns, self._last_ns
+            )
             try:
                 self._writer.add_metadata(
                     "mm_monitor",
@@ -260,6 +271,7 @@ class McapRecorder:
                         "reply_meta": f"{META_TOPIC}: data = [received_s, rtt_s] (s, monotonic)",
                     },
                 )
+                self._writer.add_metadata(ROSBAG2_RECORD, rosbag2_record(info))
                 self._writer.finish()
             except OSError as e:
                 if not self.error:
@@ -268,10 +280,7 @@ class McapRecorder:
                 self._file.close()
             if self.folder is not None:
                 try:
-                    write_metadata(
-                        self.folder, self.file.name, list(self._topics.values()),
-                        self._first_ns, self._last_ns,
-                    )  # fmt: skip
+                    write_metadata(self.folder, info)
                 except OSError as e:
                     if not self.error:
                         self._fail(e)
