@@ -6,6 +6,7 @@ An MCAP file or a rosbag2 folder (:func:`.bag_format.bag_files`); layout in
 
 from __future__ import annotations
 
+import contextlib
 import math
 import struct
 from pathlib import Path
@@ -87,23 +88,34 @@ def read_up_to_cut(path: str | Path):
     schemas: dict[int, Schema] = {}
     channels: dict[int, Channel] = {}
     messages, whole_bytes, record = [], 0, None
+
+    def take(records) -> None:
+        nonlocal record, whole_bytes
+        for record in records:
+            if isinstance(record, Schema):
+                schemas[record.id] = record
+            elif isinstance(record, Channel):
+                channels[record.id] = record
+            elif isinstance(record, Message) and record.channel_id in channels:
+                channel = channels[record.channel_id]
+                messages.append((schemas.get(channel.schema_id), channel, record))
+                whole_bytes = f.tell()  # after the chunk holding it (or the file's end)
+            elif isinstance(record, DataEnd):
+                break  # every message is read; the cut is in the index after them
+
     with open(path, "rb") as f:
         if f.read(8) != b"\x89MCAP0\r\n":
             raise strict_error
         f.seek(0)
+        ends = [8]  # where each whole record of the file ends (the magic is 8 bytes)
         try:
-            for record in StreamReader(f, validate_crcs=True).records:
-                if isinstance(record, Schema):
-                    schemas[record.id] = record
-                elif isinstance(record, Channel):
-                    channels[record.id] = record
-                elif isinstance(record, Message) and record.channel_id in channels:
-                    channel = channels[record.channel_id]
-                    messages.append((schemas.get(channel.schema_id), channel, record))
-                    whole_bytes = f.tell()  # after the chunk holding it
-                elif isinstance(record, DataEnd):
-                    break  # every message is read; the cut is in the index after them
+            take(_noting_ends(StreamReader(f, validate_crcs=True).records, f, ends))
         except (EndOfFile, struct.error):  # the cut (a short read): what came before is whole
+            f.seek(ends[-1])
+            # the whole messages at the start of a chunk cut in its middle (a damaged one
+            # is lost, the chunks before it stand)
+            with contextlib.suppress(Exception):
+                take(_cut_chunk_records(f.read()))
             if whole_bytes == 0:
                 raise ValueError(
                     f"{path} is cut short (a crash or a full disk?) before its first whole "
@@ -122,12 +134,51 @@ def read_up_to_cut(path: str | Path):
             f"{path.name} is cut short (a crash or a full disk?): all {len(messages)} messages "
             f"were read; only the index at its end ({size} bytes) is missing"
         )
+    elif whole_bytes >= size:  # the last ones from the block the cut fell in
+        warning = (
+            f"{path.name} is cut short (a crash or a full disk?) at byte {size}: read "
+            f"{len(messages)} whole messages, up to the cut; the rest of the recording is lost"
+        )
     else:
         warning = (
-            f"{path.name} is cut short (a crash or a full disk?): read {len(messages)} "
-            f"messages from the first {whole_bytes} of its {size} bytes; the rest is lost"
+            f"{path.name} is cut short (a crash or a full disk?) at byte {size}: read "
+            f"{len(messages)} whole messages from its first {whole_bytes} bytes; the rest "
+            "is lost"
         )
     return messages, types, warning
+
+
+def _noting_ends(records, f, ends: list[int]):
+    """``records`` as they come, noting in ``ends`` where the file stood after each."""
+    for r in records:
+        ends.append(f.tell())
+        yield r
+
+
+def _cut_chunk_records(data: bytes):
+    """The whole records at the start of ``data``: a Chunk record cut short (zstd or not
+    compressed), decompressed as far as it goes."""
+    import io
+
+    import zstandard
+    from mcap.exceptions import EndOfFile
+    from mcap.stream_reader import StreamReader
+
+    head = struct.Struct("<BQQQQI")  # opcode, length, start, end, uncompressed size, crc
+    if len(data) < head.size + 4 or data[0] != 0x06:  # 0x06: a Chunk
+        return
+    at = head.size
+    (n,) = struct.unpack_from("<I", data, at)
+    compression = data[at + 4 : at + 4 + n].decode()
+    at += 4 + n + 8  # the compression's name, the records' length
+    body = data[at:]
+    if compression == "zstd":
+        body = zstandard.ZstdDecompressor().decompressobj().decompress(body)
+    elif compression:
+        return  # lz4: not written by the monitor
+    stream = StreamReader(io.BytesIO(body), skip_magic=True)
+    with contextlib.suppress(EndOfFile, struct.error):  # the record the cut fell in
+        yield from stream.records
 
 
 def read_replies_up_to_cut(path: str | Path) -> tuple[list[Reply], str]:
