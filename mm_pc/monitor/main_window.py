@@ -151,6 +151,7 @@ class RateEditor(QWidget):
             }[state]
             self.now.setText(text)
             self.now.setStyleSheet(style)
+            self.achieved_hz = None  # a rate of these times is no figure for after them
             return False
         if achieved_hz is None:
             self.now.setText(f"now: {wanted:g} Hz")

@@ -75,7 +75,7 @@ def test_a_file_cut_in_its_data_replays_its_whole_replies_with_a_warning(
     assert 0.5 * share * 2001 < n < 2001
     assert replies == whole[:n]  # exactly the recorded replies, in order
     assert f"{short.name} is cut short" in warning and f"{n} replies to replay" in warning
-    assert f"of its {int(size * share)} bytes" in warning
+    assert f"at byte {int(size * share)}: read " in warning
     window = make_window(qtbot, tmp_path)
     with caplog.at_level(logging.WARNING, logger="mm_pc.monitor.replay"):
         replayer = start_replay(window, short, "max", dialog=True)
