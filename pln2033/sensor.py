@@ -94,6 +94,9 @@ class ChipInfo:
     counter_bits: int = 16
     quality_name: str = ""  # e.g. "SQUAL"; "" = the chip has no quality figure
     quality_threshold: int = 0  # a read with 0 <= quality < this is treated like a lift
+    #: a read below the quality threshold still carries real motion (the chip's own fusion
+    #: keeps counting through it): flagged low quality, but no gap for the lift estimate
+    poor_polls_carry_motion: bool = False
     max_speed_mps: float = 0.0  # the chip's tracking limit (m/s)
     firmware: str = ""  # "patch" | "srom" | "" = takes none
     source: str = ""  # where the register facts come from (one line; details in docs/sensors.md)

@@ -84,6 +84,7 @@ class Channel:
             # bound once per channel, so the run loop's ch.poll() needs no branch per poll
             self.poll = self._poll_generic  # type: ignore[method-assign]  # per-instance dispatch
         self._threshold = self.info.quality_threshold
+        self._poor_is_gap = not self.info.poor_polls_carry_motion
 
     def attach(self, driver: SensorDriver | None) -> None:
         """Use ``driver`` for polls (None: the sensor is down)."""
@@ -101,6 +102,7 @@ class Channel:
                 self._read = driver.read_motion
                 self.info = driver.info  # the PMW3901's follows its height
                 self._threshold = self.info.quality_threshold
+                self._poor_is_gap = not self.info.poor_polls_carry_motion
                 if hasattr(driver, "last_pose"):  # the OTOS: its on-chip pose too
                     self.poll = self._poll_with_pose  # type: ignore[method-assign]  # as above
 
@@ -196,7 +198,9 @@ class Channel:
             quality = m.quality
             rquality[slot] = quality
             # below the chip's threshold: the counts are not trusted, the poll is a gap
-            # poll for the lift estimate (they stay in the measured totals, as a lift's do)
+            # poll for the lift estimate (they stay in the measured totals, as a lift's do);
+            # not on a chip whose poor reads still carry motion (the OTOS's warning: its
+            # IMU carried the pose, so an estimate on top would count that motion twice)
             poor = 0 <= quality < self._threshold
             flags = (
                 (ss.FLAG_LIFT if m.lifted else 0)
@@ -217,7 +221,7 @@ class Channel:
                 ints[ss.I_LIFT_TOTAL] += 1
             if m.overflow:
                 ints[ss.I_OVERFLOWS] += 1
-            gap = m.lifted or poor
+            gap = m.lifted or (poor and self._poor_is_gap)
             if not (extra_flags and gap):  # a command's read covers no poll slot
                 self._update_lift_gap(dx, dy, gap)
         stamps[slot] = stamp_ns
@@ -254,11 +258,12 @@ class Channel:
         """
         _, rdx, rdy, _, rcpi, rflags, _rq = self.ring
         n, seq = self.n, self.seq
+        stop = ss.FLAG_LIFT | (ss.FLAG_LOW_QUALITY if self._poor_is_gap else 0)
         ratio = self.scale_x / self.scale_y if self.scale_y else 1.0  # X's CPI next to Y's
         counts, metres = [], []
         for s in range(seq - 1, max(seq - 1 - self.gap.window, seq - n, -1), -1):
             slot = s % n
-            if rflags[slot] & (ss.FLAG_LIFT | ss.FLAG_LOW_QUALITY):
+            if rflags[slot] & stop:
                 break
             dx, dy = rdx[slot], rdy[slot]
             cpi = rcpi[slot]

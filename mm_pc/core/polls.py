@@ -27,12 +27,13 @@ totals; a CPI change inside the interval), the interval becomes one gap step car
 the whole displacement from the totals, so nothing is lost and the caller can mark it.
 
 Lifts: a poll counts as lifted when its lift bit or its low-quality bit is set
-(:func:`unseen`: the chip saw the floor too poorly to trust the counts, issue 15); the
-polls of a lifted sensor are filled by
-:func:`mm_pc.core.filters.interpolate_lift_gaps`; a step is held back while a lift of
-any sensor is open or closed fewer than :data:`LIFT_CONTEXT_POLLS` polls ago, and the
-last :data:`LIFT_CONTEXT_POLLS` steps are kept as the filler's left context, so the
-steps (and the pose) do not depend on where the request boundaries fell.
+(:func:`unseen`: the chip saw the floor too poorly to trust the counts, issue 15); on a
+chip whose low-quality polls still carry motion (the OTOS, its IMU carried the pose:
+:func:`unseen_bits` of the totals' ``chip``) only the lift bit does. The polls of a lifted
+sensor are filled by :func:`mm_pc.core.filters.interpolate_lift_gaps`; a step is held
+back while a lift of any sensor is open or closed fewer than :data:`LIFT_CONTEXT_POLLS`
+polls ago, and the last :data:`LIFT_CONTEXT_POLLS` steps are kept as the filler's left
+context, so the steps (and the pose) do not depend on where the request boundaries fell.
 """
 
 from __future__ import annotations
@@ -58,6 +59,7 @@ from mm_pc.core.poll_flags import (  # the bits of GetSamples' flags, defined on
 )
 from mm_pc.core.sensor_data import Reading
 from pln2033 import INCH_M
+from pln2033 import chips as chip_registry
 
 __all__ = [
     "FLAG_COMMAND_READ",
@@ -74,6 +76,7 @@ __all__ = [
     "SensorTotals",
     "integrate_steps",
     "unseen",
+    "unseen_bits",
 ]
 
 
@@ -81,6 +84,22 @@ def unseen(flags) -> np.ndarray:
     """Bool array, True where a poll's ``flags`` say its sensor did not see the floor
     (:data:`FLAG_UNSEEN`: lifted, or surface quality below the chip's threshold)."""
     return (np.asarray(flags, dtype=np.int64) & FLAG_UNSEEN) != 0
+
+
+def unseen_bits(chip: str) -> int:
+    """The flags after which a poll of ``chip`` is a gap for the lift filling:
+    :data:`FLAG_UNSEEN`, but only :data:`FLAG_LIFT` for a chip whose low-quality polls
+    still carry motion (``ChipInfo.poor_polls_carry_motion``: the OTOS's warning, its IMU
+    carried the pose; filling them would replace measured motion by a guess). An unknown
+    or empty chip name (an old node or recording) keeps FLAG_UNSEEN."""
+    if chip:
+        try:
+            if chip_registry.chip_info(chip).poor_polls_carry_motion:
+                return FLAG_LIFT
+        except (ValueError, ImportError):
+            pass
+    return FLAG_UNSEEN
+
 
 #: Polls on each side of a lift the gap filling may look at (its window must fit).
 LIFT_CONTEXT_POLLS = 64
@@ -108,6 +127,7 @@ class SensorTotals(NamedTuple):
     x_est_m: float = 0.0
     y_est_m: float = 0.0
     instance_id: int = 0  # the node's identity: another value = a restarted node
+    chip: str = ""  # the sensor's chip ('' = not known: an old node or recording)
 
     @classmethod
     def from_msg(cls, msg) -> SensorTotals:
@@ -123,6 +143,7 @@ class SensorTotals(NamedTuple):
             x_est_m=r.x_lift_total,
             y_est_m=r.y_lift_total,
             instance_id=r.instance_id,
+            chip=r.chip,
         )
 
 
@@ -288,6 +309,7 @@ class PollTracker:
         self.n = n_sensors
         self.use_lift_estimates = bool(use_lift_estimates)
         self._cursor: list[int] | None = None
+        self._unseen = [FLAG_UNSEEN] * n_sensors  # per sensor: a gap's flags (baseline's chips)
         #: gap steps made so far, and why (newest last, at most 200 kept)
         self.gaps = 0
         self.gap_reasons: list[str] = []
@@ -308,6 +330,7 @@ class PollTracker:
         """Start (again) from these totals: nothing before them is integrated."""
         self._check_totals(totals)
         self._instance = [t.instance_id for t in totals]
+        self._unseen = [unseen_bits(t.chip) for t in totals]  # per sensor: a gap's flags
         self._cursor = [t.seq for t in totals]
         self._acc_counts = [(t.x_counts, t.y_counts) for t in totals]  # totals at the cursor
         self._acc_m = [(t.x_m, t.y_m) for t in totals]
@@ -439,7 +462,7 @@ class PollTracker:
         for i, c in enumerate(cols):
             if i and not np.array_equal(stamps[i], first):
                 return None
-            if (np.concatenate([b.flags for b in c]) & (FLAG_UNSEEN | FLAG_COMMAND_READ)).any():
+            if (np.concatenate([b.flags for b in c]) & (self._unseen[i] | FLAG_COMMAND_READ)).any():
                 return None
             counts[:, i, 0] = np.concatenate([b.dx for b in c])
             counts[:, i, 1] = np.concatenate([b.dy for b in c])
@@ -559,7 +582,7 @@ class PollTracker:
         for i, p in enumerate(pend):
             counts[:, i, 0] = p.dx
             counts[:, i, 1] = p.dy
-            lifted[:, i] = unseen(p.flags)
+            lifted[:, i] = (p.flags & self._unseen[i]) != 0
         return first, counts, lifted, np.zeros(k, bool), [k] * self.n
 
     def _match_ticks(self, pend: list[_Pending]):
@@ -583,7 +606,7 @@ class PollTracker:
             np.add.at(counts[:, i, 0], idx, p.dx[:m])
             np.add.at(counts[:, i, 1], idx, p.dy[:m])
             own = p.stamp[:m] == ticks[idx]
-            lifted[idx[own], i] = unseen(p.flags[:m][own])
+            lifted[idx[own], i] = (p.flags[:m][own] & self._unseen[i]) != 0
             # polls this sensor made while another had none -- but not those of a tick
             # whose other polls fell before the baseline (the totals of the sensors
             # of one reply are read one after the other, so they may end a tick apart)

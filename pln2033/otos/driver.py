@@ -61,6 +61,12 @@ OTOS_INFO = ChipInfo(
     counter_bits=16,
     quality_name="tracking ok",  # 1 = status bit warnOpticalTracking clear, 0 = set
     quality_threshold=1,
+    # the warning is set only while the firmware rejects the optical measurement at speed
+    # (measured < 0.25 m/s, estimate > 0.5 m/s) and then integrates its filters' velocity,
+    # carried by the accelerometer ([fw] main.cpp sensorUpdate): the counts of such a read
+    # are motion, already counted; a lift-gap estimate on top would count it twice (the
+    # other 0, a PAA error, is sticky until power-off: a gap that never closed got no estimate)
+    poor_polls_carry_motion=True,
     max_speed_mps=regs.MAX_SPEED_MPS,
     firmware="",
     source=(

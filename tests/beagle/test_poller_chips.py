@@ -18,12 +18,18 @@ from mm_beagle.poller import shared_state as ss
 from mm_beagle.poller.poller import Poller, PollerConfig
 from mm_beagle.poller.sim_backend import SimConfig
 from mm_beagle.poller.sim_channel import truth_of
+from pln2033 import INCH_M
 from pln2033 import chips as registry
 from pln2033.motion import ConstantVelocity
 
 T0 = 100.0
 PERIOD = 1e-3
 OTHERS = [c for c in registry.chip_names() if c != registry.DEFAULT_CHIP]
+#: chips whose low-quality polls lost their motion (the OTOS's carry it: its own test below)
+LOSING = [
+    c for c in OTHERS
+    if not (chip_config.available(c) and registry.chip_info(c).poor_polls_carry_motion)
+]
 
 
 def need(chip: str) -> None:
@@ -113,7 +119,7 @@ def test_mixed_chips_poll_every_count_with_quality(chip):
         assert t.low_quality_total == 0
 
 
-@pytest.mark.parametrize("chip", OTHERS)
+@pytest.mark.parametrize("chip", LOSING)
 def test_low_quality_window_is_treated_like_a_lift(chip):
     """A 30 ms poor-surface window: its polls carry FLAG_LOW_QUALITY and are counted;
     the lift-gap estimate fills the motion the chip did not count (the emulator's ground
@@ -122,8 +128,6 @@ def test_low_quality_window_is_treated_like_a_lift(chip):
     info = registry.chip_info(chip)
     if info.quality_threshold <= 0:
         pytest.skip(f"the {chip} has no quality threshold")
-    if chip == "otos":  # issue 26: tests/pln2033/test_otos_driver.py pins the firmware's rule
-        pytest.skip("OTOS firmware: no warning below 0.5 m/s; above, its IMU carries the pose")
     motion = ConstantVelocity(0.0, 0.3)
     start = T0 + 2.0  # after the slowest bring-up (the OTOS's IMU calibration: 0.6 s)
     rig = Rig([chip], [{"motion": motion, "low_quality_windows": [(start, start + 0.03)]}])
@@ -146,6 +150,41 @@ def test_low_quality_window_is_treated_like_a_lift(chip):
     true_m = 0.3 * (rig.clock.t - rig.t_init[0])
     assert t.y_total_m + t.y_est_m == pytest.approx(true_m, rel=0.01)
     assert t.y_total_m < true_m - 0.3 * 0.03 * 0.8  # without the estimate: the window short
+
+
+def test_otos_warning_polls_carry_motion_and_add_no_lift_estimate():
+    """The OTOS over a 30 ms poor surface at 0.8 m/s: the firmware warns (its filters'
+    velocity is above 0.5 m/s) and carries the pose on its IMU, so the warning polls'
+    counts are motion. They are flagged FLAG_LOW_QUALITY but open no lift gap: no
+    estimate is added on top (it added 0.025 m: the window twice), and the measured
+    totals alone equal the true path within the chip's resolution."""
+    need("otos")
+    from pln2033.otos import regs
+
+    info = registry.chip_info("otos")
+    assert info.poor_polls_carry_motion and info.quality_threshold == 1
+    speed, start = 0.8, T0 + 2.0  # after the IMU calibration; the filters have settled
+    motion = ConstantVelocity(0.0, speed)
+    rig = Rig(["otos"], [{"motion": motion, "low_quality_windows": [(start, start + 0.03)]}])
+    rig.run(round((start + 0.3 - rig.clock.t) / PERIOD))
+    t = rig.state.snapshot(0)
+    _f, _n, _d, arr = rig.state.samples(0, 0, 0)
+    poor = (arr["flags"] & ss.FLAG_LOW_QUALITY) != 0
+    assert 28 <= poor.sum() <= 34, poor.sum()  # the warning, one firmware update late at most
+    assert t.low_quality_total == int(poor.sum())
+    assert not (arr["flags"] & ss.FLAG_LIFT).any()
+    # the optical counts did stop (the emulator's ground truth) ...
+    window_counts = speed * 0.03 / INCH_M * 1000  # at the driver's 1000 CPI
+    assert t.lift_lost_y == pytest.approx(window_counts, rel=0.1)
+    # ... but the IMU carried the pose: the warning polls hold the window's motion
+    assert int(arr["dy"][poor].sum()) == pytest.approx(window_counts, rel=0.1)
+    # so no lift estimate is added on top
+    assert (t.x_est_counts, t.y_est_counts, t.x_est_m, t.y_est_m) == (0.0, 0.0, 0.0, 0.0)
+    # and the totals are the truth within the chip's resolution (0.305 mm per LSB)
+    true_m = speed * (rig.clock.t - rig.t_init[0])
+    assert t.y_total_m == pytest.approx(true_m, abs=regs.POS_M_PER_LSB)
+    assert abs(t.x_total_m) <= regs.POS_M_PER_LSB
+    assert abs(t.y_total - (t.gen_y + t.lift_lost_y)) <= 12  # optical + carried counts
 
 
 @pytest.mark.parametrize("chip", OTHERS)

@@ -190,6 +190,41 @@ def test_a_low_quality_stretch_gives_the_pose_of_a_lift_there(s_curve_ring):
     assert np.hypot(*(_pose(c)[:2] - _pose(a)[:2])) > 1e-3
 
 
+@pytest.mark.parametrize("chip", ["otos", ""])
+def test_low_quality_polls_of_a_chip_that_carries_motion_keep_their_counts(s_curve_ring, chip):
+    """The OTOS's warning polls (flag 32) hold motion its IMU carried (its ChipInfo's
+    poor_polls_carry_motion): with the totals' chip "otos" they are neither filled nor held
+    back, the steps are those without the flag; with no chip named (an old node or
+    recording) they are filled like a lift, as before."""
+    n = 6000
+    v, w = s_curve_ring.v[:n], s_curve_ring.w[:n]
+    stretch = np.zeros((n, 2), bool)
+    stretch[1500:1530, :] = True  # 30 ms of warnings on both sensors
+    plain = FakeRing(v, w)
+    flagged = FakeRing(v, w)
+    flagged.low_quality[:] = stretch  # flag 32, the counts stay the motion
+    totals = flagged.totals
+    flagged.totals = lambda k: [t._replace(chip=chip) for t in totals(k)]
+    ends = robot.request_boundaries(n, 15.0)
+    a, _ = _run(plain, ends)
+    b, _ = _run(flagged, ends)
+    assert len(b) == n and np.array_equal(a.counts, b.counts)
+    if chip:
+        assert not b.lifted.any()
+        assert np.array_equal(a.d, b.d)
+    else:
+        assert b.lifted.sum() == 60
+        assert not np.allclose(a.d[1500:1530], b.d[1500:1530], atol=1e-9, rtol=0)
+
+
+def test_unseen_bits_follow_the_chips_fact():
+    from mm_pc.core.polls import FLAG_LIFT, FLAG_UNSEEN, unseen_bits
+
+    assert unseen_bits("otos") == FLAG_LIFT
+    for chip in ("", "pln2033", "pmw3901", "no-such-chip"):
+        assert unseen_bits(chip) == FLAG_UNSEEN, chip
+
+
 def test_unseen_is_the_lift_or_the_low_quality_bit():
     from mm_pc.core.polls import FLAG_LIFT, FLAG_LOW_QUALITY, FLAG_UNSEEN, unseen
 

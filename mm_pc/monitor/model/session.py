@@ -92,7 +92,7 @@ def _totals(r: Reading) -> SensorTotals:
     return SensorTotals(
         seq=r.seq, stamp_ns=r.stamp_ns, x_counts=r.x_total_counts, y_counts=r.y_total_counts,
         x_m=r.x_total, y_m=r.y_total, x_est_m=r.x_lift_total, y_est_m=r.y_lift_total,
-        instance_id=r.instance_id,
+        instance_id=r.instance_id, chip=r.chip,
     )
 
 
