@@ -1,7 +1,8 @@
 """The PLN2033 register map and command format as data.
 
 The defaults live in ``default_regmap.yaml`` next to this module; every value
-in it is an assumption (the datasheet is not public) and a user overrides any
+in it is an assumption (the datasheet is not public; docs/sensors.md, "PLN2033", lists
+each with its source and what a wrong one looks like on a board) and a user overrides any
 part with a YAML file of the same layout. Driver and emulator both read the
 same :class:`RegisterMap`, so they always speak the same bytes.
 """

@@ -365,3 +365,44 @@ def test_any_valid_cpi_override_is_self_consistent(step, k_min, k_span, data):
         assert m.cpi_problem(cpi) is None
         assert m.decode_cpi(m.encode_cpi(cpi)) == cpi
         assert 0 <= m.encode_cpi(cpi) <= 0xFFFF
+
+
+# --- the facts table (docs/sensors.md, "PLN2033") ------------------------------------------
+
+
+def _pln2033_facts_table() -> str:
+    doc = (Path(__file__).parents[2] / "docs" / "sensors.md").read_text()
+    section = doc.split("\n## PLN2033\n", 1)[1].split("\n## ", 1)[0]
+    rows = [line for line in section.splitlines() if line.startswith("|")]
+    assert len(rows) >= 22, "the facts table lost rows"  # header, rule and 20 facts
+    return "\n".join(rows)
+
+
+def test_the_facts_table_names_every_default_of_the_register_map_with_its_value():
+    """Every key of default_regmap.yaml is in the table with the value the file holds (the
+    registers as one row: their addresses are their order), and no row names a key the
+    map does not have: the table cannot drift from the defaults a user overrides."""
+    import re
+    from importlib import resources
+
+    table = _pln2033_facts_table()
+    text = resources.files("pln2033.pln2033").joinpath("default_regmap.yaml").read_text()
+    defaults = yaml.safe_load(text)
+    named = dict(re.findall(r"`([a-z_]+\.[a-z_]+)` (0x[0-9A-Fa-f]+|\d+)", table))
+    want = {
+        f"{section}.{key}": value
+        for section, keys in defaults.items()
+        if section != "registers"
+        for key, value in keys.items()
+    }
+    assert set(named) == set(want)
+    for key, value in want.items():
+        assert int(named[key], 0) == value, key
+    assert "`registers.*`" in table and "0x00…0x0C" in table
+    assert [defaults["registers"][r] for r in REGISTER_NAMES] == list(range(len(REGISTER_NAMES)))
+    # every row says whether vendor code was checked (none exists) and what fixes it
+    for row in table.splitlines()[2:]:
+        cells = [c.strip() for c in re.split(r"(?<!\\)\|", row)[1:-1]]
+        assert len(cells) == 6, row
+        assert cells[3].startswith("no: no vendor code exists"), row
+        assert cells[5], row
