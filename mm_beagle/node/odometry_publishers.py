@@ -28,7 +28,7 @@ class OnboardOdometryPublisher:
     def __init__(self, node) -> None:
         self.node = node
         o = node.settings.odometry
-        self.onboard = OnboardOdometry(o, node.devices, node.poller.state)
+        self.onboard = OnboardOdometry(o, node.devices, node.poller.state, node.chips)
         self.sensor_frames = sensor_frame_names(node.devices, o.sensor_frames, o.frame_prefix)
         self.uncertainty = PoseUncertainty()
         self.tf = TfPublisher(node, o.publish_tf)

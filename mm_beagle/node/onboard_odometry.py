@@ -16,18 +16,28 @@ from __future__ import annotations
 import numpy as np
 
 from mm_beagle.node.params import OdometrySettings
-from mm_beagle.poller.shared_state import FLAG_LIFT, FLAG_LOW_QUALITY, SharedState
+from mm_beagle.poller.shared_state import SharedState
 from mm_pc.core.calibration import Calibration
 from mm_pc.core.geometry import SensorMount
 from mm_pc.core.odometry import Odometry, Pose2D
+from mm_pc.core.polls import unseen_bits
 from pln2033 import INCH_M
 
 
 class OnboardOdometry:
     """Integrates the polls each sensor made since the previous call."""
 
-    def __init__(self, settings: OdometrySettings, devices: list[str], state: SharedState) -> None:
+    def __init__(
+        self,
+        settings: OdometrySettings,
+        devices: list[str],
+        state: SharedState,
+        chips: list[str] | None = None,
+    ) -> None:
+        """``chips``: each device's chip name; it says which poll flags make a lift
+        (:func:`mm_pc.core.polls.unseen_bits`: an OTOS's warning polls carry motion)."""
         self.devices = devices
+        self.gap_bits = [unseen_bits(c) for c in (chips or [""] * len(devices))]
         self.state = state
         self.sensor = settings.sensor
         if not 0 <= settings.sensor < len(devices):
@@ -58,8 +68,9 @@ class OnboardOdometry:
         d = np.empty((n, len(self.devices), 2))
         lifted = np.empty((n, len(self.devices)), dtype=bool)
         for i, (first, _next, _dropped, arr) in enumerate(batches):
-            # a poll below the chip's quality threshold counts as a lift (issue 15)
-            lifted[:, i] = (arr["flags"][:n] & (FLAG_LIFT | FLAG_LOW_QUALITY)) != 0
+            # a poll below the chip's quality threshold counts as a lift (issue 15), unless
+            # the chip's own fallback carried the motion (the OTOS's warning: issue 26)
+            lifted[:, i] = (arr["flags"][:n] & self.gap_bits[i]) != 0
             scale = INCH_M / np.maximum(arr["cpi"][:n].astype(float), 1.0)
             dx = arr["dx"][:n] * scale
             dy = arr["dy"][:n] * scale
