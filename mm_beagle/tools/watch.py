@@ -15,7 +15,7 @@ import sys
 import time
 from dataclasses import dataclass
 
-from mm_pc.core.polls import SensorTotals
+from mm_pc.core.sensor_data import Reading
 
 
 @dataclass
@@ -35,17 +35,18 @@ class SensorView:
     quality: int = -1
 
     def update(self, msg) -> None:
-        """Add one ``mm_interfaces/SensorData``; the totals read as mm-odometry reads them."""
-        totals = SensorTotals.from_msg(msg)
-        self.samples += msg.samples
-        self.interval += msg.interval
-        self.x_speed, self.y_speed = msg.x_speed, msg.y_speed
-        self.x_total, self.y_total = totals.x_m, totals.y_m
-        self.cpi = msg.cpi
-        self.lifts = msg.lift_events_total
-        self.lift_est = math.hypot(totals.x_est_m, totals.y_est_m)
-        self.chip = msg.chip or "pln2033"  # an older node sends none
-        self.quality = msg.quality if msg.chip else -1
+        """Add one ``mm_interfaces/SensorData``, read by the one reader (as the monitor and
+        mm-odometry read it)."""
+        r = Reading.from_msg(msg)
+        self.samples += r.samples
+        self.interval += r.interval
+        self.x_speed, self.y_speed = r.x_speed, r.y_speed
+        self.x_total, self.y_total = r.x_total, r.y_total
+        self.cpi = r.cpi
+        self.lifts = r.lift_events_total
+        self.lift_est = math.hypot(r.x_lift_total, r.y_lift_total)
+        self.chip = r.chip or "pln2033"  # an older node sends none
+        self.quality = r.quality
 
     def take_rate(self) -> float:
         """Polls per second since the previous call."""
