@@ -288,18 +288,7 @@ class EmulatedOTOS(CountingCore):
         out: list[int] = []
         for v, lsb in zip(
             (hx, hy, hh, vx, vy, vh, *self._host_acceleration(), *self._std_devs()),
-            (
-                regs.POS_M_PER_LSB,
-                regs.POS_M_PER_LSB,
-                regs.HEADING_RAD_PER_LSB,
-                regs.VEL_MPS_PER_LSB,
-                regs.VEL_MPS_PER_LSB,
-                regs.VEL_RPS_PER_LSB,
-                regs.ACC_MPSS_PER_LSB,
-                regs.ACC_MPSS_PER_LSB,
-                regs.ACC_RPSS_PER_LSB,
-            )
-            * 2,
+            regs.POSE_BLOCK_LSB * 2,
             strict=True,
         ):
             out += regs.int16_bytes(_to_int16(v / lsb))

@@ -75,6 +75,19 @@ VEL_MPS_PER_LSB = 5.0 / 32768
 VEL_RPS_PER_LSB = math.radians(2000.0) / 32768  # +-2000 deg/s
 ACC_MPSS_PER_LSB = 16.0 * 9.80665 / 32768  # +-16 g
 ACC_RPSS_PER_LSB = math.pi * 1000.0 / 32768
+#: one LSB of each word of the pose block (position, velocity, acceleration; x, y, heading),
+#: in register order; the std-dev block that follows repeats it
+POSE_BLOCK_LSB = (
+    POS_M_PER_LSB,
+    POS_M_PER_LSB,
+    HEADING_RAD_PER_LSB,
+    VEL_MPS_PER_LSB,
+    VEL_MPS_PER_LSB,
+    VEL_RPS_PER_LSB,
+    ACC_MPSS_PER_LSB,
+    ACC_MPSS_PER_LSB,
+    ACC_RPSS_PER_LSB,
+)
 
 # --- scalars [lib] kMinScalar/kMaxScalar, setLinearScalar ----------------------------------
 SCALAR_MIN = 0.872  # int8 -128

@@ -326,18 +326,7 @@ def test_standard_deviations_are_the_firmware_filters(bench):
     assert acc.x == acc.y and 0 < acc.x < 0.1
     want = [math.sqrt(f.p[i][i]) for i in range(3) for f in (emu.kf_x, emu.kf_y, emu.kf_h)]
     got = [pos.x, pos.y, pos.h, vel.x, vel.y, vel.h, acc.x, acc.y, acc.h]
-    lsbs = [
-        regs.POS_M_PER_LSB,
-        regs.POS_M_PER_LSB,
-        regs.HEADING_RAD_PER_LSB,
-        regs.VEL_MPS_PER_LSB,
-        regs.VEL_MPS_PER_LSB,
-        regs.VEL_RPS_PER_LSB,
-        regs.ACC_MPSS_PER_LSB,
-        regs.ACC_MPSS_PER_LSB,
-        regs.ACC_RPSS_PER_LSB,
-    ]
-    for g, w_, lsb in zip(got, want, lsbs, strict=True):
+    for g, w_, lsb in zip(got, want, regs.POSE_BLOCK_LSB, strict=True):
         assert g == pytest.approx(w_, abs=1.01 * lsb)
     ft.t += 5.0
     assert otos.getPositionStdDev().x > pos.x  # it only grows without a position fix
