@@ -42,7 +42,16 @@ class EmulatorStats:
     low_quality_events: int = 0  # poor-surface windows entered
     transfers: int = 0
     faulted_transfers: int = 0
-    protocol_errors: int = 0  # transfers the chip could not make sense of (length, timing)
+    # Bus traffic the chip would not take as sent, counted once each; what counts is per chip:
+    # a frame of the wrong length (PLN2033: not whole 3-byte frames; PMW3901/PAA5100: an odd
+    # length outside the burst; PMW33xx: a write without its data byte, a motion burst not
+    # armed by a Motion_Burst write) and, on the PMW33xx, every broken timing constraint BETWEEN
+    # COMMANDS of the datasheet's Table 4 (tSWW, tSWR, tSRW, tSRR, tSRAD, tSRAD_MOTBR, tBEXIT,
+    # tNCS-SCLK, tSCLK-NCS after a write, the power-up, SROM and CRC waits), measured from the
+    # end of one command to the start of the next whether or not chip select rose; the model
+    # is pln2033/pmw33xx/timing.py, named per constraint in EmulatedPMW33xx.timing_errors
+    # (docs/sensors.md "The timing model"). The OTOS's I2C has no such rule: it stays 0.
+    protocol_errors: int = 0
     resets: int = 0
     history: list[tuple] = field(default_factory=list)
 

@@ -160,6 +160,18 @@ def test_registers_are_banked_an_id_read_in_another_bank_fails():
     drv.check_product_id()
 
 
+def test_an_odd_length_frame_is_one_protocol_error_its_whole_pairs_still_run():
+    """EmulatorStats.protocol_errors on this chip: a register frame that is not whole
+    (address, value) pairs; the burst (0x16 + any length) is no such frame."""
+    _, emu, drv = rig()
+    drv.initialise(0)
+    assert emu.stats.protocol_errors == 0
+    assert emu.xfer2([0x00, 0, 0x5F]) == [0, 0x49, 0]  # the pair is read, the odd byte not
+    assert emu.stats.protocol_errors == 1
+    emu.xfer2([regs.MOTION_BURST] + [0] * 5)  # a short burst read is legal
+    assert emu.stats.protocol_errors == 1
+
+
 # --- the burst ----------------------------------------------------------------------------------
 
 
