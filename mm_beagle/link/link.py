@@ -27,12 +27,19 @@ side touches single polls in Python. No numpy here: the agent runs without it.
 
 from __future__ import annotations
 
+import base64
+import binascii
+import hashlib
+import hmac
 import ipaddress
 import json
 import os
+import re
 import secrets
 import stat
 import struct
+import time
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -140,17 +147,277 @@ def decode_batch(data: bytes, n_sensors: int) -> Batch:
     return Batch(boot_id, number, glob, blocks)
 
 
-def parse_request(payload: bytes, what: str) -> dict:
-    """A JSON object from a query payload, or LinkError."""
-    if len(payload) > 1 << 20:
-        raise LinkError(f"{what} request of {len(payload)} bytes is too large")
-    try:
-        msg = json.loads(payload.decode("utf-8"))
-    except (UnicodeDecodeError, ValueError):
-        raise LinkError(f"{what} request is not JSON") from None
+# --- bounded decoding of everything a peer sends ------------------------------------------
+# Every payload from the link is size-checked before it is decoded, decoded without
+# unbounded recursion, decompressed with an output limit and checked field by field.
+
+MAX_REQUEST_BYTES = 64 * 1024  # a command or history request (they are < 200 bytes)
+MAX_STATUS_BYTES = 256 * 1024  # a status (~1-3 kB: hist_z holds a compressed 160 kB array)
+MAX_EVENT_BYTES = 16 * 1024
+MAX_REPLY_BYTES = 256 * 1024  # a command reply (settings: a few kB)
+MAX_TEXT = 4096  # characters of one text field (an error, an event's text)
+MAX_DEPTH = 8  # nesting of JSON arrays/objects (ours use at most 3)
+_STRING = re.compile(rb'"(?:[^"\\]|\\.)*"')
+_BRACKETS = re.compile(rb"[^\[\]{}]+")
+
+
+def parse_request(payload: bytes, what: str, max_bytes: int = MAX_REQUEST_BYTES) -> dict:
+    """A JSON object from a request payload (bounded: :func:`decode_json_bounded`), or
+    LinkError."""
+    msg = decode_json_bounded(payload, max_bytes, MAX_DEPTH, what=f"{what} request")
     if not isinstance(msg, dict):
         raise LinkError(f"{what} request must be a JSON object")
     return msg
+
+
+def json_depth_ok(data: bytes, max_depth: int) -> bool:
+    """Whether the arrays/objects in JSON ``data`` nest at most ``max_depth`` deep.
+
+    Strings are cut out first (a bracket in a string is no nesting); the scan stops at
+    the first bracket too deep, so 100 kB of ``[`` costs microseconds."""
+    skeleton = _BRACKETS.sub(b"", _STRING.sub(b"", data))
+    depth = 0
+    for c in skeleton:
+        if c in b"[{":
+            depth += 1
+            if depth > max_depth:
+                return False
+        else:
+            depth -= 1
+    return True
+
+
+def decode_json_bounded(
+    payload: bytes, max_bytes: int, max_depth: int = MAX_DEPTH, what: str = "message"
+) -> object:
+    """JSON ``payload`` decoded only if it is at most ``max_bytes`` long, nests at most
+    ``max_depth`` deep and is UTF-8; LinkError (one line) otherwise. No NaN/Infinity."""
+    if len(payload) > max_bytes:
+        raise LinkError(f"{what} of {len(payload)} bytes is too large (limit {max_bytes})")
+    data = bytes(payload)
+    if not json_depth_ok(data, max_depth):
+        raise LinkError(f"{what} nests deeper than {max_depth} levels")
+    try:
+        return json.loads(data.decode("utf-8"), parse_constant=_no_constant)
+    except (UnicodeDecodeError, ValueError, RecursionError):
+        raise LinkError(f"{what} is not JSON") from None
+
+
+def _no_constant(name: str) -> object:
+    raise ValueError(f"{name} is not a number")
+
+
+def decompress_bounded(data: bytes, max_out: int, what: str = "compressed field") -> bytes:
+    """zlib ``data`` inflated to at most ``max_out`` bytes; LinkError for anything else
+    (not zlib, longer output: a bomb stops at ``max_out``, trailing bytes)."""
+    d = zlib.decompressobj()
+    try:
+        out = d.decompress(data, max_out)
+    except zlib.error:
+        raise LinkError(f"{what} is not zlib data") from None
+    if d.unconsumed_tail or not d.eof:
+        raise LinkError(f"{what} inflates beyond {max_out} bytes or is cut short")
+    if d.unused_data:
+        raise LinkError(f"{what} has bytes after its zlib stream")
+    return out
+
+
+def b64_bounded(text: object, max_chars: int, what: str) -> bytes:
+    """Strict base64 of at most ``max_chars`` characters, or LinkError."""
+    if not isinstance(text, str) or len(text) > max_chars:
+        raise LinkError(f"{what} is not a base64 string of at most {max_chars} characters")
+    try:
+        return base64.b64decode(text, validate=True)
+    except (binascii.Error, ValueError):
+        raise LinkError(f"{what} is not base64") from None
+
+
+def field(msg: dict, key: str, kind: type | tuple, what: str, *, optional: bool = False):
+    """``msg[key]`` if it is of ``kind`` (bool is no int), else LinkError."""
+    if key not in msg:
+        if optional:
+            return None
+        raise LinkError(f"{what} has no '{key}'")
+    value = msg[key]
+    kinds = kind if isinstance(kind, tuple) else (kind,)
+    if isinstance(value, bool) and bool not in kinds:
+        raise LinkError(f"{what} field '{key}' is not {_kind_names(kinds)}")
+    if not isinstance(value, kinds):
+        raise LinkError(f"{what} field '{key}' is not {_kind_names(kinds)}")
+    if isinstance(value, str) and len(value) > MAX_TEXT:
+        raise LinkError(f"{what} field '{key}' is longer than {MAX_TEXT} characters")
+    return value
+
+
+def _kind_names(kinds: tuple) -> str:
+    return " or ".join(k.__name__ for k in kinds)
+
+
+def text_list(msg: dict, key: str, n: int, what: str) -> list[str]:
+    """``msg[key]``: a list of ``n`` strings, or LinkError."""
+    value = field(msg, key, list, what)
+    if len(value) != n or not all(isinstance(v, str) and len(v) <= MAX_TEXT for v in value):
+        raise LinkError(f"{what} field '{key}' is not a list of {n} texts")
+    return value
+
+
+def decode_status(payload: bytes, n_sensors: int, hist_bins: int) -> dict:
+    """An agent status checked field by field: {"boot_id": int, "uptime_s": float,
+    "devices", "chips", "states", "last_errors": lists of texts, "cpu_percent",
+    "rss_mb": float, "hist": bytes (``hist_bins`` int64, inflated) or None, ...}."""
+    what = "status"
+    msg = decode_json_bounded(payload, MAX_STATUS_BYTES, MAX_DEPTH, what)
+    if not isinstance(msg, dict):
+        raise LinkError("status is not a JSON object")
+    boot = field(msg, "boot_id", int, what)
+    if not 0 < boot < 1 << 64:
+        raise LinkError("status boot_id is out of range")
+    devices = field(msg, "devices", list, what)
+    if len(devices) > 64 or not all(isinstance(d, str) and len(d) <= MAX_TEXT for d in devices):
+        raise LinkError("status devices are not a list of names")
+    out = {"boot_id": boot, "devices": devices}
+    chips = field(msg, "chips", list, what, optional=True)
+    out["chips"] = None if chips is None else text_list(msg, "chips", len(devices), what)
+    out["states"] = text_list(msg, "states", len(devices), what)
+    out["last_errors"] = text_list(msg, "last_errors", len(devices), what)
+    for key in ("uptime_s", "cpu_percent", "rss_mb"):
+        v = field(msg, key, (int, float), what, optional=True)
+        out[key] = float("nan") if v is None else float(v)
+    out["bytes_sent"] = field(msg, "bytes_sent", int, what, optional=True) or 0
+    hist = None
+    if "hist_z" in msg:
+        raw = b64_bounded(msg["hist_z"], MAX_STATUS_BYTES, "status hist_z")
+        hist = decompress_bounded(raw, 8 * hist_bins, "status hist_z")
+        if len(hist) != 8 * hist_bins:
+            raise LinkError(f"status hist_z holds {len(hist)} bytes, not {8 * hist_bins}")
+    out["hist"] = hist
+    return out
+
+
+EVENT_KINDS = ("up", "down", "log", "fatal", "warn", "error", "info")
+
+
+def decode_event(payload: bytes) -> tuple[str, str, str]:
+    """An agent event checked: (kind, device, text), or LinkError."""
+    what = "event"
+    msg = decode_json_bounded(payload, MAX_EVENT_BYTES, 2, what)
+    if not isinstance(msg, dict):
+        raise LinkError("event is not a JSON object")
+    kind = field(msg, "kind", str, what)
+    device = field(msg, "device", str, what)
+    text = field(msg, "text", str, what)
+    if not kind or len(kind) > 32 or not kind.isprintable():
+        raise LinkError("event kind is not a short printable word")
+    return kind, device, text
+
+
+REPLY_STATUSES = ("ok", "invalid", "error")
+
+
+def decode_command_reply(payload: bytes, n_sensors: int) -> tuple[str, object, list, int | None]:
+    """A command reply checked: (status, payload, seqs, boot_id or None), or LinkError.
+
+    ``seqs``: one int per sensor, or [] (a reply without them)."""
+    what = "command reply"
+    msg = decode_json_bounded(payload, MAX_REPLY_BYTES, MAX_DEPTH, what)
+    if not isinstance(msg, dict):
+        raise LinkError("command reply is not a JSON object")
+    status = field(msg, "status", str, what)
+    if status not in REPLY_STATUSES:
+        raise LinkError(f"command reply status {status[:40]!r} is not one of {REPLY_STATUSES}")
+    if "payload" not in msg:
+        raise LinkError("command reply has no 'payload'")
+    seqs = field(msg, "seq", list, what, optional=True) or []
+    if seqs and (
+        len(seqs) != n_sensors
+        or not all(isinstance(s, int) and not isinstance(s, bool) and 0 <= s < 1 << 63
+                   for s in seqs)
+    ):  # fmt: skip
+        raise LinkError(f"command reply seq is not a list of {n_sensors} counts")
+    boot = field(msg, "boot_id", int, what, optional=True)
+    return status, msg["payload"], seqs, boot
+
+
+def decode_history_answer(payload: bytes) -> tuple[int | None, str]:
+    """A history refusal ``{"id", "status": "invalid", "payload"}``: (id, why)."""
+    what = "history answer"
+    msg = decode_json_bounded(payload, MAX_EVENT_BYTES, 2, what)
+    if not isinstance(msg, dict):
+        raise LinkError("history answer is not a JSON object")
+    rid = field(msg, "id", int, what, optional=True)
+    why = msg.get("payload")
+    return rid, why[:MAX_TEXT] if isinstance(why, str) else repr(why)[:200]
+
+
+class DropLog:
+    """Counts dropped inputs per kind and says when to log one (at most one line per
+    ``interval`` s per kind, with the count dropped meanwhile)."""
+
+    def __init__(self, interval: float = 5.0) -> None:
+        self.interval = interval
+        self.counts: dict[str, int] = {}
+        self.total = 0
+        self._last: dict[str, tuple[float, int]] = {}
+
+    def drop(self, kind: str, why: str) -> str | None:
+        """Count one dropped ``kind`` input; the line to log now, or None (rate-limited)."""
+        self.total += 1
+        n = self.counts[kind] = self.counts.get(kind, 0) + 1
+        now = time.monotonic()
+        last, at = self._last.get(kind, (-1e9, 0))
+        if now - last < self.interval:
+            return None
+        self._last[kind] = (now, n)
+        since = f"; {n - at - 1} more since the last line" if n - at > 1 and at else ""
+        return f"dropped a {kind} input from the link: {why[:300]} ({n} so far{since})"
+
+
+# --- frame authentication (with credentials) ----------------------------------------------
+
+TAG_BYTES = 16  # HMAC-SHA256 truncated: 128 bits
+
+
+class FrameAuth:
+    """A MAC over every message the agent sends, keyed by the shared credential.
+
+    Without credentials (``key`` None) :meth:`seal` and :meth:`open` pass bytes through.
+    With them the agent appends ``TAG_BYTES`` of HMAC-SHA256(key, kind | body) and the node
+    refuses anything without a valid tag. ``kind`` (polls, status, events, history, reply)
+    is in the MAC, so one kind cannot be replayed as another; the boot id and sequence
+    numbers are inside the body, and the node's boot and sequence rules refuse replays.
+    The key is HMAC-SHA256(password, "mm-link-v1/" + user + "/" + agent name).
+    """
+
+    def __init__(self, key: bytes | None) -> None:
+        self.key = key
+
+    @classmethod
+    def from_credentials(cls, path: str, name: str) -> FrameAuth:
+        if not path:
+            return cls(None)
+        user, password = load_credentials(path)
+        info = f"mm-link-v1/{user}/{name}".encode()
+        return cls(hmac.new(password.encode(), info, hashlib.sha256).digest())
+
+    def _tag(self, kind: str, body: bytes) -> bytes:
+        mac = hmac.new(self.key, kind.encode() + b"|", hashlib.sha256)  # type: ignore[arg-type]
+        mac.update(body)
+        return mac.digest()[:TAG_BYTES]
+
+    def seal(self, kind: str, body: bytes) -> bytes:
+        """``body`` as sent on ``kind``: with its tag when there is a key."""
+        return body if self.key is None else body + self._tag(kind, body)
+
+    def open(self, kind: str, payload: bytes) -> bytes:
+        """The body of a ``kind`` message after its tag is checked; LinkError if forged."""
+        if self.key is None:
+            return payload
+        if len(payload) < TAG_BYTES:
+            raise LinkError(f"{kind} message too short for its authentication tag")
+        body, tag = payload[:-TAG_BYTES], payload[-TAG_BYTES:]
+        if not hmac.compare_digest(tag, self._tag(kind, body)):
+            raise LinkError(f"{kind} message fails authentication (forged, or other credentials)")
+        return body
 
 
 # --- endpoints, credentials, zenoh configuration -----------------------------------------
