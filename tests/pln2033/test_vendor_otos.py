@@ -339,7 +339,10 @@ def test_variance_bit_clear_the_linear_filters_take_each_measurement_as_exact(be
     ft, emu, _kernel, otos = started(bench)
     otos.setSignalProcessConfig(regs.SIGNAL_PROCESS_DEFAULT & ~regs.SP_VAR)
     t0 = ft.t
-    emu.motion = Ramp(t0, a=1e9, v=0.2)
+    emu.motion = Ramp(t0, a=0.6, v=0.2)  # 0.6 m/s^2 for 0.33 s
+    ft.t = t0 + 0.2
+    # the filters' acceleration is the accelerometer's reading, exactly
+    assert otos.getAcceleration().y == pytest.approx(0.6, abs=regs.ACC_MPSS_PER_LSB)
     ft.t = t0 + 0.5
     vel = otos.getVelocityStdDev()
     assert (vel.x, vel.y) == (0.0, 0.0)  # zero measurement variance: nothing left
@@ -357,6 +360,48 @@ def test_accelerometer_bit_clear_no_rejection_the_pose_stops_when_lifted(bench):
     ft.t = t0 + 1.3
     assert otos.getStatus() == 0  # no rule without the accelerometer
     assert otos.getPosition().y - y0 == pytest.approx(0.1, abs=0.004)
+
+
+def test_accelerometer_bit_clear_the_acceleration_is_the_filters_guess_from_velocity(bench):
+    """enAcc clear: no accelerometer update, so the filters' acceleration (what the client
+    reads) follows the optical velocity's changes only, about 0.2 s late (with the bit set:
+    0.6 at 0.4 s and 0.0 cruising, test_a_known_motion_position_velocity_...)."""
+    ft, emu, _kernel, otos = started(bench)
+    otos.setSignalProcessConfig(regs.SIGNAL_PROCESS_DEFAULT & ~regs.SP_ACC)
+    t0 = ft.t
+    emu.motion = Ramp(t0, a=0.6, v=0.3)  # 0.6 m/s^2 until 0.5 s, then 0.3 m/s
+    got = {}
+    for dt in (0.2, 0.4, 0.7, 2.0):
+        ft.t = t0 + dt
+        got[dt] = otos.getAcceleration().y
+    assert got[0.2] == pytest.approx(0.17, abs=0.02)  # a true 0.6 m/s^2 seen late
+    assert got[0.4] == pytest.approx(0.56, abs=0.02)
+    assert got[0.7] == pytest.approx(0.33, abs=0.02)  # 0.2 s after the ramp ended: truth 0
+    assert got[2.0] == pytest.approx(0.0, abs=0.005)
+    assert otos.getVelocity().y == pytest.approx(0.3, abs=2e-3)  # the velocity is unharmed
+    assert otos.getAccelerationStdDev().y == pytest.approx(0.091, abs=0.005)  # 0.014 with it
+    assert emu.stats.protocol_errors == 0  # the OTOS's bus has no timing or length rule
+
+
+def test_accelerometer_bit_cleared_during_a_warning_freezes_the_warning_bit(bench):
+    """The firmware touches warnOpticalTracking only inside its enAcc branch: cleared while
+    the bit is set, it stays set (our driver's quality stays 0) until enAcc is set again."""
+    ft, emu, _kernel, otos = started(bench, lift_windows=[(T0 + 1.0, T0 + 1.5)])
+    t0 = ft.t
+    emu.motion = Ramp(t0, a=1e9, v=1.0)
+    ft.t = t0 + 1.2  # lifted at 1 m/s: the warning
+    assert otos.getStatus() == regs.STATUS_WARN_OPTICAL
+    otos.setSignalProcessConfig(regs.SIGNAL_PROCESS_DEFAULT & ~regs.SP_ACC)
+    y0 = otos.getPosition().y
+    ft.t = t0 + 1.4
+    assert otos.getStatus() == regs.STATUS_WARN_OPTICAL
+    assert otos.getPosition().y - y0 == pytest.approx(0.0, abs=3.1e-4)  # optical 0 believed
+    ft.t = t0 + 1.7  # on the floor again, tracking
+    assert otos.getStatus() == regs.STATUS_WARN_OPTICAL
+    assert otos.getVelocity().y == pytest.approx(1.0, abs=2e-3)
+    otos.setSignalProcessConfig(regs.SIGNAL_PROCESS_DEFAULT)
+    ft.t += 0.01
+    assert otos.getStatus() == 0
 
 
 # --- the documented simplifications, pinned ---------------------------------------------
