@@ -13,6 +13,7 @@ import pytest
 from fakes import FakeClock
 
 from pln2033.chips import make_driver, make_emulator
+from pln2033.motion import ConstantVelocity
 from pln2033.pmw33xx import regs as R  # noqa: N812
 from pln2033.pmw33xx import timing as T  # noqa: N812
 
@@ -296,3 +297,99 @@ def test_qmk_timed_bring_up_is_clean(chip):
     assert qmk_style_init(chip, emu, clock) == [0x04]
     assert emu.stats.protocol_errors == 0 and not emu.timing_errors
     assert emu.srom_intact and emu.cpi_y == 1600
+
+
+def arduino_sketch_init(emu, clock, bursts: list, cpi: int = 1200) -> list[int]:
+    """The bring-up as the widely used PMW3360 Arduino sketch times it ([ARD]
+    PMW3360DM-Burst.ino, read for its waits, no code): reads wait 35 us (tSRAD) + 1 us, then
+    19 us high; writes keep chip select low 20 us, then 100 us high; the upload 15 us per
+    byte and SROM_ID read 15 us after the last one BEFORE chip select rises (its result
+    unused); then dispRegisters' four reads in one frame, 1 ms around each data byte, and
+    ten motion bursts at 1 kHz (35 us), appended to ``bursts``. Returns what dispRegisters
+    printed: Product_ID, Inverse_Product_ID, SROM_Version."""
+
+    def write(reg: int, value: int) -> None:
+        emu.xfer_segments([([], 1), ([reg | W, value], 20)])
+        clock.t += 100e-6
+
+    def read(reg: int) -> int:
+        rx = emu.xfer_segments([([], 1), ([reg], 35), ([0], 1)])
+        clock.t += 19e-6
+        return rx[2][0]
+
+    write(0x3A, 0x5A)  # Power_Up_Reset
+    clock.t += 0.050
+    for reg in (0x02, 0x03, 0x04, 0x05, 0x06):
+        read(reg)
+    write(0x10, 0x20)  # Config2
+    write(0x13, 0x1D)  # SROM_Enable: init
+    clock.t += 0.010
+    write(0x13, 0x18)  # start the download
+    segs = [([], 1), ([0x62 | W], 15)] + [([b], 15) for b in BLOB]
+    segs += [([0x2A], 35), ([0], 1)]  # SROM_ID, chip select still low from the upload
+    emu.xfer_segments(segs)
+    clock.t += 19e-6
+    write(0x10, 0x00)  # Config2: wired
+    write(0x0F, cpi // 100 - 1)  # Config1
+    clock.t += 0.010 + 2.0
+    segs = []
+    for reg in (0x00, 0x3F, 0x2A, 0x02):  # dispRegisters: one frame
+        segs += [([reg], 1000), ([0], 1000)]
+    rx = emu.xfer_segments(segs)
+    write(0x50, 0x00)  # startBurst
+    for _ in range(10):
+        clock.t += 0.001
+        burst = emu.xfer_segments([([], 1), ([0x50], 35), ([0] * 12, 1)])[2]
+        bursts.append(burst)
+    return [rx[1][0], rx[3][0], rx[5][0]]
+
+
+def test_arduino_sketch_bring_up_runs_the_srom_and_counts_only_its_short_waits():
+    """Users report the sketch works on hardware, so its SROM must run here too; its waits
+    from the older ADNS-9800 sheet are counted against the PMW3360's table, each by name."""
+    clock = FakeClock(1.0)
+    emu = make_emulator("pmw3360", motion=ConstantVelocity(0.0, 0.1), clock=clock, srom=BLOB)
+    bursts: list[list[int]] = []
+    assert arduino_sketch_init(emu, clock, bursts) == [0x42, 0xBD, 0x04]  # its banner
+    assert emu.srom_running and emu.srom_intact and emu.cpi_y == 1200
+    # the bursts are data, not garbage: every one moved, with the SROM running, and those
+    # after the first hold the 9 ms of motion since it (0.1 m/s at 1200 cpi)
+    assert all(b[0] & R.MOT and b[1] & R.OB_SROM_RUN for b in bursts)
+    dy = [int.from_bytes(bytes(b[4:6]), "little", signed=True) for b in bursts]
+    assert sum(dy[1:]) == pytest.approx(0.1 * 0.009 / 0.0254 * 1200, abs=1)  # 42.5 counts
+    assert emu.timing_errors == {
+        T.TSRAD: 6,  # 35 us, not 160: the five reads after the reset and SROM_ID
+        T.TSCLK_NCS_WRITE: 7,  # chip select raised 20 us after each of the 7 writes, not 35
+        T.TSWW: 3,  # 120 us between writes: Config2 -> 0x1D, 0x18 -> the upload, -> Config1
+        T.SROM_END_WAIT: 1,  # SROM_ID read 15 us after the last byte, not 200
+    }
+    assert emu.stats.protocol_errors == 17
+
+
+def test_pinned_not_modelled_read_hold_srom_chip_select_hold_and_shutdown():
+    """docs/sensors.md "The timing model", not modelled: tSCLK-NCS after a read (120 ns),
+    the 15 us before chip select rises after the last SROM byte, Shutdown mode. Pinned, so
+    that modelling any of them is a deliberate change."""
+    clock = FakeClock(1.0)
+    emu = make_emulator("pmw3360", motion=ConstantVelocity(0.0, 0.1), clock=clock, srom=BLOB)
+    emu.xfer_segments([([0x3A | W, 0x5A], 180)])
+    clock.t += 0.050
+    for _ in range(2):  # chip select rises straight after the data byte (0 us, not 120 ns)
+        assert emu.xfer_segments([([0x00], 160), ([0], 0)])[1] == [0x42]
+        clock.t += 20e-6
+    emu.xfer_segments([([0x13 | W, 0x1D], 180)])
+    clock.t += 0.010
+    emu.xfer_segments([([0x13 | W, 0x18], 180)])
+    segs = [([0x62 | W], 15)] + [([b], 15) for b in BLOB[:-1]] + [([BLOB[-1]], 0)]
+    emu.xfer_segments(segs)  # chip select rises at the last byte's last clock, not 15 us on
+    clock.t += 200e-6
+    assert emu.xfer_segments([([0x2A], 160), ([0], 20)])[1] == [0x04]
+    emu.xfer_segments([([0x3B | W, R.SHUTDOWN_VALUE], 180)])  # Shutdown: the chip sleeps
+    clock.t += 0.010
+    assert emu.xfer_segments([([0x00], 160), ([0], 20)])[1] == [0x42]  # it still answers
+    clock.t += 0.001
+    emu.xfer_segments([([0x02], 160), ([0], 20)])
+    clock.t += 20e-6
+    rx = emu.xfer_segments([([0x05], 160), ([0], 20), ([0x06], 160), ([0], 20)])
+    assert rx[1][0] | rx[3][0] << 8 > 0  # and it still counts
+    assert emu.stats.protocol_errors == 0 and not emu.timing_errors
