@@ -30,6 +30,8 @@ import sys
 from functools import cache
 from pathlib import Path
 
+from mm_pc import stop_signals
+
 # Top-level names that come with ROS 2 (or with ./compile's interface builds).
 ROS_MODULES = frozenset(
     {
@@ -296,8 +298,20 @@ def launch(program: str, module: str) -> int:
     """A console script's body: install the hook, then import ``module`` and return what its
     ``main()`` returns (the exit status). The import comes after the hook, so a missing ROS,
     extra or system library at the program's top is a message and exit 2 that names
-    ``program`` (also when started as ``python -m``)."""
+    ``program`` (also when started as ``python -m``). SIGINT and SIGTERM stop it at any
+    moment with one line and exit 0, its children ended too (:mod:`mm_pc.stop_signals`)."""
     global _launched
     _launched = program
     install()
-    return importlib.import_module(module).main()
+    stop_signals.during_import(program)  # before anything else is imported
+    main = importlib.import_module(module).main
+    stop_signals.while_running(program)
+    try:
+        return main()
+    except KeyboardInterrupt:  # SIGINT or SIGTERM (stop_signals), cleaned up on the way here
+        stop_signals.ignore_more()
+        print(stop_signals.stop_line(program, stop_signals.stopped_by()), file=sys.stderr)
+        return stop_signals.EXIT_STOPPED
+    finally:
+        stop_signals.ignore_more()
+        stop_signals.end_children()

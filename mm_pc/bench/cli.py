@@ -174,13 +174,29 @@ def _echo_server(seconds: float) -> None:
         rclpy.shutdown()
 
 
+def _init_rclpy() -> None:
+    """rclpy without its own signal handlers: they would shut the context down under the
+    client's spin thread (a traceback); SIGINT/SIGTERM reach this process as the
+    KeyboardInterrupt of mm_pc.stop_signals, and the ``finally`` blocks close the clients."""
+    import rclpy
+    from rclpy.signals import SignalHandlerOptions
+
+    if not rclpy.ok():
+        rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+
+
 def baseline_rtt(n: int = 300, rate: float = 100.0) -> np.ndarray:
     """Round trips (ms) to the trivial server, same client pattern as the bench; a request
     unanswered within 2 s is left out (the next one goes out), not the end of the run."""
     ctx = mp.get_context("spawn")
     server = ctx.Process(target=_echo_server, args=(n / rate + 30.0,), daemon=True)
     server.start()
-    client = BeagleClient("mm_bench_echo_client", namespace="/mm_bench_echo/mm_beagle")
+    _init_rclpy()
+    try:
+        client = BeagleClient("mm_bench_echo_client", namespace="/mm_bench_echo/mm_beagle")
+    except BaseException:
+        server.terminate()
+        raise
     try:
         if not client.clients["get_sensor_data"].wait_for_service(timeout_sec=30):
             raise RuntimeError("the echo server did not come up")
@@ -205,10 +221,31 @@ def _poller_process(node_pid: int) -> psutil.Process:
     raise RuntimeError("the poller process of mm_beagle was not found")
 
 
+@contextlib.contextmanager
+def _client_side():
+    """The bench's own client and the list of its client processes: closed, and the
+    processes ended, however the run ends (a SIGTERM is a KeyboardInterrupt here)."""
+    import rclpy
+
+    _init_rclpy()
+    client = BeagleClient("mm_bench")
+    procs: list = []
+    try:
+        yield client, procs
+    finally:
+        for p in procs:
+            if p.is_alive():
+                p.terminate()
+        for p in procs:
+            p.join(3)
+        client.close()
+        if rclpy.ok():
+            rclpy.shutdown()
+
+
 def bench_poll(
     seconds: float, rate: float, n_clients: int, cursor: str = "ack", chips: list[str] | None = None
 ) -> dict:
-    import rclpy
 
     baseline = sleep_loop_periods(2.0)
     use_isolated_ros_env()
@@ -223,11 +260,10 @@ def bench_poll(
         devices = [f"/dev/spidev1.{i}" for i in range(max(2, len(chips)))]
         params.update(devices=devices, chips=chips)
     ctx = mp.get_context("spawn")
-    with beagle_process(params, env=dict(os.environ)) as proc:
-        client = BeagleClient("mm_bench")
+    pipes = []
+    with beagle_process(params, env=dict(os.environ)) as proc, _client_side() as (client, procs):
         if not client.wait(30):
             raise RuntimeError("mm_beagle did not come up")
-        pipes, procs = [], []
         for k in range(n_clients):
             a, b = ctx.Pipe()
             p = ctx.Process(target=_client, args=(f"mm_bench_client_{k}", seconds, rate, cursor, b))
@@ -251,8 +287,6 @@ def bench_poll(
             p.join(10)
         final = client.diagnostics(newer_than=time.monotonic())
         node_exits = 0 if proc.poll() is None else 1
-        client.close()
-        rclpy.shutdown()
 
     devices = sorted(final)
     generated = {
