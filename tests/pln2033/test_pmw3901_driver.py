@@ -306,6 +306,21 @@ def test_counts_follow_the_true_motion_through_the_fov_scale(chip, where, vx, vy
     assert mpc == pytest.approx(h * drv.optics.rad_per_count)
 
 
+def test_pinned_counts_accrue_continuously_not_per_frame():
+    """An assumption (docs/sensors.md "The emulators"): the real chip reports motion per
+    frame (~121 fps, 8.3 ms), so of 1 ms reads most would hold 0 and every eighth the whole
+    frame. The emulator counts continuously: every 1 ms read holds its 1 ms of motion."""
+    clock, emu, drv = rig()
+    drv.initialise(0)
+    t0 = clock.t
+    emu.motion = ConstantVelocity(0.0, 1.25e3 * drv.metres_per_count)  # 1.25 counts per ms
+    reads = []
+    for k in range(1, 41):
+        clock.t = t0 + k * 0.001
+        reads.append(drv.read_motion().dy)
+    assert set(reads) == {1, 2} and abs(sum(reads) - 50) <= 1  # 40 ms x 1.25, the fraction kept
+
+
 def test_a_long_noisy_run_loses_no_count_and_stays_within_noise_of_the_truth():
     # a 60 s random-looking path (m), 1 kHz polls, count noise, a register dump every 5 s
     n, dt = 601, 0.1
