@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+import threading
 import time
 from dataclasses import dataclass
 
@@ -69,17 +70,26 @@ def format_row(device: str, view: SensorView, state: str, rate: float) -> str:
     )
 
 
-def run(duration: float, namespace: str, refresh: float, out=sys.stdout) -> int:
-    """Show the view for ``duration`` s (0 = until Ctrl-C). Returns messages received."""
+def run(
+    duration: float,
+    namespace: str,
+    refresh: float,
+    out=sys.stdout,
+    stop: threading.Event | None = None,
+) -> int:
+    """Show the view for ``duration`` s (0 = until Ctrl-C or ``stop`` is set). Returns
+    messages received. Without ``stop``, rclpy is started with mm_pc.ros.spin's handlers:
+    SIGINT and SIGTERM end the loop at its next wake-up (at most ``refresh`` s)."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import qos_profile_sensor_data
 
     from mm_interfaces.msg import SensorData
+    from mm_pc.ros.spin import init, stopping
 
-    if not rclpy.ok():
-        rclpy.init()
+    if stop is None:
+        stop = init(["mm-watch"], "mm-watch") if not rclpy.ok() else threading.Event()
     node = rclpy.create_node("mm_watch")
     views: dict[str, SensorView] = {}
     states: dict[str, str] = {}
@@ -107,10 +117,10 @@ def run(duration: float, namespace: str, refresh: float, out=sys.stdout) -> int:
     # Spun here, not on a thread: a daemon thread still inside spin() when the
     # interpreter exits aborts the process ("terminate called without an active exception").
     try:
-        while time.monotonic() < end:
+        while time.monotonic() < end and not stop.is_set():
             redraw = min(end, time.monotonic() + refresh)
-            while (left := redraw - time.monotonic()) > 0:
-                executor.spin_once(timeout_sec=left)
+            while (left := redraw - time.monotonic()) > 0 and not stop.is_set():
+                executor.spin_once(timeout_sec=min(left, 0.1))
             rows = [
                 format_row(dev, v, states.get(dev, "?"), v.take_rate())
                 for dev, v in sorted(views.items())
@@ -123,11 +133,12 @@ def run(duration: float, namespace: str, refresh: float, out=sys.stdout) -> int:
             else:
                 out.write(f"{stamp}  waiting for {namespace}/sensor_data ...\n")
             out.flush()
-    except KeyboardInterrupt:
-        pass
     finally:
+        stopping()  # a second signal must not cut the clean-up short
         executor.shutdown(timeout_sec=1.0)
         node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
     return received
 
 
@@ -137,8 +148,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--namespace", default="/mm_beagle", help="the node's namespace/name")
     parser.add_argument("--refresh", type=float, default=0.5, help="seconds between redraws")
     args = parser.parse_args(argv)
-    if args.duration < 0 or args.refresh <= 0:
-        parser.error("--duration must be >= 0 and --refresh > 0")
+    if not (0 <= args.duration < math.inf and 0 < args.refresh <= 3600):
+        parser.error("--duration must be >= 0 and finite, --refresh > 0 and <= 3600 (s)")
     received = run(args.duration, args.namespace, args.refresh)
     return 0 if received or args.duration == 0 else 1
 

@@ -28,6 +28,7 @@ from pathlib import Path
 __all__ = ["main", "summary"]
 
 DEFAULT_SCREENSHOT = "demo-output/mm-monitor.png"
+MAX_DURATION_S = 2_000_000  # QTimer.singleShot's milliseconds are a 32-bit int
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -144,8 +145,9 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as e:
         print(f"mm-monitor: {e}", file=sys.stderr)
         return 2
-    if args.duration < 0:
-        print("mm-monitor: --duration must be >= 0", file=sys.stderr)
+    if not 0 <= args.duration <= MAX_DURATION_S:  # also NaN; Qt's timer takes int32 ms
+        print(f"mm-monitor: --duration must be 0..{MAX_DURATION_S} s (0 = never), "
+              f"got {args.duration:g}", file=sys.stderr)  # fmt: skip
         return 2
     if args.agent and not args.sim:
         print("mm-monitor: --agent goes with --sim (the emulated sensors behind an agent)",
