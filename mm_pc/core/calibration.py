@@ -20,6 +20,7 @@ import yaml
 from mm_pc.core.angles import wrap_pi
 from mm_pc.core.checks import finite
 from mm_pc.core.geometry import SensorMount
+from mm_pc.core.user_file import read_user_text
 from mm_pc.core.yaml_text import parse_yaml
 
 __all__ = [
@@ -477,11 +478,12 @@ class Calibration:
     def load(cls, path: str | Path) -> Calibration:
         """Read a file written by :meth:`save` (or a version-1 file).
 
-        OSError if unreadable, ValueError if bad; both messages name the file.
+        OSError if unreadable (also not a regular file, e.g. a FIFO that would block the
+        start for ever, or larger than 1 MiB), ValueError if bad; both messages name the file.
         """
         path = Path(path)
         try:
-            text = path.read_text(encoding="utf-8")
+            text = read_user_text(path)
         except UnicodeDecodeError as e:
             raise ValueError(f"calibration file {path}: not a text file ({e})") from None
         except OSError as e:
