@@ -3,7 +3,9 @@
 Each message is the displacement since the previous one (the topic's own
 read-and-clear cursor, apart from the services'). The timer runs only while
 someone subscribes; a skipped round (nobody listens, the poller busy) leaves the
-cursor where it was, so the next interval is exact.
+cursor where it was, so the next interval is exact. Each message's header: the
+newest poll on the node clock, the sensor's counting-axes frame
+(:func:`~mm_beagle.node.messages.counts_frames`).
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from rclpy.qos import qos_profile_sensor_data
 from mm_beagle.node import messages
 from mm_beagle.poller import shared_state as ss
 from mm_interfaces.msg import SensorData
+from mm_pc.ros.clock import node_stamp
 
 
 class SensorDataTopic:
@@ -22,6 +25,7 @@ class SensorDataTopic:
     def __init__(self, node, start: ss.Totals) -> None:
         self.node = node
         self.published = [start] * len(node.devices)
+        self.frames = messages.counts_frames(node.devices, node.settings.odometry)
         self.timer = None
         self.pub = node.create_publisher(
             SensorData,
@@ -65,7 +69,8 @@ class SensorDataTopic:
                 except ss.PollerBusyError:
                     continue  # this round skipped: the cursor keeps the next interval exact
                 msg = messages.sensor_data(
-                    dev, self.published[i], now, node.instance_id, node.chips[i]
-                )
+                    dev, self.published[i], now, node.instance_id, node.chips[i],
+                    self.frames[i], node_stamp(node, now.stamp_ns),
+                )  # fmt: skip
                 self.published[i] = now
                 self.pub.publish(msg)

@@ -8,9 +8,11 @@ from array import array
 import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from std_msgs.msg import Header
 
 from mm_beagle.poller.shared_state import Totals
 from mm_interfaces.msg import SensorData, SensorPolls, SensorSettings
+from mm_pc.ros.tf import counts_frame, sensor_frame_names
 
 INT32_MIN, INT32_MAX = -(2**31), 2**31 - 1
 
@@ -28,20 +30,41 @@ def new_instance_id() -> int:
     return int.from_bytes(os.urandom(8), "little") or 1
 
 
+def counts_frames(devices, odometry) -> list[str]:
+    """``SensorData.header.frame_id`` of each device: its sensor frame (``sensor_frames``,
+    after ``frame_prefix``; ``odometry`` is the node's OdometrySettings) + ``_counts``."""
+    names = sensor_frame_names(devices, odometry.sensor_frames, odometry.frame_prefix)
+    return [counts_frame(n) for n in names]
+
+
 def sensor_data(
-    device: str, prev: Totals, now: Totals, instance_id: int = 0, chip: str = "pln2033"
+    device: str,
+    prev: Totals,
+    now: Totals,
+    instance_id: int = 0,
+    chip: str = "pln2033",
+    frame_id: str = "",
+    header_stamp: Time | None = None,
 ) -> SensorData:
     """The displacement between two snapshots of one sensor's totals.
 
     ``instance_id``: the node's identity (:func:`new_instance_id`), so a client
     sees a restart whatever ``seq`` and the totals say. ``chip``: the device's chip
     (registry name); ``quality`` is the newest poll's figure (-1: the chip has none).
+    ``frame_id``: the sensor's counting-axes frame (:func:`counts_frames`);
+    ``header_stamp``: the newest poll on the node clock (``mm_pc.ros.clock.node_stamp``;
+    None: its wall-clock stamp, what node_stamp gives without ``use_sim_time``).
+    The ``stamp`` field is always the poll's wall-clock time.
     """
     interval = max(0.0, (now.stamp_ns - prev.stamp_ns) / 1e9)
     x_disp = now.x_total_m - prev.x_total_m
     y_disp = now.y_total_m - prev.y_total_m
+    poll_stamp = stamp(now.stamp_ns)
     return SensorData(
-        stamp=stamp(now.stamp_ns),
+        header=Header(
+            stamp=poll_stamp if header_stamp is None else header_stamp, frame_id=frame_id
+        ),
+        stamp=poll_stamp,
         id=device,
         x_disp=x_disp,
         y_disp=y_disp,

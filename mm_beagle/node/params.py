@@ -120,7 +120,10 @@ PARAMETERS = {
     ),
     "sensor_frames": (
         [""],
-        _plain("odometry: TF frame of each sensor, in device order ('' = mouse_ + device name)"),
+        _plain(
+            "TF frame of each sensor, in device order ('' = mouse_ + device name); "
+            "SensorData's frame_id is it + '_counts'"
+        ),
     ),
     "frame_prefix": frame_prefix_parameter(),
     "sim_trajectory": _from_option("sim_trajectory"),
@@ -215,10 +218,10 @@ def declare(node: Node) -> NodeSettings:
     )
     if problem := frame_prefix_problem(p["frame_prefix"]):
         raise ValueError(problem)
-    if odometry.rate > 0:  # checked before the poller starts
-        if problem := frame_ids_problem(p, ("odom_frame", "base_frame")):
-            raise ValueError(problem)
-        sensor_frame_names(devices, odometry.sensor_frames)
+    # checked before the poller starts; the sensor frames name SensorData's frames too
+    sensor_frame_names(devices, odometry.sensor_frames)
+    if odometry.rate > 0 and (problem := frame_ids_problem(p, ("odom_frame", "base_frame"))):
+        raise ValueError(problem)
     remote = RemoteSettings(
         p["agent"], p["agent_name"], p["agent_credentials"], p["agent_clock_sync"]
     )

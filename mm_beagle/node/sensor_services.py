@@ -19,6 +19,7 @@ from mm_beagle.node import messages
 from mm_beagle.poller import shared_state as ss
 from mm_beagle.poller.poller_client import PollerError
 from mm_beagle.poller.read_and_clear import ClientCursors
+from mm_pc.ros.clock import node_stamp
 from mm_pc.ros.services import service_types
 
 
@@ -31,6 +32,8 @@ class SensorServices:
         n = len(node.devices)
         self._served = [start] * n
         self._client_cursors = ClientCursors(n, start)  # request.client
+        #: SensorData.header.frame_id of each device
+        self.frames = messages.counts_frames(node.devices, node.settings.odometry)
         handlers = {
             "get_sensor_data": self.on_get_sensor_data,
             "get_sensor_settings": self.on_get_settings,
@@ -106,11 +109,12 @@ class SensorServices:
                 res.success, res.message = False, ss.BUSY_MESSAGE
                 return res
             for i, (prev, now) in zip(wanted, intervals, strict=True):
-                data.append(
-                    messages.sensor_data(
-                        self.node.devices[i], prev, now, self.node.instance_id, self.node.chips[i]
-                    )
-                )
+                node = self.node
+                msg = messages.sensor_data(
+                    node.devices[i], prev, now, node.instance_id, node.chips[i],
+                    self.frames[i], node_stamp(node, now.stamp_ns),
+                )  # fmt: skip
+                data.append(msg)
                 ends[i] = now.seq
         res.data = data
         res.polls, busy = self._polls_for(polls_wanted, ends)

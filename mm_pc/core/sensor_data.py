@@ -16,14 +16,14 @@ __all__ = ["Reading", "Reply"]
 
 @dataclass(frozen=True)
 class Reading:
-    """One sensor in one reply. Sensor frame (X right, Y forward), metres, seconds.
+    """One sensor in one reply. Sensor counting axes (X right, Y forward), metres, seconds.
 
     ``x_total``/``y_total``: measured displacement since the node started;
     ``x_lift_total``/``y_lift_total``: the node's estimate of what lifts lost
     (not included in the measured totals); ``seq``: polls done so far (it
-    goes back when the node restarts); ``stamp_ns``: time of the newest poll.
-    Every other field of ``SensorData`` is kept too, so a recording holds the
-    reply exactly.
+    goes back when the node restarts); ``stamp_ns``: wall-clock time of the newest
+    poll (ns since the epoch; the pose arithmetic uses it). Every other field of
+    ``SensorData`` is kept too, so a recording holds the reply exactly.
     """
 
     id: str
@@ -60,12 +60,17 @@ class Reading:
     quality: int = -1
     low_quality_events: int = 0
     low_quality_events_total: int = 0
+    #: the header (issue 25): the counting-axes TF frame ('' = an old node or recording,
+    #: which had no header) and the newest poll on the node clock (ns; 0 = none)
+    frame_id: str = ""
+    header_stamp_ns: int = 0
 
     @classmethod
     def from_msg(cls, msg) -> Reading:
         """From an ``mm_interfaces/SensorData`` (or anything with its fields; the issue-15
-        fields may be missing)."""
+        fields and the header may be missing: a ``LegacySensorData`` of an old recording)."""
         chip = str(getattr(msg, "chip", "") or "")
+        header = getattr(msg, "header", None)
         return cls(
             id=str(msg.id),
             stamp_ns=int(msg.stamp.sec) * 1_000_000_000 + int(msg.stamp.nanosec),
@@ -96,6 +101,12 @@ class Reading:
             quality=int(getattr(msg, "quality", -1)) if chip else -1,
             low_quality_events=int(getattr(msg, "low_quality_events", 0)),
             low_quality_events_total=int(getattr(msg, "low_quality_events_total", 0)),
+            frame_id=str(header.frame_id) if header is not None else "",
+            header_stamp_ns=(
+                int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+                if header is not None
+                else 0
+            ),
         )
 
 

@@ -11,10 +11,15 @@ Frames: REP 103/105 (odom -> base_link, map -> odom); poses in metres and rad.
 Many robots on one /tf: every node that names frames takes ``frame_prefix`` (as
 robot_state_publisher's: put before every frame id it publishes, '' = none), so robot
 r1's tree is r1/odom -> r1/base_link -> r1/mouse_*; :func:`prefixed` is the one rule.
+Each sensor frame ``mouse_X`` (REP 103 axes: x forward when ideally mounted) has a fixed
+child ``mouse_X_counts`` (:func:`counts_frame`): the axes ``SensorData`` counts in
+(x to the robot's right, y forward), ``mouse_X`` turned by -90 deg about z; it is
+``SensorData``'s ``header.frame_id``, so tf2 takes its numbers into base_link.
 """
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Sequence
 
@@ -28,9 +33,12 @@ from mm_pc.core.geometry import SensorMount
 from mm_pc.ros.parameters import read_only
 
 __all__ = [
+    "COUNTS_SUFFIX",
+    "COUNTS_YAW",
     "DYNAMIC_QOS",
     "STATIC_QOS",
     "TfPublisher",
+    "counts_frame",
     "frame_id_problem",
     "frame_ids_problem",
     "frame_prefix_parameter",
@@ -46,6 +54,11 @@ STATIC_QOS = QoSProfile(
     depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
 )
 
+
+#: the counting-axes frame of sensor frame F is F + this (``SensorData.header.frame_id``)
+COUNTS_SUFFIX = "_counts"
+#: its yaw in the sensor frame (rad): counts x = the sensor's right, y = its forward
+COUNTS_YAW = -math.pi / 2
 
 _FRAME_ID = re.compile(r"[A-Za-z_][A-Za-z0-9_./-]*")
 
@@ -126,6 +139,12 @@ def sensor_frame_names(
     return [prefixed(prefix, n) for n in names]
 
 
+def counts_frame(sensor_frame: str) -> str:
+    """The counting-axes frame of ``sensor_frame`` (as published, prefix included):
+    'r1/mouse_spidev1_0' -> 'r1/mouse_spidev1_0_counts'."""
+    return f"{sensor_frame}{COUNTS_SUFFIX}"
+
+
 def planar_transform(
     stamp, parent: str, child: str, x: float, y: float, yaw: float
 ) -> TransformStamped:
@@ -144,10 +163,12 @@ def planar_transform(
 def mount_transforms(
     stamp, base_frame: str, sensor_frames: Sequence[str], mounts: Sequence[SensorMount]
 ) -> list[TransformStamped]:
-    """base_link -> each sensor frame at its mount (position; yaw = the mounting error).
+    """base_link -> each sensor frame at its mount (position; yaw = the mounting error),
+    then each sensor frame -> its counting-axes frame (:func:`counts_frame`, yaw -pi/2).
 
     The sensor frame's axes are REP 103's for the sensor (x = the robot's forward
-    direction when ideally mounted), not the seed's sensor axes (X right, Y forward).
+    direction when ideally mounted); the ``_counts`` child has the seed's sensor axes
+    (X right, Y forward) that ``SensorData`` is given in.
     """
     if len(sensor_frames) != len(mounts):
         raise ValueError(
@@ -156,6 +177,9 @@ def mount_transforms(
     return [
         planar_transform(stamp, base_frame, name, m.x, m.y, m.yaw)
         for name, m in zip(sensor_frames, mounts, strict=True)
+    ] + [
+        planar_transform(stamp, name, counts_frame(name), 0.0, 0.0, COUNTS_YAW)
+        for name in sensor_frames
     ]
 
 

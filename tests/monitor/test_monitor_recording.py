@@ -67,6 +67,9 @@ def odd_reply() -> Reply:
             quality=(42, -1)[k],
             low_quality_events=2 - k,
             low_quality_events_total=9 + k,
+            # the header (issue 25): one from a node, one from an old node (none)
+            frame_id=("r1/mouse_spidev1_0_counts", "")[k],
+            header_stamp_ns=(1_700_000_003_050_000_999, 0)[k],
         )
         for k, dev in enumerate(DEVICES)
     )
@@ -675,7 +678,7 @@ def test_recordings_made_before_the_node_identity_still_decode():
     """SensorData / GetSamples' response bytes from before instance_id was appended."""
     from rclpy.serialization import serialize_message
 
-    from mm_interfaces.msg import SensorData
+    from mm_interfaces.msg import LegacySensorData as SensorData  # before its header
     from mm_interfaces.srv import GetSamples
     from mm_pc.monitor.io import cdr
 
@@ -699,7 +702,8 @@ def test_recordings_made_before_the_chip_fields_still_decode():
     """SensorData / SensorPolls bytes from before chip and quality were appended (issue 15)."""
     from rclpy.serialization import serialize_message
 
-    from mm_interfaces.msg import SensorData, SensorPolls
+    from mm_interfaces.msg import LegacySensorData as SensorData  # before its header
+    from mm_interfaces.msg import SensorPolls
     from mm_pc.monitor.io import cdr
 
     new = serialize_message(SensorData(id="/dev/spidev1.0", seq=7, instance_id=99, chip="pmw3360",
@@ -722,13 +726,15 @@ def test_recordings_made_before_the_chip_fields_still_decode():
 
 def test_an_old_recording_reads_as_a_pln2033_without_a_quality_figure():
     """The zero-filled quality of a reply from before issue 15 is no SQUAL 0."""
+    from mm_interfaces.msg import LegacySensorData
     from mm_pc.monitor.io import cdr
     from mm_pc.monitor.model.chips import chip_title, quality_figure
 
-    before = serialize_message(SensorData(id="/dev/spidev1.0", seq=7, instance_id=99))
+    before = serialize_message(LegacySensorData(id="/dev/spidev1.0", seq=7, instance_id=99))
     old_bytes = before[: before.rfind((99).to_bytes(8, "little")) + 8]
-    r = Reading.from_msg(cdr.deserialize_appended(old_bytes, SensorData))
+    r = Reading.from_msg(cdr.decode_sensor_data(old_bytes, legacy=True))
     assert (r.chip, r.quality, r.low_quality_events) == ("", -1, 0)
+    assert (r.frame_id, r.header_stamp_ns) == ("", 0)  # no header either
     assert chip_title(r.chip) == "Philips PLN2033" and math.isnan(quality_figure(r.chip, 0))
     new = SensorData(id="/dev/spidev1.0", seq=7, chip="pmw3360", quality=0)
     assert Reading.from_msg(new).quality == 0  # a real SQUAL 0 stays 0

@@ -24,6 +24,7 @@ ROBOTS = {
     "r2": {"backend": "sim", "sim_trajectory": "still"},
 }
 MICE = ("mouse_spidev1_0", "mouse_spidev1_1")
+COUNTS = tuple(f"{m}_counts" for m in MICE)  # SensorData's frames, children of the mice
 
 
 def parents_of(transforms) -> dict[str, set[str]]:
@@ -150,7 +151,7 @@ def test_two_robots_with_frame_prefixes_share_tf_without_colliding(tmp_path, ros
     by_robot = {r: {n.removeprefix(f"{r}/") for n in names if n.startswith(f"{r}/")}
                 for r in ROBOTS}  # fmt: skip
     assert sum(len(v) for v in by_robot.values()) == len(names), names
-    assert by_robot["r1"] == by_robot["r2"] == {"map", "odom", "base_link", *MICE}
+    assert by_robot["r1"] == by_robot["r2"] == {"map", "odom", "base_link", *MICE, *COUNTS}
     parents = parents_of(every)
     for r in ROBOTS:
         # who publishes what: mm-odometry odom -> base_link and the mounts, mm-fusion map -> odom
@@ -165,6 +166,11 @@ def test_two_robots_with_frame_prefixes_share_tf_without_colliding(tmp_path, ros
             ]
             assert lookup_chain(parents, f"{r}/{mouse}", f"{r}/map")[-1] == f"{r}/map"
             assert tf2_resolves(transforms, statics, f"{r}/{mouse}", f"{r}/odom") in (True, None)
+            assert lookup_chain(parents, f"{r}/{mouse}_counts", f"{r}/base_link") == [
+                f"{r}/{mouse}_counts",
+                f"{r}/{mouse}",
+                f"{r}/base_link",
+            ]
         other = "r2" if r == "r1" else "r1"
         with pytest.raises(AssertionError, match="no parent"):
             lookup_chain(parents, f"{r}/{MICE[0]}", f"{other}/odom")  # two separate trees

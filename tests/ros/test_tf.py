@@ -30,6 +30,7 @@ def test_transforms_arrive_on_tf_and_the_mounts_stay_latched_on_tf_static():
     from rclpy.executors import SingleThreadedExecutor
     from tf2_msgs.msg import TFMessage
 
+    from mm_pc.core.angles import quaternion_yaw
     from mm_pc.core.geometry import DEFAULT_MOUNTS
     from mm_pc.ros.tf import STATIC_QOS, TfPublisher, mount_transforms, planar_transform
 
@@ -57,12 +58,18 @@ def test_transforms_arrive_on_tf_and_the_mounts_stay_latched_on_tf_static():
         assert (t.header.frame_id, t.child_frame_id) == ("odom", "base_link")
         assert (t.transform.translation.x, t.transform.translation.y) == (1.5, -2.0)
         assert t.transform.rotation.z == pytest.approx(math.sqrt(0.5))
-        mounts = got["/tf_static"][0].transforms
-        assert [m.child_frame_id for m in mounts] == ["s0", "s1"]
+        statics = got["/tf_static"][0].transforms
+        assert [m.child_frame_id for m in statics] == ["s0", "s1", "s0_counts", "s1_counts"]
+        mounts, counts = statics[:2], statics[2:]
         for m, mount in zip(mounts, DEFAULT_MOUNTS, strict=True):
             assert m.header.frame_id == "base_link"
             assert m.transform.translation.x == pytest.approx(mount.x)
             assert m.transform.translation.y == pytest.approx(mount.y)
+        for c, parent in zip(counts, ["s0", "s1"], strict=True):  # SensorData's axes
+            assert c.header.frame_id == parent
+            assert (c.transform.translation.x, c.transform.translation.y) == (0.0, 0.0)
+            q = c.transform.rotation
+            assert quaternion_yaw(q.x, q.y, q.z, q.w) == pytest.approx(-math.pi / 2)
         with pytest.raises(ValueError, match="give one each"):
             mount_transforms(stamp, "base_link", ["only_one"], DEFAULT_MOUNTS)
         ex.shutdown()

@@ -2,7 +2,8 @@
 
 :func:`serialize_reading` checks the integer ranges first (rclpy's serializer
 mishandles out-of-range integers); :func:`deserialize_appended` also reads bytes
-of recordings made before fields were appended to the messages.
+of recordings made before fields were appended to the messages, and
+:func:`decode_sensor_data` those made before SensorData's header (issue 25).
 """
 
 from __future__ import annotations
@@ -13,7 +14,14 @@ from types import SimpleNamespace
 from mm_pc.core.sensor_data import Reading
 from mm_pc.monitor.io.schemas import LEGACY_POLLS_TYPE, POLLS_TYPE
 
-__all__ = ["decode_polls", "deserialize_appended", "polls_msg", "ros_types", "serialize_reading"]
+__all__ = [
+    "decode_polls",
+    "decode_sensor_data",
+    "deserialize_appended",
+    "polls_msg",
+    "ros_types",
+    "serialize_reading",
+]
 
 
 @functools.cache
@@ -21,14 +29,16 @@ def ros_types() -> SimpleNamespace:
     """The rclpy pieces, imported once (an import statement per message is costly under Qt)."""
     from builtin_interfaces.msg import Time
     from rclpy.serialization import deserialize_message, serialize_message
-    from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
+    from std_msgs.msg import Float64MultiArray, Header, MultiArrayDimension, MultiArrayLayout
 
-    from mm_interfaces.msg import SensorData, SensorPolls
+    from mm_interfaces.msg import LegacySensorData, SensorData, SensorPolls
     from mm_interfaces.srv import GetSamples
 
     return SimpleNamespace(
         Time=Time,
+        Header=Header,
         SensorData=SensorData,
+        LegacySensorData=LegacySensorData,
         SensorPolls=SensorPolls,
         GetSamplesResponse=GetSamples.Response,
         Float64MultiArray=Float64MultiArray,
@@ -52,6 +62,7 @@ _INT_RANGES = {
     "x_total_counts": (-(2**63), 2**63 - 1),
     "y_total_counts": (-(2**63), 2**63 - 1),
     "stamp_ns": (0, (2**31 - 1) * 1_000_000_000),
+    "header_stamp_ns": (0, (2**31 - 1) * 1_000_000_000),
     "quality": (-(2**15), 2**15 - 1),
     "low_quality_events": (0, 2**32 - 1),
     "low_quality_events_total": (0, 2**64 - 1),
@@ -88,8 +99,13 @@ def serialize_reading(r: Reading) -> bytes:
             )
     ros = ros_types()
     Time, SensorData = ros.Time, ros.SensorData  # noqa: N806 - message classes
+    h = r.header_stamp_ns
     try:
         return ros.serialize(SensorData(
+            header=ros.Header(
+                stamp=Time(sec=h // 1_000_000_000, nanosec=h % 1_000_000_000),
+                frame_id=r.frame_id,
+            ),
             stamp=Time(sec=r.stamp_ns // 1_000_000_000, nanosec=r.stamp_ns % 1_000_000_000),
             id=r.id,
             x_disp=r.x_disp,
@@ -129,10 +145,11 @@ def serialize_reading(r: Reading) -> bytes:
 def deserialize_appended(data: bytes, msg_type):
     """``data`` as ``msg_type``; also a recording made before fields were appended.
 
-    SensorData, SensorPolls and GetSamples' response grew fields at their end
-    (``instance_id`` in issue 13; chip and quality in issue 15). Older CDR bytes
-    end early, so they get zero bytes appended: every missing field then reads 0,
-    '' or empty ("unknown"), whatever alignment padding it needs.
+    SensorData (now LegacySensorData), SensorPolls and GetSamples' response grew
+    fields at their end (``instance_id`` in issue 13; chip and quality in issue 15).
+    Older CDR bytes end early, so they get zero bytes appended: every missing field
+    then reads 0, '' or empty ("unknown"), whatever alignment padding it needs.
+    (SensorData's header, issue 25, came first, not last: :func:`decode_sensor_data`.)
     """
     ros = ros_types()
     try:
@@ -142,6 +159,14 @@ def deserialize_appended(data: bytes, msg_type):
 
 
 _APPENDED_ROOM = 64  # bytes: more than the appended fields and their padding need
+
+
+def decode_sensor_data(data: bytes, legacy: bool):
+    """A SensorData, or (``legacy``: a recording made before its header, see
+    :func:`~mm_pc.monitor.io.schemas.is_legacy_sensor_schema`) a LegacySensorData,
+    whose fields :meth:`~mm_pc.core.sensor_data.Reading.from_msg` reads the same."""
+    ros = ros_types()
+    return deserialize_appended(data, ros.LegacySensorData if legacy else ros.SensorData)
 
 
 def decode_polls(schema: str, data: bytes):

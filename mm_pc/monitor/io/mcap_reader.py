@@ -13,7 +13,7 @@ from pathlib import Path
 
 from mm_pc.core.sensor_data import Reading, Reply
 from mm_pc.monitor.io.bag_format import bag_files
-from mm_pc.monitor.io.cdr import decode_polls, deserialize_appended, ros_types
+from mm_pc.monitor.io.cdr import decode_polls, decode_sensor_data, ros_types
 from mm_pc.monitor.io.schemas import (
     META_TOPIC,
     META_TYPE,
@@ -22,6 +22,7 @@ from mm_pc.monitor.io.schemas import (
     SAMPLES_TOPIC,
     SENSOR_TOPIC,
     SENSOR_TYPE,
+    is_legacy_sensor_schema,
 )
 
 __all__ = ["open_messages", "read_replies", "read_replies_up_to_cut", "read_samples"]
@@ -222,15 +223,20 @@ def read_replies(path: str | Path) -> list[Reply]:
 
 def _replies_of(path, messages, types) -> list[Reply]:
     ros = ros_types()
-    deserialize_message, SensorData = ros.deserialize, ros.SensorData  # noqa: N806
-    Float64MultiArray = ros.Float64MultiArray  # noqa: N806
+    deserialize_message, Float64MultiArray = ros.deserialize, ros.Float64MultiArray  # noqa: N806
     meta = [m for s, c, m in messages if c.topic == META_TOPIC and s and s.name == META_TYPE]
     # a monitor recording's replies are on SENSOR_TOPIC (the live topic's SensorData is
-    # another stream); a foreign bag's SensorData on any topic
-    sensor = [
-        (c, m) for s, c, m in messages
-        if s is not None and s.name == SENSOR_TYPE and (not meta or c.topic == SENSOR_TOPIC)
-    ]  # fmt: skip
+    # another stream); a foreign bag's SensorData on any topic. Each channel's schema
+    # says whether it was recorded before SensorData's header (issue 25).
+    legacy: dict[int, bool] = {}
+    sensor = []
+    for s, c, m in messages:
+        if s is not None and s.name == SENSOR_TYPE and (not meta or c.topic == SENSOR_TOPIC):
+            if c.id not in legacy:
+                legacy[c.id] = is_legacy_sensor_schema(
+                    s.data, c.metadata.get("topic_type_hash", "")
+                )
+            sensor.append((c, m))
     if SENSOR_TYPE not in types.values():
         topics = sorted(types)
         raise ValueError(
@@ -238,7 +244,7 @@ def _replies_of(path, messages, types) -> list[Reply]:
         )
     try:
         readings = [
-            (m.sequence, m.log_time, Reading.from_msg(deserialize_appended(m.data, SensorData)))
+            (m.sequence, m.log_time, Reading.from_msg(decode_sensor_data(m.data, legacy[c.id])))
             for c, m in sensor
             if c.message_encoding == "cdr"
         ]

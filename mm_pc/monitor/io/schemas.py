@@ -12,6 +12,8 @@ from pathlib import Path
 
 __all__ = [
     "LEGACY_POLLS_TYPE",
+    "LEGACY_SENSOR_HASH",
+    "LEGACY_SENSOR_TYPE",
     "META_LABEL",
     "META_TOPIC",
     "META_TYPE",
@@ -22,6 +24,7 @@ __all__ = [
     "SAMPLES_TYPE",
     "SENSOR_TOPIC",
     "SENSOR_TYPE",
+    "is_legacy_sensor_schema",
     "ros2msg_definition",
 ]
 
@@ -34,6 +37,11 @@ META_TYPE = "std_msgs/msg/Float64MultiArray"
 POLLS_TYPE = "mm_interfaces/msg/SensorPolls"
 #: how recordings before SensorPolls carried the polls (read, no longer written)
 LEGACY_POLLS_TYPE = "mm_interfaces/srv/GetSamples_Response"
+#: how recordings before SensorData's header (issue 25) are decoded: their channels say
+#: SensorData, but their schema text is this type's (read, never written or published)
+LEGACY_SENSOR_TYPE = "mm_interfaces/msg/LegacySensorData"
+#: the RIHS01 hash of SensorData before its header (a channel's ``topic_type_hash``)
+LEGACY_SENSOR_HASH = "RIHS01_5c159d52bc2a9db2f23fc71bff3e55d90f687990bff7f0833aa29faf66abbca5"
 SAMPLES_TYPE = POLLS_TYPE
 POLL_TYPES = (POLLS_TYPE, LEGACY_POLLS_TYPE)
 META_LABEL = "received_s,rtt_s"
@@ -60,6 +68,29 @@ def _interface_text(type_name: str) -> str:
         request, _, response = text.partition("\n---\n")
         return response if part == "Response" else request
     return (share / "msg" / f"{name}.msg").read_text()
+
+
+def _first_field(text: str) -> str:
+    """The first field line of a .msg text ('type name', comments and blanks skipped)."""
+    for raw in text.splitlines():
+        line = raw.split("#", 1)[0].strip()
+        if line:
+            return " ".join(line.split()[:2])
+    return ""
+
+
+def is_legacy_sensor_schema(schema: bytes | str, type_hash: str = "") -> bool:
+    """Is a ``SensorData`` channel with this ``ros2msg`` schema text (and
+    ``topic_type_hash``, '' = none) one recorded before the header (issue 25)?
+
+    The old type starts with ``builtin_interfaces/Time stamp``, the new one with
+    ``std_msgs/Header header``; a schema without text falls back to the hash.
+    """
+    text = schema.decode("utf-8", "replace") if isinstance(schema, bytes) else schema
+    first = _first_field(text)
+    if first:
+        return first.startswith("builtin_interfaces/Time ")
+    return type_hash == LEGACY_SENSOR_HASH
 
 
 def _field_types(text: str, pkg: str) -> list[str]:
