@@ -290,6 +290,22 @@ class OTOS:
         self.linear_scalar, self.angular_scalar = float(linear), float(angular)
         self._chip_scalar = regs.decode_scalar(want[0])
 
+    def set_signal_process(self, value: int = regs.SIGNAL_PROCESS_DEFAULT) -> None:
+        """Write the signal-process bits (0x0E) and verify them by reading back.
+
+        The counts need the power-up value 0x0F: with enRot clear the chip integrates the
+        sensor-frame velocity, and the driver's turn from the world frame by the heading
+        then mixes the axes. The chip keeps what a host wrote until power-off, so another
+        client (SparkFun's ``setSignalProcessConfig``) may have left another value.
+        """
+        self.write_bytes(regs.SIGNAL_PROCESS, [value])
+        got = self._await(regs.SIGNAL_PROCESS, bytes([value]), self._settle_s())
+        if got != bytes([value]):
+            raise SensorError(
+                f"{self.name}: the signal-process register reads back {got[0]:#04x}, wrote "
+                f"{value:#04x}; check the I2C wiring and retry"
+            )
+
     def get_scalars(self) -> tuple[float, float]:
         """(linear, angular) as the chip holds them."""
         b = self.read_bytes(regs.SCALAR_LINEAR, 2)
@@ -374,10 +390,12 @@ class OTOS:
     # --- bring-up ----------------------------------------------------------------------------
 
     def initialise(self, cpi: int = EFFECTIVE_CPI, firmware: Sequence[int] | None = None) -> None:
-        """Product id, error check, IMU calibration, scalars, offset, reset tracking, one read.
+        """Product id, error check, IMU calibration, signal-process bits, scalars, offset,
+        reset tracking, one read.
 
         Run at every start: the OTOS forgets its scalars, offset and IMU calibration at
-        power-off (SparkFun, Example3/Example4). ``cpi`` is ignored: the counts' resolution
+        power-off (SparkFun, Example3/Example4), and keeps until then whatever another client
+        wrote. ``cpi`` is ignored: the counts' resolution
         is fixed (:data:`EFFECTIVE_CPI`). The OTOS takes no firmware from this driver.
         """
         if firmware is not None:
@@ -386,6 +404,7 @@ class OTOS:
         self.check_status()
         if self.imu_samples:
             self.calibrate_imu()
+        self.set_signal_process()
         self.set_scalars(self.linear_scalar, self.angular_scalar)
         self.set_offset(*self.offset)
         self.reset_tracking()

@@ -9,7 +9,13 @@ from fakes import FakeClock
 
 from pln2033.angles import wrap_pi
 from pln2033.chips import chip_info, make_driver, make_emulator
-from pln2033.errors import FirmwareError, InvalidCpiError, ProductIdError, SensorNotRespondingError
+from pln2033.errors import (
+    FirmwareError,
+    InvalidCpiError,
+    ProductIdError,
+    SensorError,
+    SensorNotRespondingError,
+)
 from pln2033.motion import ConstantVelocity, Stationary
 from pln2033.otos import OTOS, OTOS_INFO, ConstantYawRate, EmulatedOTOS, InvalidSettingError, regs
 from pln2033.otos.driver import quantise_offset
@@ -48,10 +54,11 @@ def test_bring_up_bytes_and_what_the_chip_holds_after_it():
     assert emu.stats.history[0] == (0x17, b"\x00", b"\x5f")
     w = writes(emu)
     assert w[0] == (0x17, b"\x06\xff")  # IMU calibration, 255 samples
-    assert w[1] == (0x17, bytes([0x04, (-50) & 0xFF, 13]))  # scalars: int8 of (s-1)/0.001
+    assert w[1] == (0x17, b"\x0e\x0f")  # signal process: the power-up bits, all on
+    assert w[2] == (0x17, bytes([0x04, (-50) & 0xFF, 13]))  # scalars: int8 of (s-1)/0.001
     # offset: x 0.05 m = 164 LSB, y -0.1 m = -328, h 0.2 rad = 2086 (int16 LE)
-    assert w[2] == (0x17, bytes([0x10, 164, 0, 0xB8, 0xFE, 0x26, 0x08]))
-    assert w[3] == (0x17, b"\x07\x01")  # reset tracking
+    assert w[3] == (0x17, bytes([0x10, 164, 0, 0xB8, 0xFE, 0x26, 0x08]))
+    assert w[4] == (0x17, b"\x07\x01")  # reset tracking
     assert emu.linear_scalar == 0.95 and emu.angular_scalar == 1.013
     assert emu.offset[0] == pytest.approx(0.05, abs=2e-4)
     assert emu.offset[2] == pytest.approx(0.2, abs=1e-4)
@@ -140,7 +147,7 @@ def test_a_heading_of_plus_and_minus_pi_reaches_the_chip_as_minus_pi():
         _ft, emu, drv = make(record=True, offset=(0.0, 0.0, h))
         drv.initialise(1000)
         assert drv.offset.h == math.pi
-        assert writes(emu)[2] == (0x17, bytes([0x10, 0, 0, 0, 0, 0x00, 0x80]))
+        assert writes(emu)[3] == (0x17, bytes([0x10, 0, 0, 0, 0, 0x00, 0x80]))
         assert emu.offset[2] == -math.pi  # what the chip holds
         assert quantise_offset(drv.offset).h == -math.pi
 
@@ -188,6 +195,43 @@ def test_counts_follow_the_true_motion_with_offset_scalar_and_rotation():
     # the on-chip pose comes with it, no second transfer
     assert drv.last_pose is not None
     assert drv.last_pose.pose.h == pytest.approx(1.01 * 1.0, abs=0.02)  # 2 s at 0.5 rad/s
+
+
+@pytest.mark.parametrize("left", [0x0B, 0x0F])
+def test_signal_process_bits_left_by_another_client_are_set_back_at_start(left):
+    """A client such as SparkFun's may leave enRot clear (0x0B); the chip keeps it until
+    power-off and integrates the sensor-frame velocity. Before the driver wrote 0x0F at
+    start, its counts on a 2 s turn at 1 rad/s read (16720, 10718) for a truth of (0, 23622)."""
+    ft, emu, drv = make()
+    ft.t = 0.3
+    emu.write(0x17, bytes([regs.SIGNAL_PROCESS, left]))
+    ft.t += 0.001
+    assert emu.write_read(0x17, bytes([regs.SIGNAL_PROCESS]), 1) == bytes([left])
+    drv.initialise(1000)
+    assert emu.mem[regs.SIGNAL_PROCESS] == regs.SIGNAL_PROCESS_DEFAULT
+    emu.motion = ConstantVelocity(0.0, 0.3)
+    emu.heading_source = ConstantYawRate(1.0)
+    c0 = (emu.stats.counted_x, emu.stats.counted_y)
+    sx = sy = 0
+    for _ in range(2000):
+        ft.t += 0.001
+        m = drv.read_motion()
+        sx, sy = sx + m.dx, sy + m.dy
+    true_x = (emu.stats.counted_x - c0[0]) / 20  # the PAA5160's 20 000 CPI
+    true_y = (emu.stats.counted_y - c0[1]) / 20
+    assert (true_x, true_y) == pytest.approx((0.0, 0.6 / INCH_M * 1000), abs=1)
+    # within two of the chip's 2.4 ms updates (28 counts each at 0.3 m/s)
+    assert sx == pytest.approx(true_x, abs=56) and sy == pytest.approx(true_y, abs=56)
+
+
+def test_a_signal_process_write_that_does_not_stick_is_a_clear_error():
+    ft, emu, drv = make(imu_samples=0)
+    ft.t = 0.3
+    emu.write_read = lambda addr, write, n, _real=emu.write_read: (  # type: ignore[method-assign]
+        b"\x0b" if write == bytes([regs.SIGNAL_PROCESS]) else _real(addr, write, n)
+    )
+    with pytest.raises(SensorError, match=r"signal-process register reads back 0x0b, wrote 0x0f"):
+        drv.initialise(1000)
 
 
 def test_counts_survive_the_position_registers_wrapping_at_10_m():
