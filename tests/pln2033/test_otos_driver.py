@@ -366,6 +366,24 @@ def test_register_dump_names_and_values_in_one_read():
     assert all(0 <= v <= 0xFFFF for v in values.values())
 
 
+def test_a_host_write_is_seen_by_the_next_transaction_however_soon_but_not_during_a_calibration():
+    """The firmware applies host writes on its next loop pass, long before the host's next
+    address arrives: no latency a transaction can see (write_latency_s only times a write
+    no transaction follows). A blocking IMU calibration holds the loop: the write waits."""
+    ft, emu, _drv = make()
+    ft.t = 0.3
+    emu.write(0x17, bytes([regs.SCALAR_LINEAR, 50]))
+    assert emu.write_read(0x17, bytes([regs.SCALAR_LINEAR]), 1) == bytes([50])  # same instant
+    emu.write(0x17, bytes([regs.IMU_CALIB, 100]))  # 100 x 2.4 ms with the loop blocked
+    ft.t += 0.001
+    emu.write(0x17, bytes([regs.SCALAR_LINEAR, 20]))
+    ft.t += 0.001
+    assert emu.write_read(0x17, bytes([regs.SCALAR_LINEAR]), 1) == bytes([50])
+    ft.t += 0.25
+    assert emu.write_read(0x17, bytes([regs.IMU_CALIB]), 1) == b"\x00"
+    assert emu.write_read(0x17, bytes([regs.SCALAR_LINEAR]), 1) == bytes([20])
+
+
 def test_invalid_imu_samples_is_refused():
     _ft, emu, drv = make()
     with pytest.raises(InvalidSettingError, match=r"0 \(skip\) .. 255"):
