@@ -228,15 +228,17 @@ def _replies_of(path, messages, types) -> list[Reply]:
     # a monitor recording's replies are on SENSOR_TOPIC (the live topic's SensorData is
     # another stream); a foreign bag's SensorData on any topic. Each channel's schema
     # says whether it was recorded before SensorData's header (issue 25).
-    legacy: dict[int, bool] = {}
+    legacy: dict[tuple[bytes, str], bool] = {}  # by schema (channel ids repeat across files)
     sensor = []
     for s, c, m in messages:
-        if s is not None and s.name == SENSOR_TYPE and (not meta or c.topic == SENSOR_TOPIC):
-            if c.id not in legacy:
-                legacy[c.id] = is_legacy_sensor_schema(
-                    s.data, c.metadata.get("topic_type_hash", "")
-                )
-            sensor.append((c, m))
+        if (
+            s is not None and s.name == SENSOR_TYPE and (not meta or c.topic == SENSOR_TOPIC)
+            and c.message_encoding == "cdr"
+        ):  # fmt: skip
+            key = (bytes(s.data), c.metadata.get("topic_type_hash", ""))
+            if key not in legacy:
+                legacy[key] = is_legacy_sensor_schema(*key)
+            sensor.append((legacy[key], m))
     if SENSOR_TYPE not in types.values():
         topics = sorted(types)
         raise ValueError(
@@ -244,9 +246,8 @@ def _replies_of(path, messages, types) -> list[Reply]:
         )
     try:
         readings = [
-            (m.sequence, m.log_time, Reading.from_msg(decode_sensor_data(m.data, legacy[c.id])))
-            for c, m in sensor
-            if c.message_encoding == "cdr"
+            (m.sequence, m.log_time, Reading.from_msg(decode_sensor_data(m.data, old)))
+            for old, m in sensor
         ]
         metas = {}
         for m in meta:
