@@ -20,16 +20,13 @@ from __future__ import annotations
 
 import types
 
+import pmw3901 as vendor  # the test extra (pyproject.toml) installs it: a missing one is an error
 import pytest
 from fakes import FakeClock
 
 from pln2033.pmw3901 import PAA5100, PMW3901, EmulatedPAA5100, EmulatedPMW3901, regs
 from pln2033.pmw3901.emulator import expected_init_writes
 from pln2033.sensor import INCH_M
-
-vendor = pytest.importorskip(
-    "pmw3901", reason="pimoroni's pmw3901 is a test dependency: pip install -e '.[test]'"
-)
 
 #: (pimoroni's class, our emulator, our driver)
 CHIPS = [
