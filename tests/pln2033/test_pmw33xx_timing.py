@@ -393,3 +393,20 @@ def test_pinned_not_modelled_read_hold_srom_chip_select_hold_and_shutdown():
     rx = emu.xfer_segments([([0x05], 160), ([0], 20), ([0x06], 160), ([0], 20)])
     assert rx[1][0] | rx[3][0] << 8 > 0  # and it still counts
     assert emu.stats.protocol_errors == 0 and not emu.timing_errors
+
+
+def test_pinned_bus_assumptions_half_a_clock_setup_1_us_high_bytes_at_the_clock_rate():
+    """The emulator's assumptions about the host's controller (docs/sensors.md "The timing
+    model"): chip select falls half a clock before the first SCLK (0.25 us at 2 MHz, meets
+    tNCS-SCLK's 120 ns), stays high at least 1 us between two calls at one fake instant
+    (meets tBEXIT's 500 ns), and a byte takes 8 clocks at ``sclk_hz`` (default 2 MHz)."""
+    clock = FakeClock(1.0)
+    emu = make_emulator("pmw3360", clock=clock)
+    assert (emu.cs_setup_us, emu.min_cs_high_us, emu.byte_us) == (0.25, 1.0, 4.0)
+    slow = make_emulator("pmw3360", clock=clock, sclk_hz=1_000_000)
+    assert (slow.cs_setup_us, slow.byte_us) == (0.5, 8.0)
+    emu.xfer_segments([([0x50 | W, 0x00], 180)])  # arm the burst
+    clock.t += 0.001
+    for _ in range(3):  # back to back, no leading delay, the clock standing still
+        emu.xfer_segments([([0x50], 35), ([0] * 12, 0)])
+    assert emu.stats.protocol_errors == 0 and not emu.timing_errors
