@@ -416,6 +416,10 @@ def test_pinned_position_has_no_filter_lag(bench):
     ft.t = t0 + 0.05
     assert otos.getPosition().y == pytest.approx(ramp.y(emu.t_update), abs=3.1e-4)
     assert otos.getVelocity().y == pytest.approx(0.5, abs=2e-3)
+    # what is left out: the firmware's own filter (run alongside) stays ~1.8 mm behind
+    ft.t = t0 + 1.0
+    assert ramp.y(emu.t_update) - emu.kf_y.x[0] == pytest.approx(1.8e-3, abs=3e-4)
+    assert otos.getPosition().y == pytest.approx(ramp.y(emu.t_update), abs=3.1e-4)
 
 
 def test_pinned_lookup_table_is_speed_independent(bench):
