@@ -2,43 +2,144 @@
 
 A BeagleBone Black cannot run ROS 2 Jazzy, so the board runs only this: the
 same :class:`~mm_beagle.poller.poller.Poller` the node spawns locally (same driver,
-same conservation rules), writing into a private shared-state buffer, and
-every 10 ms (between polls, on the poll thread: no locks, no second thread)
-it publishes the new polls with the totals after them and answers queued
-queries. ``mm-beagle --ros-args -p backend:=remote`` on any ROS machine turns
-that back into the ROS services (:mod:`mm_beagle.link.remote`). Keys and frames:
-:mod:`mm_beagle.link.link`. Needs only Debian's python3-spidev and python3-yaml and
-the eclipse-zenoh wheel; ``--backend sim`` also needs python3-numpy. The command line
-and configuration: :mod:`mm_beagle.link.agent_cli`.
+same conservation rules), writing into a private shared-state buffer. Every 10 ms,
+between polls on the poll thread, it publishes the new polls with the totals after
+them and advances the peers' requests by one bounded step. ``mm-beagle --ros-args -p
+backend:=remote`` on any ROS machine turns that back into the ROS services
+(:mod:`mm_beagle.link.remote`). Keys and frames: :mod:`mm_beagle.link.link`. Needs only
+Debian's python3-spidev and python3-yaml and the eclipse-zenoh wheel; ``--backend sim``
+also needs python3-numpy. The command line and configuration: :mod:`mm_beagle.link.agent_cli`.
+
+No peer can hold up the poll: two worker threads take the command queries and the
+history requests, refuse what is too large, too frequent or malformed
+(:mod:`mm_beagle.link.agent_requests`), and hand the rest to the poll thread as a
+:class:`Job` in a bounded lane; the poll thread runs at most one step of each lane per
+service (a patch load goes in steps of a few register transfers), and the workers send
+the replies, so a peer that stops reading blocks at most its worker, never the poll.
+History replies are at most :data:`HISTORY_REPLY_POLLS` polls and published with
+congestion control DROP: a reader that stops reading misses them (the node asks again).
 """
 
 from __future__ import annotations
 
 import base64
+import collections
 import json
 import os
 import random
 import sys
+import threading
 import time
 import zlib
+from collections.abc import Callable, Generator
 
 from mm_beagle.link import link
+from mm_beagle.link.agent_requests import (
+    COMMAND_KEYS,
+    HISTORY_KEYS,
+    MAX_REQUEST_BYTES,
+    RX_MAX_MESSAGE_BYTES,
+    Refusals,
+    TokenBucket,
+    parse_request,
+)
 from mm_beagle.poller import commands
 from mm_beagle.poller import shared_state as ss
 from mm_beagle.poller.poller import Poller, PollerConfig
 
 HEARTBEAT_S = 0.1  # an empty batch at least this often: the node's link watchdog
 STATUS_S = 1.0
+HISTORY_REPLY_POLLS = 4096  # polls per history reply (~94 kB); the node asks on for the rest
+JOB_BUDGET_S = 0.003  # the longest the poll thread spends on one lane's job per service
+JOB_TIMEOUT_S = 10.0  # a worker gives up on a job the poll thread has not finished by then
+LANE_SIZE = 2  # jobs waiting per lane (each worker waits for its own: at most one)
+COMMAND_RATE = (50.0, 50)  # commands per second and burst, all peers together (<= 100/s run)
+HISTORY_RATE = (100.0, 50)  # history requests per second and burst, all peers together
+QUERY_QUEUE = 16  # zenoh's own buffer of received queries/requests (oldest dropped)
+
+
+def agent_zenoh_config(listen: list[str], credentials: str = ""):
+    """The agent's zenoh.Config: :func:`link.zenoh_config` and limits a peer cannot push
+    past. Messages over :data:`RX_MAX_MESSAGE_BYTES` are dropped by zenoh before Python
+    sees them (a 200 MB command once cost 490 MB of RSS); a full transmission queue drops
+    a message after at most 2 ms, fragments included (zenoh's default waits 50 ms)."""
+    cfg = link.zenoh_config(listen=listen, credentials=credentials)
+    cfg.insert_json5("transport/link/rx/max_message_size", str(RX_MAX_MESSAGE_BYTES))
+    cfg.insert_json5(
+        "transport/link/tx/queue/congestion_control/drop",
+        json.dumps({"wait_before_drop": 1000, "max_wait_before_drop_fragments": 2000}),
+    )
+    return cfg
+
+
+class Job:
+    """Work for the poll thread: a generator run in steps between polls (its return value is
+    the answer), and the event its worker thread waits on."""
+
+    __slots__ = ("cancelled", "done", "gen", "result")
+
+    def __init__(self, gen: Generator[None, None, object]) -> None:
+        self.gen = gen
+        self.done = threading.Event()
+        self.result: object = None
+        self.cancelled = False
+
+    def step(self, deadline: float) -> bool:
+        """Run until the generator ends (True) or ``deadline`` (perf_counter s) passes."""
+        try:
+            while True:
+                next(self.gen)
+                if time.perf_counter() >= deadline:
+                    return False
+        except StopIteration as stop:
+            self.result = stop.value
+        except Exception as exc:  # never let one request stop the polls
+            self.result = exc
+        self.done.set()
+        return True
+
+
+def once(fn: Callable[..., object], *args: object) -> Generator[None, None, object]:
+    """A job of one step: ``fn(*args)``."""
+    return fn(*args)
+    yield  # a generator, run by Job.step
+
+
+class Lane:
+    """Jobs of one kind waiting for the poll thread (appended by one worker thread)."""
+
+    def __init__(self, size: int = LANE_SIZE) -> None:
+        self.jobs: collections.deque[Job] = collections.deque()
+        self.size = size
+        self.current: Job | None = None
+
+    def submit(self, job: Job) -> bool:
+        if len(self.jobs) >= self.size:
+            return False
+        self.jobs.append(job)
+        return True
+
+    def step(self, budget_s: float) -> None:
+        """The poll thread: one bounded step of the current job (or the next one)."""
+        job = self.current
+        while job is None:
+            if not self.jobs:
+                return
+            job = self.jobs.popleft()
+            if job.cancelled:  # its worker gave up before it started
+                job = None
+        self.current = None if job.step(time.perf_counter() + budget_s) else job
 
 
 class AgentLink:
-    """The agent's zenoh side: publishers, and a queryable and a subscriber read with
-    ``try_recv`` on the poll thread (no callbacks, no second thread)."""
+    """The agent's zenoh side: publishers on the poll thread, a worker thread each for the
+    command queryable and the history-request subscriber, and their job lanes."""
 
-    def __init__(self, session, name: str, poller: AgentPoller) -> None:
+    def __init__(self, session, name: str, poller: AgentPoller, credentials: str = "") -> None:
         import zenoh
 
         self.keys = link.keys(name)
+        self.auth = link.FrameAuth.from_credentials(credentials, name)  # a MAC per message
         self.session = session
         self.poller = poller
         self.boot_id = random.getrandbits(63) | 1
@@ -46,11 +147,13 @@ class AgentLink:
         self.pub = session.declare_publisher(self.keys["polls"])
         self.status_pub = session.declare_publisher(self.keys["status"])
         self.events_pub = session.declare_publisher(self.keys["events"])
-        fifo = zenoh.handlers.FifoChannel
-        self.cmd_q = session.declare_queryable(self.keys["cmd"], handler=fifo(64))
-        self.history_sub = session.declare_subscriber(self.keys["history_req"], handler=fifo(64))
+        ring = zenoh.handlers.RingChannel
+        self.cmd_q = session.declare_queryable(self.keys["cmd"], handler=ring(QUERY_QUEUE))
+        self.history_sub = session.declare_subscriber(
+            self.keys["history_req"], handler=ring(QUERY_QUEUE)
+        )
         self.history_pub = session.declare_publisher(
-            self.keys["history"], congestion_control=zenoh.CongestionControl.BLOCK
+            self.keys["history"], congestion_control=zenoh.CongestionControl.DROP
         )
         n = len(poller.channels)
         self.sent = [0] * n  # next seq to publish, per sensor
@@ -63,8 +166,23 @@ class AgentLink:
         self.cpu_last = (os.times(), time.monotonic())
         self.cpu_percent = float("nan")
         self.bytes_sent = 0
+        self.refusals = Refusals()
+        self.command_lane, self.history_lane = Lane(), Lane()
+        self.command_rate, self.history_rate = (
+            TokenBucket(*COMMAND_RATE),
+            TokenBucket(*HISTORY_RATE),
+        )
+        self.workers = [
+            threading.Thread(target=self._worker, args=args, name=name, daemon=True)
+            for args, name in (
+                ((self.cmd_q.handler, self._command_query), "mm_agent_commands"),
+                ((self.history_sub.handler, self._history_request), "mm_agent_history"),
+            )
+        ]
+        for t in self.workers:
+            t.start()
 
-    # --- between polls ---
+    # --- between polls (the poll thread) ---
 
     def service(self) -> None:
         now = time.monotonic()
@@ -74,9 +192,10 @@ class AgentLink:
             for ch in self.poller.channels:
                 self.sent[ch.i] = ch.seq
             self.last_pub = now
-        self._answer(self.cmd_q, self.answer_command)
-        while (sample := self.history_sub.try_recv()) is not None:
-            self.history_pub.put(self.answer_history(sample.payload.to_bytes()))
+        if self.command_lane.current or self.command_lane.jobs:
+            self.command_lane.step(JOB_BUDGET_S)
+        if self.history_lane.current or self.history_lane.jobs:
+            self.history_lane.step(JOB_BUDGET_S)
         if now >= self.next_status:
             self.next_status = now + STATUS_S
             self.publish_status(now)
@@ -100,70 +219,153 @@ class AgentLink:
             self.boot_id, self.number, self.poller.state.glob_view.tobytes(), blocks
         )
         self.bytes_sent += len(frame)
-        self.pub.put(frame)
+        self.pub.put(frame, attachment=self.auth.tag("polls", frame))
 
-    def _answer(self, queryable, answer) -> None:
+    def run_command(self, name: str, i: int | None, args: tuple) -> tuple[str, object, list]:
+        """One checked command on the poll thread: (status, payload, seq after it)."""
+        status, body = self.poller.serve_command((name, i, *args))
+        return status, body, [ch.seq for ch in self.poller.channels]
+
+    def load_patch(self, i: int, words: list[int]) -> Generator[None, None, tuple]:
+        """load_patch in steps on the poll thread: (status, payload, seq after it)."""
+        status, body = yield from self.poller.load_patch_steps(i, words)
+        return status, body, [ch.seq for ch in self.poller.channels]
+
+    def history_frame(self, rid: int, i: int, since: int, most: int) -> bytes:
+        """Polls ``since`` onwards of sensor ``i`` (at most ``most`` and
+        :data:`HISTORY_REPLY_POLLS`), as a batch frame numbered ``rid``, on the poll thread.
+        Polls the ring no longer holds are left out: the block starts at its oldest."""
+        ch = self.poller.channels[i]
+        if since > ch.seq:
+            raise commands.CommandRefusedError(commands.history_ahead(since, ch.seq))
+        first = max(since, ch.seq - ch.n)
+        end = min(ch.seq, first + min(most, HISTORY_REPLY_POLLS))
+        block = self._block(ch, first, end)
+        return link.encode_batch(self.boot_id, rid, self.poller.state.glob_view.tobytes(), [block])
+
+    # --- the worker threads ---
+
+    def _worker(self, handler, answer: Callable[[object], None]) -> None:
+        """Take requests from a zenoh channel until it is undeclared; never raise."""
         while True:
-            query = queryable.try_recv()
-            if query is None:
-                return
-            payload = query.payload.to_bytes() if query.payload is not None else b""
             try:
-                reply = answer(payload)
-            except (link.LinkError, commands.CommandRefusedError) as exc:  # nothing changed
-                reply = json.dumps({"status": "invalid", "payload": str(exc)}).encode()
-            except Exception as exc:  # never let one request stop the polls
-                reply = json.dumps({"status": "error", "payload": f"agent failed: {exc!r}"})
-                reply = reply.encode()
-            query.reply(query.key_expr, reply)
+                request = handler.recv()
+            except Exception:  # the channel is closed: the agent stops
+                return
+            try:
+                answer(request)
+            except Exception as exc:  # a reply that could not be sent (peer gone)
+                self.refusals.refuse("reply", "reply failed", f"{exc!r}")
+
+    def _job(self, lane: Lane, gen: Generator[None, None, object]) -> object:
+        """Run ``gen`` on the poll thread and wait for its answer (exceptions returned)."""
+        job = Job(gen)
+        if not lane.submit(job):
+            gen.close()
+            raise commands.CommandRefusedError("the agent is busy with other requests; try again")
+        if not job.done.wait(JOB_TIMEOUT_S):
+            job.cancelled = True
+            return RuntimeError(f"the poll thread did not answer within {JOB_TIMEOUT_S:g} s")
+        return job.result
+
+    def _command_query(self, query) -> None:
+        """One command query: checked here, run on the poll thread, answered from here."""
+        try:
+            try:
+                reply = self.answer_command(query.payload)
+            except Exception as exc:  # a bug: still an answer, and the worker goes on
+                self.refusals.refuse("command", "failed", repr(exc))
+                reply = self._reply(commands.ERROR, f"agent failed: {exc!r}", [])
+            query.reply(query.key_expr, reply, attachment=self.auth.tag("reply", reply))
+        finally:
             query.drop()
 
-    def answer_command(self, payload: bytes) -> bytes:
-        """One command (JSON) -> {"status", "payload", "seq"}: checked against the command
-        table (:mod:`~mm_beagle.poller.commands`), then the poller's own answer."""
-        msg = link.parse_request(payload, "command")
-        poller = self.poller
-        cmd, i, args = commands.from_link(msg, poller.cfg.devices)
-        if cmd.name == "info":  # the agent's own configuration
-            status, body = commands.OK, self.info()
-        else:
+    def answer_command(self, payload) -> bytes:
+        """A command (ZBytes or bytes of JSON) -> reply JSON {"status", "payload", "seq"}."""
+        try:
+            if not self.command_rate.allow():
+                raise _RefusedError("rate", f"more than {COMMAND_RATE[0]:g} commands/s; try again")
+            msg = parse_request(_bounded_bytes(payload, "command"), "command", COMMAND_KEYS)
+            cmd, i, args = commands.from_link(msg, self.poller.cfg.devices)
+            if cmd.name == "info":  # the agent's own configuration: nothing on the poll thread
+                seqs = [ch.seq for ch in self.poller.channels]
+                return self._reply(commands.OK, self.info(), seqs)
             if cmd.name == "load_patch":
-                args = (self._patch_words(*args),)
-            status, body = poller.serve_command((cmd.name, i, *args))
-        seqs = [ch.seq for ch in poller.channels]
-        return json.dumps({"status": status, "payload": body, "seq": seqs}).encode()
+                gen = self.load_patch(i, self._patch_words(*args))
+            else:
+                gen = once(self.run_command, cmd.name, i, args)
+            result = self._job(self.command_lane, gen)
+        except (
+            _RefusedError,
+            link.LinkError,
+            commands.CommandRefusedError,
+        ) as exc:  # nothing changed
+            reason = exc.reason if isinstance(exc, _RefusedError) else type(exc).__name__
+            self.refusals.refuse("command", reason, str(exc))
+            return self._reply(commands.INVALID, str(exc), [])
+        if isinstance(result, Exception):
+            self.refusals.refuse("command", "failed", repr(result))
+            return self._reply(commands.ERROR, f"agent failed: {result!r}", [])
+        status, body, seqs = result  # type: ignore[misc]
+        return self._reply(status, body, seqs)
+
+    def _reply(self, status: str, body: object, seqs: list) -> bytes:
+        """A command reply: its status, payload, the seq after it, the boot that answers."""
+        msg = {"status": status, "payload": body, "seq": seqs, "boot_id": self.boot_id}
+        return json.dumps(msg).encode()
 
     def _patch_words(self, name: str) -> list[int]:
-        """The words of patch file ``name`` in this agent's patch_dir.
+        """The words of patch file ``name`` in this agent's patch_dir, read on the worker
+        thread: a file the chip's patch RAM cannot hold is refused unread.
 
         A peer names a file; it never sends a path elsewhere or the code itself."""
-        from mm_beagle.poller.patches import PatchPathError, resolve_patch_file
+        from mm_beagle.poller.patches import (
+            PatchPathError,
+            check_patch_file_size,
+            resolve_patch_file,
+        )
         from pln2033.errors import PatchError
         from pln2033.pln2033 import read_patch_file
 
         try:
-            return read_patch_file(resolve_patch_file(self.poller.cfg.patch_dir, name))
+            path = resolve_patch_file(self.poller.cfg.patch_dir, name)
+            check_patch_file_size(
+                path, self.poller.regmap.memory_words - self.poller.regmap.patch_start
+            )
+            return read_patch_file(path)
         except (PatchPathError, PatchError) as exc:
             raise commands.CommandRefusedError(str(exc)) from None
 
-    def answer_history(self, payload: bytes) -> bytes:
+    def _history_request(self, sample) -> None:
+        reply = self.answer_history(sample.payload)
+        if reply is not None:
+            self.history_pub.put(reply, attachment=self.auth.tag("history", reply))
+
+    def answer_history(self, payload) -> bytes | None:
         """Polls ``since`` onwards of one sensor (at most ``max``): a batch frame numbered
-        by the request's ``id``, or JSON saying why not."""
+        by the request's ``id``, JSON saying why not, or None (rate limited: no answer)."""
+        if not self.history_rate.allow():
+            self.refusals.refuse(
+                "history", "rate", f"more than {HISTORY_RATE[0]:g} history requests/s"
+            )
+            return None
         rid = None
         try:
-            msg = link.parse_request(payload, "history")
+            msg = parse_request(_bounded_bytes(payload, "history"), "history", HISTORY_KEYS)
             rid = msg.get("id")
             n = len(self.poller.channels)
             rid, i, since, most = commands.history_request(msg, n, link.MAX_HISTORY)
-            ch = self.poller.channels[i]
-            if since > ch.seq:
-                raise commands.CommandRefusedError(commands.history_ahead(since, ch.seq))
-        except (link.LinkError, commands.CommandRefusedError) as exc:
+            result = self._job(self.history_lane, once(self.history_frame, rid, i, since, most))
+            if isinstance(result, commands.CommandRefusedError):
+                raise result
+        except (_RefusedError, link.LinkError, commands.CommandRefusedError) as exc:
+            self.refusals.refuse("history", type(exc).__name__, str(exc))
             rid = rid if isinstance(rid, int) and not isinstance(rid, bool) else None
             return json.dumps({"id": rid, "status": "invalid", "payload": str(exc)}).encode()
-        end = min(ch.seq, since + min(most, link.MAX_HISTORY))
-        block = self._block(ch, since, end)
-        return link.encode_batch(self.boot_id, rid, self.poller.state.glob_view.tobytes(), [block])
+        if isinstance(result, Exception):
+            self.refusals.refuse("history", "failed", repr(result))
+            return json.dumps({"id": rid, "status": "error", "payload": repr(result)}).encode()
+        return result  # type: ignore[return-value]
 
     def info(self) -> dict:
         cfg = self.poller.cfg
@@ -203,25 +405,45 @@ class AgentLink:
             "cpu_percent": round(self.cpu_percent, 2),
             "rss_mb": round(rss_mb(), 2),
             "bytes_sent": self.bytes_sent,
+            **self.refusals.status(),
             "hist_z": base64.b64encode(hist_z).decode(),
         }
-        self.status_pub.put(json.dumps(status).encode())
+        body = json.dumps(status).encode()
+        self.status_pub.put(body, attachment=self.auth.tag("status", body))
 
     def event(self, kind: str, args: tuple) -> None:
         device = str(args[0]) if kind in ("up", "down") else ""
         text = str(args[-1]) if args else ""
-        self.events_pub.put(json.dumps({"kind": kind, "device": device, "text": text}).encode())
+        body = json.dumps({"kind": kind, "device": device, "text": text}).encode()
+        self.events_pub.put(body, attachment=self.auth.tag("events", body))
 
     def close(self) -> None:
-        for entity in (
-            self.cmd_q,
-            self.history_sub,
-            self.history_pub,
-            self.pub,
-            self.status_pub,
-            self.events_pub,
-        ):
+        for entity in (self.cmd_q, self.history_sub):  # ends the workers' recv
             entity.undeclare()
+        for t in self.workers:
+            t.join(1.0)
+        for entity in (self.history_pub, self.pub, self.status_pub, self.events_pub):
+            entity.undeclare()
+
+
+class _RefusedError(Exception):
+    """A request refused before it was parsed (``reason``: rate, size)."""
+
+    def __init__(self, reason: str, text: str) -> None:
+        super().__init__(text)
+        self.reason = reason
+
+
+def _bounded_bytes(payload, what: str) -> bytes:
+    """A request's bytes (ZBytes or bytes), its size checked before it is copied."""
+    if payload is None:
+        return b""
+    size = len(payload)
+    if size > MAX_REQUEST_BYTES:
+        raise _RefusedError(
+            "size", f"{what} request of {size} bytes is larger than {MAX_REQUEST_BYTES}"
+        )
+    return payload if isinstance(payload, bytes) else payload.to_bytes()
 
 
 class AgentPoller(Poller):

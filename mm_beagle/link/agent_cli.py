@@ -16,8 +16,15 @@ import sys
 import time
 from dataclasses import dataclass, field
 
-from mm_beagle.link import link
-from mm_beagle.link.agent import AgentLink, AgentPoller, StubMotionBus, make_state, rss_mb
+from mm_beagle.link import link, link_checks
+from mm_beagle.link.agent import (
+    AgentLink,
+    AgentPoller,
+    StubMotionBus,
+    agent_zenoh_config,
+    make_state,
+    rss_mb,
+)
 from mm_beagle.poller import chip_config
 from mm_beagle.poller import shared_state as ss
 from mm_beagle.poller.options import (
@@ -29,9 +36,16 @@ from mm_beagle.poller.options import (
 )
 from mm_beagle.poller.poller import PollerConfig, tune_process
 from mm_beagle.poller.sim_channel import truth_of
+from mm_pc.core.user_file import read_user_text
+from mm_pc.core.yaml_text import parse_yaml
 
 EXIT_CONFIG = 2
 MIN_RING_S = 60.0
+MAX_RING_S = 600.0
+#: the poll ring's memory (every sensor's): 20000 s took 776 MB; a BBB has 512 MB in all
+MAX_RING_BYTES = 32 << 20
+MAX_CONFIG_BYTES = 1 << 20
+MAX_SELF_TEST_S = 3600.0
 
 
 @dataclass
@@ -53,9 +67,14 @@ AGENT_OPTIONS = {
             65.536,
             "single polls kept (s); at least the link's replay window",
             lo=MIN_RING_S,
-            unit=" s (the link's replay window)",
+            hi=MAX_RING_S,
+            unit=" s (at least the link's replay window)",
         ),
-        Option("name", link.DEFAULT_NAME, "key prefix mm/NAME"),
+        Option(
+            "name",
+            link.DEFAULT_NAME,
+            f"key prefix mm/NAME: 1..{link_checks.MAX_NAME} letters, digits, _ . -",
+        ),
         Option("listen", [link.DEFAULT_ENDPOINT], "zenoh endpoints to listen on"),
         Option("credentials", "", "user:password file (mode 600) peers must present"),
     )
@@ -139,15 +158,18 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _load_yaml(path: str) -> dict:
-    import yaml
-
+    """The config file's options: a regular file of at most 1 MiB (a FIFO would block the
+    start, /dev/zero never end), YAML in one line's message (what, line, column)."""
     try:
-        with open(path, encoding="utf-8") as f:
-            data = yaml.safe_load(f) or {}
+        text = read_user_text(path, MAX_CONFIG_BYTES)
     except OSError as exc:
         raise ValueError(f"cannot read config file {path}: {exc.strerror or exc}") from None
-    except (yaml.YAMLError, RecursionError) as exc:
-        raise ValueError(f"config file {path} is not valid YAML: {exc}") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"config file {path} is not a text file (UTF-8 YAML)") from None
+    try:
+        data = parse_yaml(text) or {}
+    except ValueError as exc:
+        raise ValueError(f"config file {path}: {exc}") from None
     if not isinstance(data, dict):
         raise ValueError(f"config file {path} must be a mapping of option: value")
     unknown = sorted(set(data) - set(DEFAULTS))
@@ -165,8 +187,35 @@ def _check_type(name: str, value: object) -> object:
         if not isinstance(value, list) or not all(isinstance(v, str) and v for v in value):
             raise ValueError(f"'{name}' must be a list of strings, got {value!r}")
     elif not isinstance(value, want) or isinstance(value, bool) != (want is bool):
-        raise ValueError(f"'{name}' must be {want.__name__}, got {value!r}")
+        raise ValueError(f"'{name}' must be {want.__name__}, got {_short(value)}")
     return value
+
+
+def _short(value: object) -> str:
+    """A value for a one-line message: at most 60 characters of its repr."""
+    text = repr(value)
+    return text if len(text) <= 60 else f"{text[:40]}... ({len(text)} characters)"
+
+
+def ring_problem(ring_seconds: float, poll_rate: float, sensors: int) -> str:
+    """Why a poll ring of ``ring_seconds`` at ``poll_rate`` Hz for ``sensors`` does not fit
+    :data:`MAX_RING_BYTES` ('' if it does)."""
+    polls = round(ring_seconds * poll_rate)
+    need = ss.SharedState.size(sensors, polls)
+    if need <= MAX_RING_BYTES:
+        return ""
+    return (
+        f"'ring_seconds' {ring_seconds:g} s at {poll_rate:g} Hz for {sensors} sensors needs "
+        f"{need / 2**20:.0f} MiB of poll ring; at most {MAX_RING_BYTES >> 20} MiB "
+        "(lower ring_seconds or poll_rate)"
+    )
+
+
+def self_test_problem(seconds: float | None) -> str:
+    """Why ``--self-test SECONDS`` cannot run ('' if it can, or was not given)."""
+    if seconds is None or 0 < seconds <= MAX_SELF_TEST_S:  # NaN fails both
+        return ""
+    return f"--self-test must be more than 0 and at most {MAX_SELF_TEST_S:g} s, got {seconds:g}"
 
 
 def config_from_args(args: argparse.Namespace) -> AgentConfig:
@@ -180,6 +229,13 @@ def config_from_args(args: argparse.Namespace) -> AgentConfig:
             values[name] = v
     values = {k: _check_type(k, v) for k, v in values.items()}
     check_ranges(ALL_OPTIONS, values)
+    if problem := ring_problem(
+        values["ring_seconds"], values["poll_rate"], max(1, len(values["devices"]))
+    ):
+        raise ValueError(problem)
+    link_checks.check_link_settings(
+        values["name"], values["listen"], "listen", values["credentials"]
+    )
     ring = round(values["ring_seconds"] * values["poll_rate"])
     cfg = poller_config_from(values, ring)
     link.keys(values["name"])
@@ -225,6 +281,9 @@ def self_test_report(poller: AgentPoller, seconds: float, cpu_s: float) -> dict:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    if problem := self_test_problem(args.self_test):
+        print(f"mm-beagle-agent: error: {problem}", file=sys.stderr)
+        return EXIT_CONFIG
     if args.make_credentials:
         try:
             path = link.make_credentials(args.make_credentials)
@@ -243,7 +302,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         import zenoh
 
-        session = zenoh.open(link.zenoh_config(listen=cfg.listen, credentials=cfg.credentials))
+        session = zenoh.open(agent_zenoh_config(cfg.listen, cfg.credentials))
     except ImportError:
         print(
             "mm-beagle-agent: error: the eclipse-zenoh package is missing; "
@@ -254,7 +313,7 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as exc:
         print(f"mm-beagle-agent: error: cannot listen on {cfg.listen}: {exc}", file=sys.stderr)
         return EXIT_CONFIG
-    poller.link = AgentLink(session, cfg.name, poller)
+    poller.link = AgentLink(session, cfg.name, poller, credentials=cfg.credentials)
     if args.bench_stub:
         for dev, bus in list(poller.sim_buses.items()):
             poller.sim_buses[dev] = StubMotionBus(bus, poller.regmap)

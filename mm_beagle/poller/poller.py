@@ -27,7 +27,7 @@ import os
 import signal
 import time
 import traceback
-from collections.abc import Callable
+from collections.abc import Callable, Generator
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from typing import TYPE_CHECKING, cast
@@ -35,7 +35,7 @@ from typing import TYPE_CHECKING, cast
 from mm_beagle.poller import chip_config, commands
 from mm_beagle.poller import shared_state as ss
 from mm_beagle.poller.channel import Bus, Channel
-from mm_beagle.poller.patches import resolve_patch_file
+from mm_beagle.poller.patches import patch_load_steps, resolve_patch_file
 from mm_beagle.poller.sim_backend import SimConfig
 from pln2033 import SensorError
 from pln2033 import chips as registry
@@ -356,6 +356,39 @@ class Poller:
         except FirmwareError as exc:
             return (commands.INVALID, str(exc))
         driver.load_firmware(words)  # writes, verifies, enables
+        self.patch = list(words)  # re-initialisations load it too
+        return (commands.OK, len(words))
+
+    def load_patch_steps(
+        self, i: int, words: list[int]
+    ) -> Generator[None, None, tuple[str, object]]:
+        """load_patch on sensor ``i`` in steps (:func:`~mm_beagle.poller.patches.patch_load_steps`):
+        the caller polls between two ``next()``; the generator's value is ``(status, payload)``
+        as :meth:`serve_command` answers. A sensor re-initialised meanwhile ends it with an
+        error (its bring-up loaded the previous patch)."""
+        ch = self.channels[i]
+        driver = ch.driver
+        if driver is None:
+            return (commands.ERROR, commands.sensor_down(ch.device, ch.last_error))
+        if ch.info.firmware != "patch":
+            return (commands.INVALID, commands.takes_no_patch(ch.device, ch.info.title))
+        try:
+            driver.check_firmware(words)
+        except FirmwareError as exc:
+            return (commands.INVALID, str(exc))
+        try:
+            for _ in patch_load_steps(cast(PLN2033, driver), words):
+                yield
+                if ch.driver is not driver:
+                    return (
+                        commands.ERROR,
+                        f"sensor {ch.device} was re-initialised during the patch load "
+                        "(with the previous patch): load it again",
+                    )
+        except SensorError as exc:  # the bus, or the read-back differs
+            ch.ints[ss.I_SPI_ERRORS] += 1
+            self._resync_cpi(ch)
+            return (commands.ERROR, f"sensor {ch.device}: {exc}")
         self.patch = list(words)  # re-initialisations load it too
         return (commands.OK, len(words))
 
