@@ -232,7 +232,8 @@ def test_remapping_tf_per_namespace_keeps_two_robots_apart(tmp_path, ros_command
     for r in ROBOTS:
         assert procs[r].returncode == 0 and "Traceback" not in logs[r], logs[r]
         parents = parents_of(got[f"/{r}/tf"] + got[f"/{r}/tf_static"])
-        assert parents == {"base_link": {"odom"}, **{m: {"base_link"} for m in MICE}}
+        assert parents == {"base_link": {"odom"}, **{m: {"base_link"} for m in MICE},
+                           **{f"{m}_counts": {m} for m in MICE}}  # fmt: skip
         for mouse in MICE:
             assert lookup_chain(parents, mouse, "odom") == [mouse, "base_link", "odom"]
     assert all(t.transform.translation.x == 0.0 for t in got["/r2/tf"])  # r2 stands still

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 import subprocess
 import threading
@@ -86,11 +87,16 @@ def test_tf_follows_odom_reset_starts_over_and_live_parameters_are_checked(
             statics: list = []
             client.node.create_subscription(TFMessage, "/tf_static", statics.append, STATIC_QOS)
             wait_until(lambda: statics, 10, "/tf_static for a late subscriber")
-            frames = statics[0].transforms
+            frames, counts = statics[0].transforms[:2], statics[0].transforms[2:]
             assert [f.child_frame_id for f in frames] == ["mouse_spidev1_0", "mouse_spidev1_1"]
             for f, mount in zip(frames, DEFAULT_MOUNTS, strict=True):
                 assert f.header.frame_id == "base_link"
                 assert planar_tf(f) == pytest.approx((mount.x, mount.y, mount.yaw), abs=1e-12)
+            for c, f in zip(counts, frames, strict=True):  # SensorData's counting axes
+                assert (c.header.frame_id, c.child_frame_id) == (
+                    f.child_frame_id, f"{f.child_frame_id}_counts"
+                )
+                assert planar_tf(c) == pytest.approx((0.0, 0.0, -math.pi / 2), abs=1e-12)
 
             # ~/reset: back to the origin with a fresh covariance, path cleared, then on
             before = odoms[-1]
