@@ -71,7 +71,8 @@ class OnboardOdometryPublisher:
         return f"onboard odometry back to (0, 0, 0) in {frame}, covariance cleared"
 
     def send_static_frames(self) -> None:
-        """base_link -> each sensor frame at its (calibrated) mount, latched on /tf_static."""
+        """base_link -> each sensor frame at its (calibrated) mount, and each sensor frame ->
+        its ``_counts`` frame (SensorData's), latched on /tf_static."""
         self.tf.send_static(
             mount_transforms(
                 self.node.get_clock().now().to_msg(),

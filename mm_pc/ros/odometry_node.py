@@ -21,7 +21,8 @@ from other clients, applies the calibration, runs the pose math of
           while replies are missing, ERROR past ``no_reply_error``
   /tf (publish_tf):          odom -> base_link, the same pose and stamp as ~/odom
   /tf_static (publish_tf):   base_link -> each sensor frame (``sensor_frames``) at its
-          mount (the calibrated one where a calibration is loaded)
+          mount (the calibrated one where a calibration is loaded), and each sensor
+          frame -> its ``_counts`` frame (yaw -pi/2: SensorData's axes and frame_id)
   ~/reset (std_srvs/Trigger): pose and covariance back to the start, path cleared
 
 Frame ids, rates, method and geometry are parameters; ``LIVE`` ones take
@@ -222,7 +223,8 @@ class OdometryNode(Node):
         return prefixed(self.p["frame_prefix"], self.p[name])
 
     def send_static_frames(self) -> None:
-        """base_link -> each sensor frame at its mount, latched on /tf_static."""
+        """base_link -> each sensor frame at its mount (and its ``_counts`` child), latched
+        on /tf_static."""
         self.tf.send_static(
             mount_transforms(
                 self.get_clock().now().to_msg(), self.frame("base_frame"), self.sensor_frames,

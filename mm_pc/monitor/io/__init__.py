@@ -4,7 +4,8 @@ File layout (MCAP profile ``ros2``, schemas ``ros2msg``, messages ``cdr``):
 
 ``/mm_beagle/sensor_data_replies`` -- ``mm_interfaces/msg/SensorData``
     One message per sensor per reply, built from each :class:`Reading`
-    (stamp from ``stamp_ns``), every field as the node served it.
+    (stamp from ``stamp_ns``, the header from ``frame_id`` and ``header_stamp_ns``),
+    every field as the node served it.
 ``/mm_monitor/reply_meta`` -- ``std_msgs/msg/Float64MultiArray``
     One message per reply, ``data = [received_s, rtt_s]``: the exact
     monotonic arrival time and round-trip time (s) of the reply.
@@ -25,7 +26,9 @@ Live topics (:meth:`.mcap_writer.McapRecorder.write_live`, subscribed by the bri
     arrival on the system clock).
 
 Recordings before the SensorPolls type carry the polls as
-``mm_interfaces/srv/GetSamples_Response``; they are still read. Every channel has
+``mm_interfaces/srv/GetSamples_Response``; they are still read. Recordings before
+SensorData's header (issue 25) carry its old schema text and are decoded as
+``mm_interfaces/msg/LegacySensorData`` (:func:`.schemas.is_legacy_sensor_schema`). Every channel has
 rosbag2's ``offered_qos_profiles`` (and ``topic_type_hash``) metadata; a path
 without ``.mcap`` is recorded as a rosbag2 folder with ``metadata.yaml``
 (:mod:`.bag_format`).
