@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 
-from mm_beagle.link import link
+from mm_beagle.link import link, link_checks
 from mm_beagle.node.otos_calibration import otos_options
 from mm_beagle.poller import chip_config
 from mm_beagle.poller.options import OPTIONS, poller_config_from
@@ -226,7 +226,10 @@ def declare(node: Node) -> NodeSettings:
         p["agent"], p["agent_name"], p["agent_credentials"], p["agent_clock_sync"]
     )
     if p["backend"] == "remote":
-        try:
+        try:  # name, endpoint (tls/quic certificates, iface) and credentials file
+            link_checks.check_link_settings(
+                remote.name, [remote.agent], "connect", remote.credentials
+            )
             link.endpoint_host(remote.agent)
             link.keys(remote.name)
             if remote.credentials:

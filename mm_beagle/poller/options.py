@@ -11,6 +11,7 @@ No ROS, no numpy (the board's agent imports it).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from mm_beagle.poller import chip_config
@@ -173,6 +174,8 @@ def range_problem(option: Option, value: object) -> str:
         return f"'{option.name}' is '{value}'; allowed: {', '.join(option.choices)}"
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         return ""
+    if not math.isfinite(value):  # NaN passes every comparison below
+        return f"'{option.name}' must be a finite number, got {value}"
     lo, hi = option.lo, option.hi
     if (lo is not None and value < lo) or (hi is not None and value > hi):
         return f"'{option.name}' must be {option_bounds(option)}{option.unit}, got {_num(value)}"
@@ -221,6 +224,12 @@ def poller_config_from(
     cfg = poller_config(
         {**values, "devices": devices, "chips": chips, "chip_options": options}, ring_size, sim
     )
-    if backend == "sim":
-        sim_chips(cfg)  # a bad emulated chip name now, with a clear message
+    if backend == "sim":  # a bad emulated chip name now, with a clear message
+        emulated, driven = sim_chips(cfg), chip_config.resolve_chips(chips, devices)
+        if emulated != driven:  # another chip's emulator crashes the driver (an OTOS is I2C)
+            raise ValueError(
+                f"'sim_chips' {','.join(emulated)} differ from 'chips' {','.join(driven)}: "
+                "each device's driver talks to its own chip's emulator; give chips the same "
+                "list (or leave sim_chips empty: the emulators follow chips)"
+            )
     return cfg
