@@ -95,3 +95,33 @@ def test_frame_ids_are_checked_and_sensor_frames_derived_from_the_devices():
                      (["a", "/b"], "leading '/'")):  # fmt: skip
         with pytest.raises(ValueError, match=why):
             sensor_frame_names(devices, bad)
+
+
+def test_a_counts_vector_through_the_counts_frame_is_the_robots_motion_in_base_link():
+    """SensorData's numbers (counting axes, X right, Y forward) taken through
+    base_link <- mouse_X <- mouse_X_counts give the robot's motion, for a mount turned by
+    a mounting error: what mm_pc.core.frames and geometry compute without TF."""
+    from builtin_interfaces.msg import Time
+
+    from mm_pc.core.angles import quaternion_yaw
+    from mm_pc.core.frames import base_to_sensor
+    from mm_pc.core.geometry import SensorMount
+    from mm_pc.ros.tf import COUNTS_YAW, counts_frame, mount_transforms
+
+    def turn(yaw: float, x: float, y: float) -> tuple[float, float]:
+        c, s = math.cos(yaw), math.sin(yaw)
+        return c * x - s * y, s * x + c * y
+
+    mount = SensorMount(0.049, -0.0395, 0.07)  # 4 deg mounting error
+    mouse, counts = mount_transforms(Time(), "r1/base_link", ["r1/mouse_a"], [mount])
+    assert (counts.header.frame_id, counts.child_frame_id) == ("r1/mouse_a", "r1/mouse_a_counts")
+    assert counts_frame("r1/mouse_a") == "r1/mouse_a_counts"
+    yaws = [quaternion_yaw(t.transform.rotation.x, t.transform.rotation.y,
+                           t.transform.rotation.z, t.transform.rotation.w)
+            for t in (mouse, counts)]  # fmt: skip
+    assert yaws == pytest.approx([mount.yaw, COUNTS_YAW])
+    assert math.isclose(COUNTS_YAW, -math.pi / 2)
+    for d in [(0.01, 0.0), (0.0, 0.01), (-0.003, 0.004)]:  # base_link motion, m
+        reported = turn(-mount.yaw, *map(float, base_to_sensor(*d)))  # what the chip counts
+        back = turn(yaws[0], *turn(yaws[1], *reported))  # tf2: counts -> mouse -> base_link
+        assert back == pytest.approx(d, abs=1e-15)
