@@ -50,7 +50,7 @@ NODE_NAME = "mm_beagle"
 class BeagleNode(Node):
     """The composition: settings, the poller, and the parts that serve what it writes."""
 
-    def __init__(self, **kwargs) -> None:
+    def __init__(self, stop: threading.Event | None = None, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
         self.settings: NodeSettings = declare(self)
         cfg = self.settings.poller
@@ -78,7 +78,7 @@ class BeagleNode(Node):
         start = ss.Totals.zero(time.time_ns())  # the read-and-clear cursors' origin
         self.supervisor = PollerSupervisor(self)
         self.poller.start()
-        self.supervisor.wait_for_first_bring_up(timeout=10.0)
+        self.supervisor.wait_for_first_bring_up(timeout=10.0, stop=stop)  # stop: Ctrl-C
 
         self.sensor_services = SensorServices(self, start)
         # the service callbacks, also called directly (in-process tests)
@@ -144,7 +144,7 @@ def main(argv: list[str] | None = None) -> int:
     code = 0
     try:
         try:
-            node = BeagleNode()
+            node = BeagleNode(stop)
         except (ValueError, OSError, ParameterException, StartupError) as exc:  # say what, exit 2
             print(f"mm-beagle: {exc}", file=sys.stderr)
             return 2

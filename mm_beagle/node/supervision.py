@@ -35,7 +35,7 @@ class PollerSupervisor:
     def start_timer(self) -> None:
         self.node.create_timer(0.2, self.relay_poller_events)
 
-    def wait_for_first_bring_up(self, timeout: float) -> None:
+    def wait_for_first_bring_up(self, timeout: float, stop=None) -> None:
         """Return once every sensor is up or has failed once (the services come after).
 
         With the remote backend an unreachable agent does not stop the node:
@@ -45,6 +45,8 @@ class PollerSupervisor:
         ints = poller.state.ints
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline and poller.alive:
+            if stop is not None and stop.is_set():  # SIGINT/SIGTERM while it waits
+                return
             if all(int(ints[i][ss.I_STATE]) != ss.STATE_STARTING for i in range(len(node.devices))):
                 break
             time.sleep(0.02)
