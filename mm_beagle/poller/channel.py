@@ -66,6 +66,8 @@ class Channel:
         self.last_error = ""
         self.gap = LiftGapEstimator()  # in counts
         self.gap_m = LiftGapEstimator()  # in metres: right across a CPI change
+        self._gap_busy = False  # self.gap.busy, as the hot path reads it
+        self._fast_poll: Callable[[int], None] = _detached
         # the hot path's view of the driver (see attach)
         self._xfer: Callable[[list[int]], list[int]] = _detached
         self._decode: Callable[[list[int]], Motion] = _detached
@@ -98,6 +100,9 @@ class Channel:
                 self._tx = pln.motion_tx
                 self._unusual = pln.unusual_status_bits
                 self._motion_bit = pln.map.status_motion
+                self._fast_poll = self._make_fast_poll()
+                if type(self).poll is Channel.poll:  # no subclass wraps it: call it directly
+                    self.poll = self._fast_poll  # type: ignore[method-assign]  # as below
             else:
                 self._read = driver.read_motion
                 self.info = driver.info  # the PMW3901's follows its height
@@ -137,43 +142,59 @@ class Channel:
         ints[ss.I_VERSION] += 1  # even: consistent
 
     def poll(self, stamp_ns: int) -> None:
-        """One motion burst, recorded: the 1 kHz hot path. Raises SensorError.
+        """One motion burst, recorded: the 1 kHz hot path (:meth:`_make_fast_poll`'s
+        function, which :meth:`attach` also binds as ``poll`` itself). Raises SensorError."""
+        self._fast_poll(stamp_ns)
+
+    def _make_fast_poll(self) -> Callable[[int], None]:
+        """The PLN2033's poll as a function of the stamp, made at each ``attach``.
 
         The common poll (no lift, no overflow, no lift gap open or waiting for
         its after-window) is recorded here with as few Python operations as
-        possible (field indices are literals: see shared_state); anything else
-        goes through :meth:`record`, the one general implementation. The lift
-        gap costs the hot path nothing but the ``busy`` check: the polls before
-        a gap are read back from the ring when it starts.
+        possible: what is fixed while this driver is attached (its bus transfer, burst,
+        status bits, this channel's shared-memory views) is held by the function instead
+        of read from attributes, and field indices are literals (see shared_state);
+        anything else goes through :meth:`record`, the one general implementation. The
+        lift gap costs the hot path nothing but the ``_gap_busy`` check (the estimator's
+        ``busy``, mirrored after each of its updates): the polls before a gap are read
+        back from the ring when it starts.
         """
-        rx = self._xfer(self._tx)
-        status = (rx[1] << 8) | rx[2] if len(rx) == 9 else 0xFFFF
-        if status & self._unusual or self.gap.busy:
-            self.record(stamp_ns, self._decode(rx))
-            return
-        dx = (((rx[4] << 8) | rx[5]) ^ 0x8000) - 0x8000  # signed 16 bit
-        dy = (((rx[7] << 8) | rx[8]) ^ 0x8000) - 0x8000
-        ints = self.ints
-        seq = self.seq
-        slot = seq % self.n
+        xfer, tx, decode, record = self._xfer, self._tx, self._decode, self.record
+        unusual, motion_bit = self._unusual, self._motion_bit
+        ints, floats, n = self.ints, self.floats, self.n
         stamps, rdx, rdy, rstatus, rcpi, rflags, _rq = self.ring
-        ints[0] += 1  # I_VERSION, odd: writing
-        rdx[slot] = dx
-        rdy[slot] = dy
-        rstatus[slot] = status
-        stamps[slot] = stamp_ns
-        rcpi[slot] = self.cpi_y
-        rflags[slot] = 2 if status & self._motion_bit else 0  # FLAG_MOTION
-        if dx:
-            ints[2] += dx  # I_X_TOTAL
-            self.floats[0] += dx * self.scale_x  # F_X_TOTAL_M
-        if dy:
-            ints[3] += dy  # I_Y_TOTAL
-            self.floats[1] += dy * self.scale_y  # F_Y_TOTAL_M
-        self.seq = seq = seq + 1
-        ints[1] = seq  # I_SEQ
-        ints[10] = stamp_ns  # I_STAMP_NS
-        ints[0] += 1  # even: consistent
+        ch = self
+
+        def fast_poll(stamp_ns: int) -> None:
+            rx = xfer(tx)
+            status = (rx[1] << 8) | rx[2] if len(rx) == 9 else 0xFFFF
+            if status & unusual or ch._gap_busy:
+                record(stamp_ns, decode(rx))
+                return
+            dx = (((rx[4] << 8) | rx[5]) ^ 0x8000) - 0x8000  # signed 16 bit
+            dy = (((rx[7] << 8) | rx[8]) ^ 0x8000) - 0x8000
+            seq = ch.seq
+            slot = seq % n
+            version = ints[0] + 1
+            ints[0] = version  # I_VERSION, odd: writing
+            rdx[slot] = dx
+            rdy[slot] = dy
+            rstatus[slot] = status
+            stamps[slot] = stamp_ns
+            rcpi[slot] = ch.cpi_y
+            rflags[slot] = 2 if status & motion_bit else 0  # FLAG_MOTION
+            if dx:
+                ints[2] += dx  # I_X_TOTAL
+                floats[0] += dx * ch.scale_x  # F_X_TOTAL_M
+            if dy:
+                ints[3] += dy  # I_Y_TOTAL
+                floats[1] += dy * ch.scale_y  # F_Y_TOTAL_M
+            ch.seq = seq = seq + 1
+            ints[1] = seq  # I_SEQ
+            ints[10] = stamp_ns  # I_STAMP_NS
+            ints[0] = version + 1  # even: consistent
+
+        return fast_poll
 
     def record(self, stamp_ns: int, m: Motion | None, extra_flags: int = 0) -> None:
         """Add one read to the totals and the ring (under the sequence lock).
@@ -237,6 +258,7 @@ class Channel:
         if lifted and not self.gap.busy:
             self._prime_lift_gap()
         est = self.gap.update(dx, dy, lifted)
+        self._gap_busy = self.gap.busy
         est_m = self.gap_m.update(dx * self.scale_x, dy * self.scale_y, lifted)
         if est is not None and est_m is not None:
             floats = self.floats
