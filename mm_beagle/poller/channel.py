@@ -102,7 +102,7 @@ class Channel:
                 self._motion_bit = pln.map.status_motion
                 self._fast_poll = self._make_fast_poll()
                 if type(self).poll is Channel.poll:  # no subclass wraps it: call it directly
-                    self.poll = self._fast_poll  # type: ignore[method-assign]  # as below
+                    self.poll = self._fast_poll  # type: ignore[method-assign,assignment]  # as below
             else:
                 self._read = driver.read_motion
                 self.info = driver.info  # the PMW3901's follows its height

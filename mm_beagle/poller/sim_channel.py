@@ -74,7 +74,7 @@ class SimChannel(Channel):
             self.truth = SimChannelStats(self.ints, stats, self.cpi_y, emulated_cpi)
         if self.truth is None and self.fast and driver is not None:
             # no truth to keep (the benchmark's stub bus): the production hot path as it is
-            self.poll = self._fast_poll  # type: ignore[method-assign]  # per-instance dispatch
+            self.poll = self._fast_poll  # type: ignore[method-assign,assignment]  # per-instance
 
     def poll(self, stamp_ns: int) -> None:
         super().poll(stamp_ns)
