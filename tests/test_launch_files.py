@@ -22,6 +22,8 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("mm_beagle", "mm_pc")
 LAUNCH_FILES = sorted(p for pkg in PACKAGES for p in (ROOT / pkg / "launch").glob("*.launch.py"))
+#: configurations launch_ros itself keeps (PushRosNamespace's), read with a default
+LAUNCH_ROS_CONFIGURATIONS = frozenset({"ros_namespace"})
 # The node modules whose PARAMETERS table lives elsewhere.
 PARAM_TABLE_FILE = {
     "mm_beagle.node.node": "mm_beagle/node/params.py",
@@ -138,6 +140,7 @@ def test_launch_file_statically(path):
     )
     declared = declared_arguments(tree)
     used = {_const(c.args[0]) for c in calls(tree, "LaunchConfiguration")}
+    used -= LAUNCH_ROS_CONFIGURATIONS
     assert used <= declared, f"undeclared launch arguments {used - declared}"
 
     tested = "\n".join(p.read_text() for p in (ROOT / "tests").rglob("*.py"))
@@ -514,3 +517,37 @@ def test_robot_launch_passes_an_outer_namespace_and_tf_remap_to_its_nodes(tmp_pa
         assert "__ns:=/r2" in argv and "/tf:=tf" in argv and "/tf_static:=tf_static" in argv, (
             exe, argv,
         )  # fmt: skip
+
+
+@pytest.mark.skipif(not HAVE_LAUNCH, reason="launch/launch_ros not installed (no PyPI wheel)")
+@pytest.mark.parametrize(
+    ("arguments", "outer", "beagle"),
+    [
+        ({}, (), "/mm_beagle"),
+        ({"namespace": "r1"}, (), "/r1/mm_beagle"),
+        ({"namespace": "/r1"}, (), "/r1/mm_beagle"),
+        ({}, ("r2",), "/r2/mm_beagle"),
+        ({"namespace": "r1"}, ("r2",), "/r2/r1/mm_beagle"),
+    ],
+)
+def test_robot_launch_monitor_watches_the_robots_own_mm_beagle(
+    tmp_path, monkeypatch, arguments, outer, beagle
+):
+    """monitor:=true: mm-monitor (a process, not a Node: no namespace of its own) is told the
+    mm_beagle node robot.launch.py started, under ``namespace`` and an outer namespace too
+    (it watched /mm_beagle whatever the namespace, with the real launch)."""
+    from launch_ros.actions import PushRosNamespace
+
+    prefix, out = _fake_prefix(tmp_path)
+    robot = ROOT / "mm_beagle/launch/robot.launch.py"
+    run = _run_launch(
+        robot, {"backend": "sim", "monitor": "true", **arguments}, prefix, out, monkeypatch,
+        [PushRosNamespace(ns) for ns in outer],
+    )  # fmt: skip
+    assert set(run) == {"mm-beagle", "mm-odometry", "mm-fusion", "mm-monitor"}
+    argv = run["mm-monitor"]["argv"]
+    given = argv[argv.index("--beagle") + 1]
+    assert "/" + given.strip("/") == beagle, argv  # mm-monitor makes the name absolute
+    started = run["mm-beagle"]["argv"]
+    ns = next((a.removeprefix("__ns:=") for a in started if a.startswith("__ns:=")), "")
+    assert f"{ns.rstrip('/')}/mm_beagle" == beagle, started  # the node it started

@@ -41,6 +41,15 @@ def _include(package: str, launch_file: str, arguments: dict, condition=None):
     )
 
 
+def _beagle_node(namespace):
+    """The mm_beagle node's full name for mm-monitor (a process, not a launch_ros Node, so
+    neither ``namespace`` nor an outer PushRosNamespace reaches it by itself): the pushed
+    namespace (launch_ros's ``ros_namespace``), then ``namespace`` (absolute: it alone, as
+    for a Node), then ``mm_beagle``; mm-monitor makes a relative name absolute."""
+    pushed = LaunchConfiguration("ros_namespace", default="")
+    return PathJoinSubstitution([pushed, namespace, "mm_beagle"])
+
+
 def _config(package: str, name: str):
     return PathJoinSubstitution([FindPackageShare(package), "config", name])
 
@@ -119,7 +128,7 @@ def generate_launch_description() -> LaunchDescription:
             _include(
                 "mm_pc",
                 "monitor.launch.py",
-                {"beagle": "/mm_beagle"},
+                {"beagle": _beagle_node(namespace)},
                 condition=IfCondition(LaunchConfiguration("monitor")),
             ),
         ]
