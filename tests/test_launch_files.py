@@ -108,7 +108,8 @@ def share_paths(tree: ast.AST) -> list[tuple[str, Path]]:
     out = []
     for call in calls(tree, "PathJoinSubstitution"):
         first, *rest = call.args[0].elts
-        assert isinstance(first, ast.Call) and _call_name(first) == "FindPackageShare"
+        if not (isinstance(first, ast.Call) and _call_name(first) == "FindPackageShare"):
+            continue  # not in a package's share folder (robot.launch.py's node names)
         if not isinstance(first.args[0], ast.Constant):
             continue  # robot.launch.py's include helper: its calls are checked there
         pkg = _const(first.args[0])
