@@ -591,8 +591,10 @@ def test_onboard_odometry_broadcasts_tf_when_asked_and_resets(tmp_path):
             statics: list = []
             client.node.create_subscription(TFMessage, "/tf_static", statics.append, STATIC_QOS)
             wait_until(lambda: statics, 5, "/tf_static for a late subscriber", interval=0.05)
-            frames = statics[0].transforms
-            assert [f.child_frame_id for f in frames] == ["left_mouse", "right_mouse"]
+            frames = statics[0].transforms[:2]  # then each one's _counts (SensorData's)
+            assert [f.child_frame_id for f in statics[0].transforms] == [
+                "left_mouse", "right_mouse", "left_mouse_counts", "right_mouse_counts"
+            ]
             assert [f.transform.translation.y for f in frames] == [-0.0395, 0.0395]
             before = odoms[-1]
             res = client.trigger(f"{ns}/mm_beagle/reset")
