@@ -552,3 +552,22 @@ def test_robot_launch_monitor_watches_the_robots_own_mm_beagle(
     started = run["mm-beagle"]["argv"]
     ns = next((a.removeprefix("__ns:=") for a in started if a.startswith("__ns:=")), "")
     assert f"{ns.rstrip('/')}/mm_beagle" == beagle, started  # the node it started
+
+
+@pytest.mark.skipif(not HAVE_LAUNCH, reason="launch/launch_ros not installed (no PyPI wheel)")
+def test_beagle_launch_list_arguments_reach_the_node_in_a_file_it_accepts(tmp_path, monkeypatch):
+    """chips:= goes into launch_ros's own parameters file as a list (a ``!!python/tuple``
+    there); mm-beagle's --params-file check takes every file it is given (it refused that
+    one: exit 2 with the real launch)."""
+    from mm_pc.ros.spin import params_file_problems
+
+    prefix, out = _fake_prefix(tmp_path)
+    beagle = ROOT / "mm_beagle/launch/beagle.launch.py"
+    arguments = {"backend": "sim", "chips": "pmw3389", "namespace": "r2", "frame_prefix": "r2/"}
+    run = _run_launch(beagle, arguments, prefix, out, monkeypatch)
+    argv = run["mm-beagle"]["argv"]
+    assert params_file_problems(argv) == [], argv
+    (launch_file,) = [f for f in run["mm-beagle"]["params_files"] if "launch_params_" in f]
+    text = run["mm-beagle"]["params"][run["mm-beagle"]["params_files"].index(launch_file)]
+    assert "python/tuple" in text  # how launch_ros writes a list
+    assert "- pmw3389" in text and "frame_prefix: r2/" in text and "backend: sim" in text

@@ -19,9 +19,10 @@ def yaml_problem(exc: BaseException) -> str:
     return f"not valid YAML: {text}"
 
 
-def parse_yaml(text: str) -> object:
-    """``yaml.safe_load(text)``; ValueError with :func:`yaml_problem`'s line on bad input."""
+def parse_yaml(text: str, loader: type = yaml.SafeLoader) -> object:
+    """``yaml.load(text, loader)`` (safe by default); ValueError with :func:`yaml_problem`'s
+    line on bad input."""
     try:
-        return yaml.safe_load(text)
+        return yaml.load(text, Loader=loader)
     except (yaml.YAMLError, RecursionError) as e:
         raise ValueError(yaml_problem(e)) from None

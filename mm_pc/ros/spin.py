@@ -54,7 +54,7 @@ def params_file_problems(argv: Sequence[str]) -> list[str]:
                 problems.append(f"{where}: cannot read it ({e.strerror or e})")
                 continue
             try:
-                data = parse_yaml(text)
+                data = parse_yaml(text, _ros_params_loader())
             except ValueError as e:
                 problems.append(f"{where}: {e}")
                 continue
@@ -66,6 +66,21 @@ def params_file_problems(argv: Sequence[str]) -> list[str]:
             elif problem := _layout_problem(data):
                 problems.append(f"{where}: {problem}")
     return problems
+
+
+def _ros_params_loader() -> type:
+    """A safe YAML loader that also reads a ``!!python/tuple`` as a list: launch_ros writes a
+    Node's dict of parameters with ``yaml.dump``, a list value as that tag, and rcl's parser
+    reads it (``ros2 launch mm_beagle beagle.launch.py chips:=pmw3389`` was refused)."""
+    import yaml
+
+    class Loader(yaml.SafeLoader):
+        pass
+
+    Loader.add_constructor(
+        "tag:yaml.org,2002:python/tuple", lambda loader, node: loader.construct_sequence(node)
+    )
+    return Loader
 
 
 def _layout_problem(tree: dict, path: str = "") -> str:
