@@ -26,6 +26,7 @@ import base64
 import collections
 import json
 import os
+import queue
 import random
 import sys
 import threading
@@ -55,16 +56,20 @@ JOB_TIMEOUT_S = 10.0  # a worker gives up on a job the poll thread has not finis
 LANE_SIZE = 2  # jobs waiting per lane (each worker waits for its own: at most one)
 COMMAND_RATE = (50.0, 50)  # commands per second and burst, all peers together (<= 100/s run)
 HISTORY_RATE = (100.0, 50)  # history requests per second and burst, all peers together
-QUERY_QUEUE = 16  # zenoh's own buffer of received queries/requests (oldest dropped)
+QUERY_QUEUE = 16  # requests received and waiting for their worker, per key
 
 
 def agent_zenoh_config(listen: list[str], credentials: str = ""):
     """The agent's zenoh.Config: :func:`link.zenoh_config` and limits a peer cannot push
     past. Messages over :data:`RX_MAX_MESSAGE_BYTES` are dropped by zenoh before Python
-    sees them (a 200 MB command once cost 490 MB of RSS); a full transmission queue drops
-    a message after at most 2 ms, fragments included (zenoh's default waits 50 ms)."""
+    sees them (a 200 MB command once cost 490 MB of RSS); no shared-memory transport; a
+    full transmission queue drops a message after at most 2 ms, fragments included
+    (zenoh's default waits 50 ms)."""
     cfg = link.zenoh_config(listen=listen, credentials=credentials)
     cfg.insert_json5("transport/link/rx/max_message_size", str(RX_MAX_MESSAGE_BYTES))
+    # No shared memory: a local peer's messages over 3 kB came in its 16 MB zenoh segment,
+    # mapped into the agent (+16 MB RSS per peer, and past max_message_size).
+    cfg.insert_json5("transport/shared_memory/enabled", "false")
     cfg.insert_json5(
         "transport/link/tx/queue/congestion_control/drop",
         json.dumps({"wait_before_drop": 1000, "max_wait_before_drop_fragments": 2000}),
@@ -131,6 +136,35 @@ class Lane:
         self.current = None if job.step(time.perf_counter() + budget_s) else job
 
 
+class Inbox:
+    """Requests received on one key, waiting for its worker: zenoh's callback puts them
+    here (on a zenoh thread, briefly); one that finds :data:`QUERY_QUEUE` waiting is
+    dropped and counted (a dropped query ends at once for its sender, with no reply)."""
+
+    def __init__(self, key: str, refusals: Refusals) -> None:
+        self.key, self.refusals = key, refusals
+        self.queue: queue.Queue = queue.Queue(QUERY_QUEUE)
+        self.closed = False
+
+    def put(self, request: object) -> None:
+        try:
+            self.queue.put_nowait(request)
+        except queue.Full:
+            self.refusals.refuse(self.key, "queue full", f"{QUERY_QUEUE} requests already wait")
+
+    def get(self) -> object | None:
+        """The next request, or None once closed."""
+        while not self.closed:
+            try:
+                return self.queue.get(timeout=0.2)
+            except queue.Empty:
+                continue
+        return None
+
+    def close(self) -> None:
+        self.closed = True
+
+
 class AgentLink:
     """The agent's zenoh side: publishers on the poll thread, a worker thread each for the
     command queryable and the history-request subscriber, and their job lanes."""
@@ -147,11 +181,11 @@ class AgentLink:
         self.pub = session.declare_publisher(self.keys["polls"])
         self.status_pub = session.declare_publisher(self.keys["status"])
         self.events_pub = session.declare_publisher(self.keys["events"])
-        ring = zenoh.handlers.RingChannel
-        self.cmd_q = session.declare_queryable(self.keys["cmd"], handler=ring(QUERY_QUEUE))
-        self.history_sub = session.declare_subscriber(
-            self.keys["history_req"], handler=ring(QUERY_QUEUE)
-        )
+        self.refusals = Refusals()
+        self.cmd_in = Inbox("command", self.refusals)
+        self.history_in = Inbox("history", self.refusals)
+        self.cmd_q = session.declare_queryable(self.keys["cmd"], self.cmd_in.put)
+        self.history_sub = session.declare_subscriber(self.keys["history_req"], self.history_in.put)
         self.history_pub = session.declare_publisher(
             self.keys["history"], congestion_control=zenoh.CongestionControl.DROP
         )
@@ -166,7 +200,6 @@ class AgentLink:
         self.cpu_last = (os.times(), time.monotonic())
         self.cpu_percent = float("nan")
         self.bytes_sent = 0
-        self.refusals = Refusals()
         self.command_lane, self.history_lane = Lane(), Lane()
         self.command_rate, self.history_rate = (
             TokenBucket(*COMMAND_RATE),
@@ -175,8 +208,8 @@ class AgentLink:
         self.workers = [
             threading.Thread(target=self._worker, args=args, name=name, daemon=True)
             for args, name in (
-                ((self.cmd_q.handler, self._command_query), "mm_agent_commands"),
-                ((self.history_sub.handler, self._history_request), "mm_agent_history"),
+                ((self.cmd_in, self._command_query), "mm_agent_commands"),
+                ((self.history_in, self._history_request), "mm_agent_history"),
             )
         ]
         for t in self.workers:
@@ -245,13 +278,9 @@ class AgentLink:
 
     # --- the worker threads ---
 
-    def _worker(self, handler, answer: Callable[[object], None]) -> None:
-        """Take requests from a zenoh channel until it is undeclared; never raise."""
-        while True:
-            try:
-                request = handler.recv()
-            except Exception:  # the channel is closed: the agent stops
-                return
+    def _worker(self, inbox: Inbox, answer: Callable[[object], None]) -> None:
+        """Take requests from ``inbox`` until it is closed; never raise."""
+        while (request := inbox.get()) is not None:
             try:
                 answer(request)
             except Exception as exc:  # a reply that could not be sent (peer gone)
@@ -418,8 +447,10 @@ class AgentLink:
         self.events_pub.put(body, attachment=self.auth.tag("events", body))
 
     def close(self) -> None:
-        for entity in (self.cmd_q, self.history_sub):  # ends the workers' recv
+        for entity in (self.cmd_q, self.history_sub):
             entity.undeclare()
+        self.cmd_in.close()
+        self.history_in.close()
         for t in self.workers:
             t.join(1.0)
         for entity in (self.history_pub, self.pub, self.status_pub, self.events_pub):

@@ -15,7 +15,12 @@ Each figure comes from real processes in one run:
   needed), latency from a poll's stamp to the node's shared state, one clock;
 - ``counts_lost`` over ``link_drops`` forced drops of a few seconds (a
   :class:`~mm_beagle.tools.link_proxy.ProxyProcess` cut): node totals and every ring
-  poll against the emulator's truth.
+  poll against the emulator's truth;
+- ``hostile``: the attacks of issue 27 on an agent on emulated sensors, one after the
+  other (:func:`hostile_run`, :mod:`~mm_beagle.tools.hostile_peer`): per attack the
+  longest gap between two polls (ms, from the agent's ring), and at the end the counts
+  lost, the refusals and the agent's RSS now and at its peak; ``hostile_spidev`` the same
+  memory figures of the spidev agent (no numpy, sensors absent) under the floods.
 """
 
 from __future__ import annotations
@@ -33,6 +38,7 @@ import numpy as np
 from mm_beagle.link.remote import RemoteAgent
 from mm_beagle.poller.poller import PollerConfig
 from mm_beagle.tools.harness import agent_command, agent_process, free_port
+from mm_beagle.tools.hostile_peer import PollWatch, flood, peak_rss_mb, stuck_reader
 from mm_beagle.tools.link_proxy import ProxyProcess
 
 # The project's board check (tools/armhf-root in the checkout), or MM_ARMHF_ROOT_TOOL.
@@ -226,6 +232,103 @@ def link_run(seconds: float, drops: int, drop_s: float) -> dict:
     return result
 
 
+def _attacks(
+    watch: PollWatch, endpoint: str, pid: int, patches: bool, seconds: float
+) -> tuple[dict, dict]:
+    """Each attack on the agent (process ``pid``) behind ``watch``: the longest poll gap
+    (ms) it caused (None without polls: a spidev agent whose sensors are absent) and the
+    agent's RSS after it (MB)."""
+    keys = watch.keys
+    rss: dict[str, float] = {}
+
+    def window(attack) -> float | None:
+        start = [watch.seq(i) for i in range(watch.n)]
+        attack()
+        time.sleep(0.5)
+        rss[attack.__name__] = round(peak_rss_mb(pid)[0], 1)
+        end = [watch.seq(i) for i in range(watch.n)]
+        if not all(end):
+            return None
+        return round(watch.longest_gap_ms(start, end), 2)
+
+    def quiet() -> None:
+        time.sleep(seconds)
+
+    def brackets() -> None:
+        for size in (100_000, 60_000, 4000):
+            for _ in range(10):
+                flood(watch.session, keys["history_req"], [b"[" * size], query=False)
+                flood(watch.session, keys["cmd"], [b"[" * size], query=True)
+
+    def patch_flood() -> None:
+        watch.command(cmd="load_patch", sensor=DEVICES[0], file="big.patch")
+        msg = json.dumps({"cmd": "load_patch", "sensor": DEVICES[0], "file": "full.patch"})
+        flood(watch.session, keys["cmd"], [msg.encode()] * 100, query=True)
+        time.sleep(seconds)
+
+    def stuck() -> None:
+        proc = stuck_reader(endpoint, "mm_beagle", seconds)
+        proc.stdout.readline()
+        time.sleep(seconds)
+        proc.kill()
+        proc.wait(10)
+
+    def big_command() -> None:
+        list(watch.session.get(keys["cmd"], payload=b"x" * 200_000_000, timeout=5.0))
+
+    gaps = {"quiet": window(quiet), "brackets_100kB": window(brackets)}
+    if patches:
+        gaps["load_patch_x100_and_1MiB_file"] = window(patch_flood)
+    gaps["stuck_history_reader"] = window(stuck)
+    gaps["command_200MB"] = window(big_command)
+    return gaps, rss
+
+
+DEVICES = ["/dev/spidev1.0", "/dev/spidev1.1"]
+
+
+def hostile_run(seconds: float = 3.0, tmp: str | None = None) -> dict:
+    """The attacks on a sim agent (poll gaps, counts lost, memory) and on a spidev agent
+    with its sensors absent (memory only: the board's own figure, no numpy)."""
+    import tempfile
+
+    out: dict = {}
+    with tempfile.TemporaryDirectory(dir=tmp) as d:
+        patch_dir = Path(d)
+        (patch_dir / "full.patch").write_bytes(bytes(range(256)) * 32)  # 4096 words
+        (patch_dir / "big.patch").write_bytes(b"\x12\x34" * (1 << 19))  # 1 MiB
+        for backend in ("sim", "spidev"):
+            endpoint = f"tcp/127.0.0.1:{free_port()}"
+            opts: dict = {"backend": backend, "listen": [endpoint], "patch_dir": d}
+            if backend == "spidev":
+                opts["devices"] = ["/dev/spidev99.0", "/dev/spidev99.1"]
+            with agent_process(opts) as proc:
+                watch = PollWatch(endpoint)
+                deadline = time.monotonic() + 60
+                while watch.command(timeout=0.5, cmd="info") is None:
+                    if time.monotonic() > deadline:
+                        raise RuntimeError("the agent did not answer 'info'")
+                time.sleep(1.0)
+                rss0, _ = peak_rss_mb(proc.pid)
+                gaps, rss = _attacks(watch, endpoint, proc.pid, backend == "sim", seconds)
+                time.sleep(1.5)  # a status after the attacks
+                rss1, peak1 = peak_rss_mb(proc.pid)
+                result = {
+                    "rss_mb_before": round(rss0, 1),
+                    "rss_mb_after": round(rss1, 1),
+                    "peak_rss_mb": round(peak1, 1),
+                    "rss_mb_after_each": rss,
+                    "requests_refused": watch.status.get("requests_refused"),
+                    "alive": proc.poll() is None and watch.command(cmd="info") is not None,
+                }
+                if backend == "sim":
+                    result["longest_poll_gap_ms"] = gaps
+                    result["counts_lost"] = watch.counts_lost()
+                watch.close()
+            out["hostile" if backend == "sim" else "hostile_spidev"] = result
+    return out
+
+
 def bench_agent(seconds: float = 3.0, drops: int = 5, drop_s: float = 3.0) -> dict:
     flat = self_test(["--backend", "sim", "--self-test", str(seconds), "--bench-stub"])
     paced = self_test(
@@ -272,12 +375,16 @@ def bench_agent(seconds: float = 3.0, drops: int = 5, drop_s: float = 3.0) -> di
         "polls_flat_out": flat["polls"],
     }
     out.update(link_run(seconds * 3, drops, drop_s))
+    out.update(hostile_run(seconds))
     out["goals"] = {
         "cpu_us_per_poll": "<= 3 (x86, two sensors)",
         "cpu_us_per_poll_qemu_arm": "<= 30",
         "rss_mb": "<= 40",
         "counts_lost": "0",
         "latency_p99_ms": "<= 20",
+        "ratio_to_minimal_loop": "<= 1.3",
+        "hostile.longest_poll_gap_ms": "<= 50 under every attack, counts_lost 0",
+        "hostile_spidev.peak_rss_mb": "<= 40",
     }
     return out
 

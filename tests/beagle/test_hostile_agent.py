@@ -133,8 +133,9 @@ def test_a_200_mb_command_is_refused_and_memory_stays_bounded(agent):
     assert not [r for r in replies if r.ok is not None], "a 200 MB command was answered"
     _alive(proc, watch)
     rss1, peak1 = peak_rss_mb(proc.pid)
-    assert peak1 - peak0 < 60, f"peak RSS {peak0:.1f} -> {peak1:.1f} MB"
-    assert rss1 - rss0 < 60
+    # no shared-memory transport, messages over 64 KiB dropped by zenoh: a few MB at most
+    assert peak1 - peak0 < 30, f"peak RSS {peak0:.1f} -> {peak1:.1f} MB"
+    assert rss1 - rss0 < 30
     end = _window(watch)
     assert watch.longest_gap_ms(start, end) < GAP_BOUND_MS
     assert watch.counts_lost() == 0
