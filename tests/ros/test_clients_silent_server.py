@@ -73,13 +73,13 @@ def test_beagle_client_gives_up_each_call_and_asks_again(silent_beagle):
         assert client.wait(scaled(20)), "the stand-in's services were not discovered"
         for n in (1, 2):
             t0 = time.monotonic()
-            with pytest.raises(TimeoutError, match="get_sensor_data did not answer within 0.5 s"):
+            with pytest.raises(TimeoutError, match=r"get_sensor_data did not answer within 0\.5 s"):
                 client.call("get_sensor_data", timeout=0.5, id="")
             assert 0.5 <= time.monotonic() - t0 < scaled(3.0)
             wait_until(lambda n=n: silent_beagle.get("get_sensor_data") == n, 5,
                        f"request {n} at the server")  # fmt: skip
             assert not client.clients["get_sensor_data"]._pending_requests  # forgotten
-        with pytest.raises(TimeoutError, match="get_samples did not answer within 0.3 s"):
+        with pytest.raises(TimeoutError, match=r"get_samples did not answer within 0\.3 s"):
             client.call("get_samples", timeout=0.3, retries=1, id="/dev/spidev1.0")
         wait_until(lambda: silent_beagle.get("get_samples") == 2, 5, "the retried get_samples")
     finally:
