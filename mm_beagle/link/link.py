@@ -61,6 +61,7 @@ DEFAULT_PORT = 7447
 DEFAULT_ENDPOINT = f"tcp/127.0.0.1:{DEFAULT_PORT}"
 DEFAULT_NAME = "mm_beagle"
 MAX_HISTORY = 16384  # polls per history reply
+MAX_BLOCK_POLLS = 1 << 21  # polls in one block (35 min at 1 kHz: more than any agent ring)
 CREDENTIALS_HELP = "see docs/hardware-setup.md, 'Credentials'"
 
 
@@ -113,6 +114,12 @@ def encode_batch(boot_id: int, number: int, glob: bytes, blocks: list[Block]) ->
     return b"".join(parts)
 
 
+def max_batch_bytes(n_sensors: int) -> int:
+    """The largest batch frame a node of ``n_sensors`` accepts (bytes)."""
+    per = BLOCK.size + INTS_BYTES + FLOATS_BYTES + MAX_BLOCK_POLLS * POLL_BYTES
+    return HEADER.size + GLOB_BYTES + n_sensors * per
+
+
 def decode_batch(data: bytes, n_sensors: int) -> Batch:
     """Parse and check a frame; LinkError names what is wrong."""
     if len(data) < HEADER.size + GLOB_BYTES:
@@ -120,6 +127,8 @@ def decode_batch(data: bytes, n_sensors: int) -> Batch:
     magic, version, nblocks, _r, boot_id, number = HEADER.unpack_from(data, 0)
     if magic != MAGIC or version != VERSION:
         raise LinkError(f"not a version-{VERSION} batch frame (magic {magic!r}, v{version})")
+    if nblocks > n_sensors:
+        raise LinkError(f"batch frame of {nblocks} blocks; this node has {n_sensors} sensors")
     off = HEADER.size
     glob = bytes(data[off : off + GLOB_BYTES])
     off += GLOB_BYTES
@@ -131,6 +140,8 @@ def decode_batch(data: bytes, n_sensors: int) -> Batch:
         off += BLOCK.size
         if index >= n_sensors:
             raise LinkError(f"batch block for sensor {index}; this node has {n_sensors}")
+        if count > MAX_BLOCK_POLLS or first >= 1 << 62:
+            raise LinkError(f"batch block of {count} polls from seq {first} is out of range")
         ints = bytes(data[off : off + INTS_BYTES])
         off += INTS_BYTES
         floats = bytes(data[off : off + FLOATS_BYTES])
@@ -350,26 +361,29 @@ def decode_history_answer(payload: bytes) -> tuple[int | None, str]:
 
 
 class DropLog:
-    """Counts dropped inputs per kind and says when to log one (at most one line per
-    ``interval`` s per kind, with the count dropped meanwhile)."""
+    """Counts dropped inputs per kind and says when to log one: at most one line per
+    ``interval`` s per kind and reason (its first three words without digits: the
+    checks' own wordings, so a peer cannot vary it into a flood), with the count."""
 
     def __init__(self, interval: float = 5.0) -> None:
         self.interval = interval
         self.counts: dict[str, int] = {}
         self.total = 0
-        self._last: dict[str, tuple[float, int]] = {}
+        self._last: dict[tuple[str, str], tuple[float, int]] = {}
 
     def drop(self, kind: str, why: str) -> str | None:
         """Count one dropped ``kind`` input; the line to log now, or None (rate-limited)."""
         self.total += 1
         n = self.counts[kind] = self.counts.get(kind, 0) + 1
         now = time.monotonic()
-        last, at = self._last.get(kind, (-1e9, 0))
+        key = (kind, " ".join(re.sub(r"[0-9]", "", why).split()[:3]))
+        last = self._last.get(key, (-1e9, 0))[0]
         if now - last < self.interval:
             return None
-        self._last[kind] = (now, n)
-        since = f"; {n - at - 1} more since the last line" if n - at > 1 and at else ""
-        return f"dropped a {kind} input from the link: {why[:300]} ({n} so far{since})"
+        if len(self._last) > 256:  # bounded: forget the reasons seen
+            self._last.clear()
+        self._last[key] = (now, n)
+        return f"dropped a {kind} input from the link: {why[:300]} ({n} so far)"
 
 
 # --- frame authentication (with credentials) ----------------------------------------------
@@ -380,12 +394,13 @@ TAG_BYTES = 16  # HMAC-SHA256 truncated: 128 bits
 class FrameAuth:
     """A MAC over every message the agent sends, keyed by the shared credential.
 
-    Without credentials (``key`` None) :meth:`seal` and :meth:`open` pass bytes through.
-    With them the agent appends ``TAG_BYTES`` of HMAC-SHA256(key, kind | body) and the node
-    refuses anything without a valid tag. ``kind`` (polls, status, events, history, reply)
-    is in the MAC, so one kind cannot be replayed as another; the boot id and sequence
-    numbers are inside the body, and the node's boot and sequence rules refuse replays.
-    The key is HMAC-SHA256(password, "mm-link-v1/" + user + "/" + agent name).
+    Without credentials (``key`` None) there is no tag and :meth:`check` passes. With them
+    the agent sends ``TAG_BYTES`` of HMAC-SHA256(key, kind | body) as the zenoh
+    attachment of each message (the payload is unchanged) and the node refuses anything
+    without a valid tag. ``kind`` (polls, status, events, history, reply) is in the MAC, so
+    one kind cannot be replayed as another; the boot id and sequence numbers are inside
+    the body, and the node's boot and sequence rules refuse replays. The key is
+    HMAC-SHA256(password, "mm-link-v1/" + user + "/" + agent name).
     """
 
     def __init__(self, key: bytes | None) -> None:
@@ -399,25 +414,31 @@ class FrameAuth:
         info = f"mm-link-v1/{user}/{name}".encode()
         return cls(hmac.new(password.encode(), info, hashlib.sha256).digest())
 
-    def _tag(self, kind: str, body: bytes) -> bytes:
-        mac = hmac.new(self.key, kind.encode() + b"|", hashlib.sha256)  # type: ignore[arg-type]
+    def tag(self, kind: str, body: bytes) -> bytes | None:
+        """The attachment to send with ``body`` on ``kind`` (None without credentials)."""
+        if self.key is None:
+            return None
+        mac = hmac.new(self.key, kind.encode() + b"|", hashlib.sha256)
         mac.update(body)
         return mac.digest()[:TAG_BYTES]
 
-    def seal(self, kind: str, body: bytes) -> bytes:
-        """``body`` as sent on ``kind``: with its tag when there is a key."""
-        return body if self.key is None else body + self._tag(kind, body)
-
-    def open(self, kind: str, payload: bytes) -> bytes:
-        """The body of a ``kind`` message after its tag is checked; LinkError if forged."""
+    def check(self, kind: str, body: bytes, attachment: bytes | None) -> None:
+        """LinkError unless ``attachment`` is the tag of ``body`` (always fine without a key)."""
         if self.key is None:
-            return payload
-        if len(payload) < TAG_BYTES:
-            raise LinkError(f"{kind} message too short for its authentication tag")
-        body, tag = payload[:-TAG_BYTES], payload[-TAG_BYTES:]
-        if not hmac.compare_digest(tag, self._tag(kind, body)):
+            return
+        if attachment is None or len(attachment) != TAG_BYTES:
+            raise LinkError(f"{kind} message has no authentication tag (forged, or an old agent)")
+        if not hmac.compare_digest(attachment, self.tag(kind, body) or b""):
             raise LinkError(f"{kind} message fails authentication (forged, or other credentials)")
-        return body
+
+
+def attachment_bytes(sample) -> bytes | None:
+    """A zenoh sample's attachment as bytes (None: none, or longer than a tag could be)."""
+    att = getattr(sample, "attachment", None)
+    if att is None:
+        return None
+    data = att.to_bytes()
+    return data if len(data) <= 64 else None
 
 
 # --- endpoints, credentials, zenoh configuration -----------------------------------------
@@ -482,6 +503,31 @@ def make_credentials(path: str, user: str = "mm") -> str:
     return str(p)
 
 
+AGENT_KEYS = ("polls", "status", "events", "history", "cmd")  # what only the agent sends
+
+
+def agent_acl() -> dict:
+    """zenoh access control for the agent's session: no peer may put on the keys only the
+    agent publishes (polls, status, events, history), nor declare a queryable on ``cmd``
+    or reply to a query there. Every connected peer is such a subject (zenoh's subject
+    with no criteria matches all): nodes only put history requests and query ``cmd``.
+    The node is a client of the agent's session, so everything it receives passes here."""
+    rule = {
+        "id": "only-the-agent-speaks",
+        "permission": "deny",
+        "flows": ["ingress"],
+        "messages": ["put", "delete", "declare_queryable", "reply"],
+        "key_exprs": [f"mm/*/{k}" for k in AGENT_KEYS],
+    }
+    return {
+        "enabled": True,
+        "default_permission": "allow",
+        "rules": [rule],
+        "subjects": [{"id": "every-peer"}],
+        "policies": [{"rules": [rule["id"]], "subjects": ["every-peer"]}],
+    }
+
+
 def zenoh_config(
     *,
     listen: list[str] | None = None,
@@ -490,8 +536,8 @@ def zenoh_config(
 ):
     """A zenoh.Config: no multicast scouting, no gossip, only the endpoints given.
 
-    The agent listens (peer mode); the node connects as a client and keeps
-    retrying every 0.1-1 s. With ``credentials`` both sides authenticate with
+    The agent listens (peer mode, with :func:`agent_acl`); the node connects as a
+    client and keeps retrying every 0.1-1 s. With ``credentials`` both sides authenticate with
     zenoh's user/password scheme: a listener then refuses peers without them.
     ``RUST_LOG`` (e.g. ``zenoh=debug``) turns on zenoh's own log on stderr.
     """
@@ -512,6 +558,8 @@ def zenoh_config(
             "exit_on_failure": False,
             "retry": {"period_init_ms": 100, "period_max_ms": 1000, "period_increase_factor": 2},
         }
+    if listen:
+        cfg["access_control"] = agent_acl()
     if credentials:
         user, password = load_credentials(credentials)
         auth = {"user": user, "password": password}

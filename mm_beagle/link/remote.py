@@ -18,20 +18,20 @@ stamps never step back: they stay strictly increasing, as the agent took them.
 
 from __future__ import annotations
 
-import base64
 import collections
 import contextlib
 import json
 import queue
+import socket
 import threading
 import time
-import zlib
 
 import numpy as np
 
 from mm_beagle.link import link
 from mm_beagle.poller import chip_config, commands, ring_layout
 from mm_beagle.poller import shared_state as ss
+from mm_beagle.poller.options import OPTIONS
 from mm_beagle.poller.poller import PollerConfig
 from mm_beagle.poller.poller_client import PollerError
 
@@ -46,6 +46,22 @@ CLOCK_LEAK = 1e-4  # the clock offset estimate may rise this much per second (10
 # under load, against 1 ms between polls).
 CLOCK_SLEW = 0.05
 RING_DTYPES = ring_layout.WIRE_DTYPES  # a batch block's arrays, in RING_FIELDS order
+XY = (ss.I_X_TOTAL, ss.I_Y_TOTAL)
+# Plausibility of what the link says (docs/hardware-setup.md, "What a local process can do"):
+# a sensor's seq may advance at most SEQ_RATE_MARGIN x the highest poll rate an agent
+# accepts, per second since its last block that brought new polls, plus SEQ_SLACK polls.
+# Anything beyond is refused, not applied.
+MAX_POLL_RATE = float(OPTIONS["poll_rate"].hi or 2000.0)
+SEQ_RATE_MARGIN = 1.5
+# A burst of frames late from an outage (zenoh's and TCP's buffers) brings seconds of
+# polls at once: 65 536 (the default ring, 65 s at 1 kHz) covers it. A forged jump within
+# it is caught by the gap fetch: the agent's ring has no polls that far (refused).
+SEQ_SLACK = 65_536
+GLOB_HOLD_S = 1.0
+# A new boot id is followed only when its status arrives after the current boot's frames
+# stopped for this long (a restarted agent is silent for seconds: import, bring-up).
+BOOT_SILENCE_S = 0.5
+CREDENTIALS_PROBE_S = 3.0  # TCP reaches the agent but zenoh does not open for this long
 
 
 class RemoteAgent:
@@ -65,8 +81,7 @@ class RemoteAgent:
         self.credentials = credentials
         self.clock_sync = clock_sync
         link.endpoint_host(endpoint)  # LinkError now, not in the thread
-        if credentials:
-            link.load_credentials(credentials)
+        self.auth = link.FrameAuth.from_credentials(credentials, name)
         n = len(cfg.devices)
         self.n = n
         self.state = ss.SharedState(
@@ -90,8 +105,15 @@ class RemoteAgent:
         self.last_rx = 0.0  # ... of the newest frame received on the polls key
         self.link_drops = 0
         self.polls_lost = 0
-        self.bad_frames = 0
+        self.bad_frames = 0  # every input dropped (undecodable, forged or implausible)
+        self.drops = link.DropLog()  # ... per kind, and the rate-limited log line
+        self.refused = 0  # of those: well-formed but refused (auth, boot id, seq, totals)
+        self.unannounced = 0  # batches of a boot whose status has not come yet (not counted)
         self.restarts = 0
+        self.refused_credentials = ""  # the agent is reached by TCP but the session never opens
+        self._tcp_probe_t = 0.0
+        self._tcp_since: float | None = None  # since when TCP reaches the agent
+        self._started = time.monotonic()
         self.agent_status: dict = {}
         self.mismatch = ""  # the agent serves other devices than this node expects
         self.query_error = ""
@@ -108,7 +130,16 @@ class RemoteAgent:
         self._stamp_raw: list[int] = [0] * n
         # sequence bookkeeping, per sensor
         self.boot: int | None = None
+        self.boots_seen: set[int] = set()  # a boot once left is never followed again
+        self.boot_devices: tuple | None = None  # devices/chips of this boot (never change)
+        self.boot_heard = 0.0  # monotonic time of the newest accepted frame of this boot
         self.batch_number = 0  # the newest batch frame of this boot applied
+        self._batch_t = 0.0  # when batch_number was set
+        # per sensor (node time, agent seq end) of the newest block that brought new polls
+        self._seq_ref: list[tuple[float, int] | None] = [None] * n
+        # per sensor: (x, y) counts of history polls applied since the last live totals
+        self._pending = [[0, 0] for _ in range(n)]
+        self._zeroed = False  # the node's totals start at its first contact (read-and-clear)
         self.next_agent = [None] * n  # next agent seq expected
         self.base_i = np.zeros((n, ss.N_INT), np.int64)
         self.base_f = np.zeros((n, ss.N_FLOAT), np.float64)
@@ -141,6 +172,8 @@ class RemoteAgent:
             return self.mismatch
         if self.link_up:
             return ""
+        if self.refused_credentials and not self.ever_up:
+            return self.refused_credentials
         since = time.strftime("%H:%M:%S", time.localtime(self.since_wall))
         ago = time.time() - self.since_wall
         what = "unreachable since" if self.ever_up else "not reached yet, trying since"
@@ -156,12 +189,9 @@ class RemoteAgent:
         if reply is None:
             raise PollerError(
                 f"agent at {self.endpoint} did not answer {kind!r} within {timeout:g} s"
+                f" ({self.query_error})"
             )
-        try:
-            data = json.loads(reply)
-            status, payload, seqs = data["status"], data["payload"], data.get("seq", [])
-        except (ValueError, KeyError, TypeError):
-            raise PollerError(f"agent at {self.endpoint} sent a malformed reply") from None
+        status, payload, seqs, _boot = reply
         self._wait_applied(seqs, deadline=time.monotonic() + 1.0)
         return status, payload
 
@@ -184,11 +214,16 @@ class RemoteAgent:
             "link_drops": self.link_drops,
             "link_polls_lost": self.polls_lost,
             "link_bad_frames": self.bad_frames,
+            "link_refused_frames": self.refused,
+            "link_dropped_by_kind": self._drop_counts(),
             "agent_restarts": self.restarts,
             "link_latency_p50_ms": f"{np.nanpercentile(lat, 50):.2f}",
             "link_latency_p99_ms": f"{np.nanpercentile(lat, 99):.2f}",
             "agent_rss_mb": self.agent_status.get("rss_mb", ""),
         }
+
+    def _drop_counts(self) -> str:
+        return ", ".join(f"{k} {v}" for k, v in sorted(self.drops.counts.items())) or "none"
 
     def stop(self, timeout: float = 3.0) -> None:
         self._running = False
@@ -219,16 +254,32 @@ class RemoteAgent:
             session.close()
             return
         self._block_cc = zenoh.CongestionControl.BLOCK
+        self._target_all = zenoh.QueryTarget.ALL
+        self._no_consolidation = zenoh.ConsolidationMode.NONE
         self.session = session
         q = self._queue
 
+        limits = {
+            "polls": link.max_batch_bytes(self.n),
+            "status": link.MAX_STATUS_BYTES,
+            "events": link.MAX_EVENT_BYTES,
+        }
+
         def put(kind: str):
+            limit = limits[kind]
+
             def cb(sample) -> None:
-                if kind == "polls":
-                    self.last_rx = time.monotonic()
+                # size first: a payload over the limit is never copied out of zenoh
+                size = len(sample.payload)
+                item = (kind, b"", time.time_ns(), None, size)
+                if size <= limit:
+                    if kind == "polls":  # the link carries frames (a gap fetch waits for it)
+                        self.last_rx = time.monotonic()
+                    data = sample.payload.to_bytes()
+                    item = (kind, data, item[2], link.attachment_bytes(sample), size)
                 # a full queue: the feeder is behind; the seq gap is fetched from the agent's ring
                 with contextlib.suppress(queue.Full):
-                    q.put_nowait((kind, sample.payload.to_bytes(), time.time_ns()))
+                    q.put_nowait(item)
 
             return cb
 
@@ -237,8 +288,11 @@ class RemoteAgent:
         ]
 
         def history(sample) -> None:
+            if len(sample.payload) > limits["polls"]:
+                return  # counted when nothing answers the request
+            item = (sample.payload.to_bytes(), link.attachment_bytes(sample))
             with contextlib.suppress(queue.Full):
-                self._history_q.put_nowait(sample.payload.to_bytes())
+                self._history_q.put_nowait(item)
 
         self._subs.append(session.declare_subscriber(self.keys["history"], history))
         self._history_pub = session.declare_publisher(
@@ -246,28 +300,71 @@ class RemoteAgent:
         )
 
     def _feed(self) -> None:
+        """Apply what arrives, in order; no input ends this thread (the node would stop)."""
         while self._running:
             try:
-                kind, data, recv_ns = self._queue.get(timeout=0.1)
+                kind, data, recv_ns, tag, size = self._queue.get(timeout=0.1)
             except queue.Empty:
                 self._watch_link()
+                self._probe_credentials()
                 continue
             try:
-                if kind == "polls":
-                    self._on_batch(link.decode_batch(data, self.n), recv_ns)
-                elif kind == "status":
-                    self._on_status(data)
-                else:
-                    self._on_event(data)
-            except (link.LinkError, ValueError, KeyError, TypeError) as exc:
-                self.bad_frames += 1
-                if self.bad_frames <= 10 or self.bad_frames % 1000 == 0:
-                    self._emit(
-                        "log",
-                        f"dropped a bad {kind} frame from the link ({exc}); "
-                        f"{self.bad_frames} so far",
-                    )
+                self._on_input(kind, data, recv_ns, tag, size)
+            except Refused as exc:
+                self.refused += 1
+                self._dropped(kind, str(exc))
+            except link.LinkError as exc:
+                self._dropped(kind, str(exc))
+            except Exception as exc:  # a bug or an input no check foresaw: drop it, go on
+                self._dropped(kind, f"{type(exc).__name__}: {str(exc)[:200]}")
             self._watch_link()
+
+    def _dropped(self, kind: str, why: str) -> None:
+        self.bad_frames += 1
+        line = self.drops.drop(kind, why)
+        if line:
+            self._emit("log", line)
+
+    def _on_input(self, kind: str, data: bytes, recv_ns: int, tag, size: int) -> None:
+        if len(data) != size:
+            raise link.LinkError(f"{kind} message of {size} bytes is too large")
+        try:
+            self.auth.check(kind, data, tag)
+        except link.LinkError as exc:
+            raise Refused(str(exc)) from None
+        if kind == "polls":
+            self._on_batch(link.decode_batch(data, self.n), recv_ns)
+        elif kind == "status":
+            self._on_status(data)
+        else:
+            self._on_event(data)
+
+    def _probe_credentials(self) -> None:
+        """Never reached yet: is something listening there that does not let us in?"""
+        now = time.monotonic()
+        if self.ever_up or now - self._tcp_probe_t < 1.0 or not self.endpoint.startswith("tcp/"):
+            return
+        self._tcp_probe_t = now
+        host = link.endpoint_host(self.endpoint)
+        port = int(self.endpoint.rpartition(":")[2].split("#", 1)[0])
+        try:
+            with socket.create_connection((host, port), timeout=0.5):
+                pass
+        except OSError:
+            self._tcp_since = None
+            self.refused_credentials = ""
+            return
+        if self._tcp_since is None:
+            self._tcp_since = now
+        waited = now - self._tcp_since
+        if self.session is None and waited >= CREDENTIALS_PROBE_S and not self.refused_credentials:
+            what = "our credentials" if self.credentials else "us without credentials"
+            self.refused_credentials = (
+                f"agent at {self.endpoint} refused {what}: it listens but the zenoh "
+                f"session does not open (agent_credentials must be the agent's "
+                f"--credentials file; {link.CREDENTIALS_HELP})"
+            )
+            self._emit("log", self.refused_credentials)
 
     def _watch_link(self, heard: float | None = None) -> None:
         """Mark the link down once nothing was heard for LINK_TIMEOUT_S (``heard``:
@@ -284,17 +381,29 @@ class RemoteAgent:
     def _on_batch(self, batch: link.Batch, recv_ns: int) -> None:
         if self.mismatch:
             return
+        if self.boot is None or (
+            batch.boot_id != self.boot and time.monotonic() - self.boot_heard >= BOOT_SILENCE_S
+        ):
+            self.unannounced += 1  # a (re)started agent before its status: not yet followed
+            return
         if batch.boot_id != self.boot:
-            self._new_boot(batch.boot_id)
-        self.last_heard = time.monotonic()
+            raise Refused(
+                f"a batch of boot {batch.boot_id:#x}, not of the agent's boot {self.boot:#x} "
+                "(a new boot is followed only after its status, once the old one fell silent)"
+            )
+        now = time.monotonic()
+        self._check_blocks(batch, now)
+        self.boot_heard = now
+        self.last_heard = now
         if not self.link_up:
             self.link_up = self.ever_up = True
             self.since_wall = time.time()
             self._emit("log", f"link to the agent at {self.endpoint} up")
         # a frame overtaken by a newer one (the subscriber's callbacks may run on several
-        # threads): its polls are skipped as already applied, its older counters too
-        if batch.number > self.batch_number:
-            self.batch_number = batch.number
+        # threads): its polls are skipped as already applied, its older counters too. A
+        # number far ahead (forged) holds the counters back for GLOB_HOLD_S at most.
+        if batch.number > self.batch_number or now - self._batch_t > GLOB_HOLD_S:
+            self.batch_number, self._batch_t = batch.number, now
             self.state.glob[:] = np.frombuffer(batch.glob, np.int64)
         newest = max(
             (int(np.frombuffer(b.ints, np.int64)[ss.I_STAMP_NS]) for b in batch.blocks if b.count),
@@ -303,14 +412,51 @@ class RemoteAgent:
         if newest:  # before applying: the very first polls get an offset too
             self._clock(recv_ns, newest)
         for block in batch.blocks:
+            before = self.next_agent[block.index]
             self._apply(block, fetch_gaps=True)
+            self._seq_reference(block, before, now)
         # a gap fetch can take seconds: frames that kept arriving meanwhile mean the link is
         # up (else the feeder would call it lost the moment the fetch returns)
         self.last_heard = max(self.last_heard, self.last_rx)
         if newest:
             self.apply_latency_ms.append((time.time_ns() - newest) / 1e6)
 
-    def _new_boot(self, boot_id: int) -> None:
+    def _check_blocks(self, batch: link.Batch, now: float) -> None:
+        """Refuse a live batch whose sequence numbers cannot be the agent's: a seq beyond
+        what the time since the sensor's last block allows, totals whose seq is not the
+        block's end (counts that do not add up: :meth:`_apply`)."""
+        seen = set()
+        for b in batch.blocks:
+            i = b.index
+            if i in seen:
+                raise Refused(f"batch names sensor {i} twice")
+            seen.add(i)
+            ints = np.frombuffer(b.ints, np.int64)
+            end = b.first_seq + b.count
+            if int(ints[ss.I_SEQ]) != end:
+                raise Refused(
+                    f"block of sensor {i}: totals at seq {int(ints[ss.I_SEQ])}, not {end}"
+                )
+            expected = self.next_agent[i]
+            if expected is None:
+                continue
+            ref = self._seq_ref[i]
+            if ref is not None:
+                elapsed = now - ref[0]
+                most = elapsed * MAX_POLL_RATE * SEQ_RATE_MARGIN + SEQ_SLACK
+                if end - ref[1] > most:
+                    raise Refused(
+                        f"sensor {i}'s seq {end} is {end - ref[1]} polls past seq {ref[1]} "
+                        f"of {elapsed:.2f} s ago (at most {most:.0f})"
+                    )
+
+    def _seq_reference(self, block: link.Block, before: int | None, now: float) -> None:
+        """(now, end) becomes sensor i's seq reference when ``block`` brought new polls."""
+        end = block.first_seq + block.count
+        if before is None or self.next_agent[block.index] != before:
+            self._seq_ref[block.index] = (now, end)
+
+    def _new_boot(self, boot_id: int, uptime_s: float = 0.0) -> None:
         if self.boot is not None:  # a restarted agent: continue from what we had
             self.restarts += 1
             self.base_i[:, self._mono] += self.agent_i[:, self._mono]
@@ -319,8 +465,16 @@ class RemoteAgent:
             self.agent_f[:] = 0
             self.next_agent = [0] * self.n  # its polls since it started: fetch what we missed
             self._emit("log", "the agent restarted: totals and sequence numbers continue")
+            self.boots_seen.add(self.boot)
         self.boot = boot_id
+        self.boot_devices = None
+        now = time.monotonic()
+        self.boot_heard = now
         self.batch_number = 0
+        self._batch_t = now
+        # its polls since it started are to come: the seq check counts from its start
+        up = min(max(uptime_s, 0.0), 1e6) if uptime_s == uptime_s else 0.0
+        self._seq_ref = [(now - up, 0)] * self.n
 
     def _apply(self, block: link.Block, fetch_gaps: bool, totals: bool = True) -> None:
         """Write a block's new polls into the ring and, with ``totals``, publish its totals.
@@ -334,16 +488,23 @@ class RemoteAgent:
         first, count = block.first_seq, block.count
         end = first + count
         expected = self.next_agent[i]
-        if expected is None:  # first contact: the ring starts here
-            expected = self.next_agent[i] = first
-            self.state.ints[i][ss.I_RING_FROM] = self.base_i[i][ss.I_SEQ] + first
-        if end < expected or (end == expected and count):
+        check = totals  # a live block right after known polls: its counts must add up
+        if expected is None:  # first contact: the node's totals and ring start after it
+            if not totals:
+                return
+            self._zero_at(i, block)
+            expected = self.next_agent[i] = end
+            self.state.ints[i][ss.I_RING_FROM] = self.base_i[i][ss.I_SEQ] + end
+            check = False
+        elif end < expected or (end == expected and count):
             return  # already applied (a history reply overlapping the live stream)
         if first > expected:
             if fetch_gaps:
                 self._fill_gap(i, expected, first)
                 expected = self.next_agent[i]
             if first > expected:  # what the agent's ring no longer holds
+                check = False
+                self._pending[i] = [0, 0]
                 self.polls_lost += first - expected
                 self._emit(
                     "log",
@@ -356,6 +517,19 @@ class RemoteAgent:
         skip = expected - first
         ints = np.frombuffer(block.ints, np.int64)
         floats = np.frombuffer(block.floats, np.float64)
+        sums = [0, 0]
+        if count > skip:
+            sums = [
+                int(np.frombuffer(block.arrays[k], RING_DTYPES[k])[skip:].sum()) for k in (1, 2)
+            ]
+        if check:
+            have = [int(self.agent_i[i][k]) + p for k, p in zip(XY, self._pending[i], strict=True)]
+            got = [int(ints[k]) for k in XY]
+            if [h + d for h, d in zip(have, sums, strict=True)] != got:
+                raise Refused(f"sensor {i}'s totals {got} are not {have} + its polls {sums}")
+            self._pending[i] = [0, 0]
+        elif not totals:  # a history reply: its counts are in the next live block's totals
+            self._pending[i] = [p + d for p, d in zip(self._pending[i], sums, strict=True)]
         sync = self.clock_sync and self._offset_ns is not None
         st = self.state.ints[i]
         st[ss.I_VERSION] += 1  # odd: writing
@@ -384,6 +558,16 @@ class RemoteAgent:
         if end >= expected:
             self.next_agent[i] = end
         st[ss.I_VERSION] += 1  # even: consistent
+
+    def _zero_at(self, i: int, block: link.Block) -> None:
+        """The node's counts start after ``block``, its first contact with sensor i: the
+        agent's totals before it (its whole uptime) are not this node's, or the first
+        read-and-clear interval (from the node's start) would carry them."""
+        ints = np.frombuffer(block.ints, np.int64)
+        floats = np.frombuffer(block.floats, np.float64)
+        zero = [k for k in self._mono if k != ss.I_REINITS]
+        self.base_i[i][zero] = -ints[zero]
+        self.base_f[i][: ss.N_TOTAL_FLOAT] = -floats[: ss.N_TOTAL_FLOAT]
 
     def _fill_gap(self, i: int, since: int, until: int) -> None:
         """Fetch the missing polls since..until of sensor i from the agent's ring.
@@ -432,12 +616,26 @@ class RemoteAgent:
         while since < until and self._running:
             data = self._history(i, since, min(link.MAX_HISTORY, until - since))
             if data is None:
+                if "ahead of the newest poll" in self.query_error:  # commands.history_ahead
+                    raise Refused(f"a block of sensor {i} from seq {until}: {self.query_error}")
                 return False
             batch = link.decode_batch(data, self.n)
-            if batch.boot_id != self.boot or not batch.blocks or not batch.blocks[0].count:
+            if batch.boot_id != self.boot or not batch.blocks:
                 self.query_error = "the agent restarted meanwhile"
                 return True
+            if not batch.blocks[0].count:  # its ring ends before the block that named them
+                raise Refused(
+                    f"a block of sensor {i} from seq {until}: the agent's own ring ends at "
+                    f"{since} (a forged seq)"
+                )
             block = batch.blocks[0]
+            if block.index != i or block.first_seq > since or block.first_seq + block.count > until:
+                self.refused += 1
+                self._dropped(
+                    "history", f"a history reply for other polls than asked ({i}, {since}..{until})"
+                )
+                self.query_error = "the history reply was not for the polls asked"
+                return False
             self._apply(block, fetch_gaps=False, totals=False)
             since = block.first_seq + block.count
         return False
@@ -458,23 +656,34 @@ class RemoteAgent:
                 self.query_error = "the link went down while asking"
                 return None
             try:
-                data = self._history_q.get(timeout=min(left, 0.1))
+                data, tag = self._history_q.get(timeout=min(left, 0.1))
             except queue.Empty:
                 continue
+            try:
+                self.auth.check("history", data, tag)
+            except link.LinkError as exc:
+                self.refused += 1
+                self._dropped("history", str(exc))
+                continue
             if data[:4] == link.MAGIC:
-                if link.HEADER.unpack_from(data, 0)[5] == rid:
+                if len(data) >= link.HEADER.size and link.HEADER.unpack_from(data, 0)[5] == rid:
                     return data
             else:
-                with contextlib.suppress(ValueError, TypeError, AttributeError):
-                    answer = json.loads(data)
-                    if answer.get("id") == rid:
-                        self.query_error = str(answer.get("payload"))
-                        return None
+                try:
+                    answer_id, why = link.decode_history_answer(data)
+                except link.LinkError as exc:
+                    self._dropped("history", str(exc))
+                    continue
+                if answer_id == rid:
+                    self.query_error = why
+                    return None
         self.query_error = f"no answer to a history request within {HISTORY_TIMEOUT_S:g} s"
         return None
 
-    def _query(self, key: str, payload: bytes, timeout: float) -> bytes | None:
-        """The first good reply to one query, or None (``self.query_error`` says why)."""
+    def _query(self, key: str, payload: bytes, timeout: float) -> tuple | None:
+        """The first good command reply of the agent's boot: (status, payload, seqs,
+        boot_id), or None (``self.query_error`` says why). A reply that fails its tag,
+        does not decode or names another boot id is refused and counted."""
         session = self.session
         if session is None:
             self.query_error = "not connected"
@@ -482,30 +691,64 @@ class RemoteAgent:
         t0 = time.monotonic()
         deadline = t0 + timeout
         while True:
+            replies, refused, errors = 0, [], []
             try:
-                # BLOCK: the reply inherits it (zenoh's default drops under load).
-                replies = list(
-                    session.get(
-                        key,
-                        payload=payload,
-                        timeout=max(0.1, deadline - time.monotonic()),
-                        congestion_control=self._block_cc,
-                    )
-                )
+                # BLOCK: the reply inherits it (zenoh's default drops under load). Every
+                # queryable is asked and no reply merged away: the first good one is taken
+                # as it arrives, a foreign responder's are refused (it cannot answer first).
+                for reply in session.get(
+                    key,
+                    payload=payload,
+                    timeout=max(0.1, deadline - time.monotonic()),
+                    congestion_control=self._block_cc,
+                    target=self._target_all,
+                    consolidation=self._no_consolidation,
+                ):
+                    replies += 1
+                    if reply.ok is not None:
+                        good = self._reply(reply.ok)
+                        if isinstance(good, tuple):
+                            return good
+                        refused.append(good)
+                    elif reply.err is not None:
+                        errors.append(str(reply.err.payload.to_string())[:200])
             except Exception as exc:  # a session closing under us
                 self.query_error = f"query failed: {exc}"
                 return None
-            for reply in replies:
-                if reply.ok is not None:
-                    return reply.ok.payload.to_bytes()
-            errors = [str(r.err.payload.to_string()) for r in replies if r.err is not None]
+            if refused:
+                self.query_error = "; ".join(refused[:3])
+                return None
             elapsed = time.monotonic() - t0
-            self.query_error = f"{len(replies)} replies in {elapsed:.2f} s, errors: {errors}"
+            self.query_error = f"{replies} replies in {elapsed:.2f} s, errors: {errors}"
             # A query that ends at once with no reply never reached the agent (zenoh
             # 1.10 right after a reconnection, eclipse-zenoh/zenoh#2767): ask again.
             if replies or time.monotonic() > deadline - 0.1:
                 return None
             time.sleep(0.05)
+
+    def _reply(self, sample) -> tuple | str:
+        """One command reply checked (tuple), or why it was refused (str, counted)."""
+        try:
+            if len(sample.payload) > link.MAX_REPLY_BYTES:
+                raise link.LinkError(f"a command reply of {len(sample.payload)} bytes")
+            data = sample.payload.to_bytes()
+            try:
+                self.auth.check("reply", data, link.attachment_bytes(sample))
+            except link.LinkError as exc:
+                raise Refused(str(exc)) from None
+            reply = link.decode_command_reply(data, self.n)
+            if reply[3] != self.boot:
+                raise Refused(
+                    f"a command reply from boot {reply[3]}, not the agent's boot {self.boot}"
+                )
+            return reply
+        except Refused as exc:
+            self.refused += 1
+            self._dropped("reply", str(exc))
+            return f"refused a reply: {exc}"
+        except Exception as exc:
+            self._dropped("reply", f"{type(exc).__name__}: {str(exc)[:200]}")
+            return f"a malformed reply: {exc}"
 
     def _wait_applied(self, seqs: list, deadline: float) -> None:
         """Until the feeder has applied the agent's polls up to ``seqs`` (its reply's)."""
@@ -549,33 +792,35 @@ class RemoteAgent:
         self.latency_ms.append((sample - off) / 1e6 if self.clock_sync else sample / 1e6)
 
     def _on_status(self, data: bytes) -> None:
-        status = json.loads(data)
-        if not isinstance(status, dict):
-            raise link.LinkError("status is not a JSON object")
-        if status.get("devices") != self.cfg.devices:
-            if not self.mismatch:
-                self.mismatch = (
-                    f"the agent at {self.endpoint} serves {status.get('devices')}, this node "
-                    f"expects {self.cfg.devices}: set the node's 'devices' parameter to match"
-                )
-                self._emit("log", self.mismatch)
+        """A status, checked. Its boot id is how a new agent boot is followed: only when
+        the current boot fell silent for BOOT_SILENCE_S and the id was never seen before.
+        Devices and chips never change within a boot: a status that says otherwise is
+        refused, so a forged one cannot make the services fail."""
+        status = link.decode_status(data, self.n, ss.HIST_BINS)
+        boot = status["boot_id"]
+        if boot != self.boot:
+            if boot in self.boots_seen:
+                raise Refused(f"a status of the agent's earlier boot {boot:#x}")
+            if self.boot is not None:
+                silent = time.monotonic() - self.boot_heard
+                if silent < BOOT_SILENCE_S:
+                    raise Refused(
+                        f"a status of boot {boot:#x} while the agent's boot {self.boot:#x} "
+                        f"was heard {silent:.2f} s ago"
+                    )
+            self._new_boot(boot, status["uptime_s"])
+        devices = (tuple(status["devices"]), tuple(status["chips"] or ()))
+        if self.boot_devices is None:
+            self.boot_devices = devices
+            self._check_devices(status)
+        elif devices != self.boot_devices:
+            raise Refused("a status whose devices or chips differ from its boot's first status")
+        if self.mismatch:
             return
-        chips = status.get("chips")  # an agent from before issue 15 polls PLN2033s only
-        expected = chip_config.resolve_chips(self.cfg.chips, self.cfg.devices)
-        if (chips or ["pln2033"] * len(expected)) != expected:
-            if not self.mismatch:
-                self.mismatch = (
-                    f"the agent at {self.endpoint} polls chips {chips}, this node expects "
-                    f"{expected}: set the node's 'chips' parameter to match the agent's --chips"
-                )
-                self._emit("log", self.mismatch)
-            return
-        self.mismatch = ""
         first = not self.agent_status
         self.agent_status = status
-        hist = np.frombuffer(zlib.decompress(base64.b64decode(status["hist_z"])), np.int64)
-        if len(hist) == ss.HIST_BINS:
-            self.state.hist[:] = hist
+        if status["hist"] is not None:
+            self.state.hist[:] = np.frombuffer(status["hist"], np.int64)
         if first:
             for dev, state, err in zip(
                 self.cfg.devices, status["states"], status["last_errors"], strict=True
@@ -583,10 +828,35 @@ class RemoteAgent:
                 if state == "down":
                     self._emit("down", dev, err)
 
-    def _on_event(self, data: bytes) -> None:
-        ev = json.loads(data)
-        kind = ev["kind"]
-        if kind in ("up", "down"):
-            self._emit(kind, ev["device"], ev["text"])
+    def _check_devices(self, status: dict) -> None:
+        """Set ``mismatch`` when the agent serves other devices or chips than expected."""
+        self.mismatch = ""
+        if status["devices"] != self.cfg.devices:
+            self.mismatch = (
+                f"the agent at {self.endpoint} serves {status['devices']}, this node "
+                f"expects {self.cfg.devices}: set the node's 'devices' parameter to match"
+            )
         else:
-            self._emit("log", f"agent: {ev['text']}")
+            chips = status["chips"]  # an agent from before issue 15 polls PLN2033s only
+            expected = chip_config.resolve_chips(self.cfg.chips, self.cfg.devices)
+            if (chips or ["pln2033"] * len(expected)) != expected:
+                self.mismatch = (
+                    f"the agent at {self.endpoint} polls chips {chips}, this node expects "
+                    f"{expected}: set the node's 'chips' parameter to match the agent's --chips"
+                )
+        if self.mismatch:
+            self._emit("log", self.mismatch)
+
+    def _on_event(self, data: bytes) -> None:
+        kind, device, text = link.decode_event(data)
+        if kind in ("up", "down"):
+            if device not in self.cfg.devices:
+                raise link.LinkError(f"an event for unknown device {device[:80]!r}")
+            self._emit(kind, device, text)
+        else:
+            self._emit("log", f"agent: {text}")
+
+
+class Refused(link.LinkError):
+    """A well-formed input refused: failed authentication, another boot, an implausible
+    sequence number or totals that do not add up. Counted apart from undecodable ones."""

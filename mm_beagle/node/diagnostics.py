@@ -98,18 +98,22 @@ class Diagnostics:
         """health.assess for sensor ``i`` over the polls since the previous round."""
         node = self.node
         prev_seq = last[1][i] if last else t.seq
+        dropped = 0
         try:
-            _f, _n, _d, arr = node.poller.state.samples(i, prev_seq, 0)
+            _f, _n, dropped, arr = node.poller.state.samples(i, prev_seq, 0)
         except ss.PollerBusyError:
             arr = None
         stamps = arr["stamp_ns"] if arr is not None else []
+        cfg = node.settings.poller
+        remote = cfg.backend == "remote"
         if arr is not None and len(stamps):
             self.stamps[i], prev_ns = int(stamps[-1]), self.stamps[i]
-            gap = health.longest_gap(stamps, arr["dx"], arr["dy"], prev_ns, now_ns)
+            # remote: only the gaps between the agent's polls (the link's delay is no stall)
+            end_ns = int(stamps[-1]) if remote else now_ns
+            gap = health.longest_gap(stamps, arr["dx"], arr["dy"], prev_ns, end_ns)
         else:
             gap = health.longest_gap([], [], [], self.stamps[i] or t.stamp_ns, now_ns)
-        cfg = node.settings.poller
-        if cfg.backend == "remote" or t.state != ss.STATE_UP:
+        if t.state != ss.STATE_UP or (remote and (not len(stamps) or dropped)):
             gap = health.Gap(0.0, 0.0, 0.0)  # the link's own values say what is late there
         return health.assess(rate, cfg.poll_rate, overruns_grew, gap, t.cpi_y)
 

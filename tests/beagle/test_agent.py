@@ -457,12 +457,15 @@ def test_bad_frames_on_the_polls_key_are_dropped_and_counted(tmp_path):
         ):
             assert client.wait(scaled(60))
             wait_link(client, up=True)
+            # the agent's access control (link.agent_acl) drops a peer's puts on its keys: the
+            # node never sees them (tests/beagle/test_hostile_link.py feeds the node bad frames
+            # past the agent, through a router of its own, and finds them counted)
             rogue = session_to(endpoint)
             for junk in (b"", b"MMB1", b"\x00" * 200, b"MMB1\x01\x09" + b"\x00" * 100):
                 rogue.put(link.keys("mm_beagle")["polls"], junk)
-            wait_until(
-                lambda: int(client.diagnostics(time.monotonic(), timeout=scaled(30))[S0][
-                    "link_bad_frames"]) >= 4, 30, "/diagnostics counting the 4 bad frames")
+            time.sleep(1.0)
+            diag = client.diagnostics(time.monotonic(), timeout=scaled(30))
+            assert diag[S0]["link_bad_frames"] == "0", diag[S0]
             rogue.close()
             before = node_totals(client)
             # still fed by the real agent

@@ -96,6 +96,17 @@ class FakeAgent:
         return link.encode_batch(self.boot, 0, self.glob(now), [block])
 
 
+def first_contact(remote: RemoteAgent, agent: FakeAgent) -> None:
+    """The agent's status names its boot (the node follows no batch before one), then a
+    batch of no polls: the node's counts start at the agent's seq 0 (a real node's start
+    after its first contact, issue 27)."""
+    remote._new_boot(agent.boot)
+    blocks = [agent.block(i, 0, 0) for i in (0, 1)]
+    remote._on_batch(
+        link.decode_batch(link.encode_batch(agent.boot, 0, agent.glob(0), blocks), 2), 0
+    )
+
+
 def loaded_delays(rng: random.Random, n: int) -> list[float]:
     """Link delays (ms) of a loaded machine: late at start, then anything from 0.1 to 20 ms
     with a new smallest one now and then, and a steady tail at the smallest."""
@@ -151,6 +162,7 @@ def test_a_smaller_link_delay_never_puts_a_stamp_before_its_predecessor():
     rng = random.Random(7)
     agent = FakeAgent()
     remote = RemoteAgent(PollerConfig(devices=[S0, S1], ring_size=8192))
+    first_contact(remote, agent)
     for delay in loaded_delays(rng, 200):
         frame, recv_ns = agent.batch(10, delay)
         remote._on_batch(link.decode_batch(frame, 2), recv_ns)
@@ -160,6 +172,7 @@ def test_a_smaller_link_delay_never_puts_a_stamp_before_its_predecessor():
 def test_without_clock_sync_the_agents_stamps_are_served_as_they_are():
     agent = FakeAgent()
     remote = RemoteAgent(PollerConfig(devices=[S0, S1], ring_size=8192), clock_sync=False)
+    first_contact(remote, agent)
     for delay in loaded_delays(random.Random(3), 50):
         frame, recv_ns = agent.batch(10, delay)
         remote._on_batch(link.decode_batch(frame, 2), recv_ns)
@@ -173,6 +186,7 @@ def test_a_fetched_gap_serves_only_the_polls_written_with_totals_that_belong_to_
     remote = RemoteAgent(PollerConfig(devices=[S0, S1], ring_size=8192))
     remote._history = agent.history
     remote._running = True  # (no threads: it only lets a gap be fetched)
+    first_contact(remote, agent)
     frames = [agent.batch(10, 1.0) for _ in range(8)]
     agent.poll(25)  # the agent polls on while the node asks for the gap
     cursors = [[0, 0], [0, 0]]
@@ -209,7 +223,11 @@ def test_frames_overtaking_each_other_on_several_threads_serve_every_poll_once(s
         return agent.history(i, since, most)
 
     remote._history = history  # the agent's ring, without a link
-    items = [("polls", *agent.batch(rng.randint(1, 20), d)) for d in loaded_delays(rng, 150)]
+    first_contact(remote, agent)
+    items = []
+    for d in loaded_delays(rng, 150):
+        frame, recv_ns = agent.batch(rng.randint(1, 20), d)
+        items.append(("polls", frame, recv_ns, None, len(frame)))
     first, rest = items[0], items[1:]  # first contact: the node's ring starts there
     shares = [rest[k::4] for k in range(4)]
     for share in shares:  # some frames twice
