@@ -514,8 +514,11 @@ def test_applying_a_block_never_puts_the_agents_lock_word_into_the_node_state():
     ints[ss.I_SEQ], ints[ss.I_Y_TOTAL] = 3, 7
     from mm_beagle.link.remote import RING_DTYPES
 
-    arrays = tuple(np.zeros(3, dt).tobytes() for dt in RING_DTYPES)
+    arrays = [np.zeros(3, dt) for dt in RING_DTYPES]
+    arrays[2][:] = (2, 2, 3)  # dy: the totals add up to the polls (or the block is refused)
+    arrays = tuple(a.tobytes() for a in arrays)
     block = link.Block(0, 0, 3, ints.tobytes(), np.zeros(ss.N_FLOAT).tobytes(), arrays)
+    remote.next_agent[0] = 0  # followed from seq 0 (a first contact's counts start after it)
     before = int(st[ss.I_VERSION])
     remote._apply(block, fetch_gaps=False)
     assert int(st[ss.I_VERSION]) == before + 2
