@@ -9,7 +9,8 @@ The agent (:mod:`mm_beagle.link.agent`) serves under ``mm/<name>/``:
   events    put: JSON {"kind", "device", "text"} when a sensor comes up or goes down
   cmd       queryable: JSON {"cmd": name, "sensor": device, <argument>: value}, the
             commands of :data:`mm_beagle.poller.commands.COMMANDS`; the reply is JSON
-            {"status", "payload", "seq"}
+            {"status", "payload", "seq", "boot_id"} (the node takes no reply of
+            another boot)
   history_req  subscribed: JSON {"id": k, "sensor": i, "since": seq, "max": n}; the
             answer is put on ``history``: a batch frame numbered k, or JSON
             {"id": k, "status": "invalid", "payload": why}. (Pub/sub, not a query:
@@ -23,6 +24,12 @@ and float64 fields and its polls as one array per ring field
 (:data:`mm_beagle.poller.ring_layout.RING`: stamp q, dx h, dy h, status H, cpi H,
 flags B, quality h). The arrays are the shared-state ring's own bytes, so neither
 side touches single polls in Python. No numpy here: the agent runs without it.
+
+Everything a peer sends is decoded bounded here (issue 27): size first, JSON only when
+it nests at most MAX_DEPTH deep, zlib with an output limit, field by field
+(:func:`decode_json_bounded`, :func:`decode_status`, ...). With credentials every
+message of the agent carries an HMAC tag as its zenoh attachment (:class:`FrameAuth`);
+the agent's session refuses peers' puts and queryables on its keys (:func:`agent_acl`).
 """
 
 from __future__ import annotations
