@@ -66,7 +66,9 @@ __all__ = ["Gap", "LogEntry", "MonitorSession", "SessionStats", "sensor_columns"
 #: Per-sensor history columns (prefixed ``s0_``, ``s1_``, ...):
 #: raw_dx/raw_dy  displacement served for the interval (m, sensor frame)
 #: dx/dy          after the median filter and the calibration (m)
-#: vx/vy          dx/dt, dy/dt (m/s)
+#: vx/vy          speed (m/s): dx, dy summed over the rows of the last SPEED_WINDOW_S
+#:                divided by the time their poll stamps span (not dx/dt of one reply: a
+#:                reply stamp off by a poll at 500 Hz made dx/dt swing by 2x)
 #: wx/wy          the sensor's position in odom (m)
 #: lifts          polls with the lift bit set in the interval
 #: cpi            resolution in force
@@ -85,6 +87,9 @@ ROBOT_FIELDS = ("t", "dt", "rtt", "x", "y", "yaw", "residual", "calibrating")
 MAP_FIELDS = ("t", "x", "y", "yaw")
 MAP_SPACING_M = 0.002
 MAP_SPACING_RAD = math.radians(1.0)
+#: the speed columns average the rows (replies) of this many seconds back (by the
+#: newest poll's stamp each reply carries): at 500 Hz 25 replies, at 15 Hz just one
+SPEED_WINDOW_S = 0.05
 
 
 def _totals(r: Reading) -> SensorTotals:
@@ -235,6 +240,8 @@ class MonitorSession:
         #: replies of a batch whose rows wait for the batch's per-poll poses
         self._deferred: list[_Deferred] = []
         self._batching = False
+        #: the newest rows' (t, dt, processed (dx, dy) per sensor) the speed is taken over
+        self._speed_rows: deque[tuple[float, float, list[tuple[float, float]]]] = deque()
         if devices is not None:
             self._set_devices(tuple(devices))
 
@@ -528,6 +535,7 @@ class MonitorSession:
             self._t0_ns = now[0].stamp_ns
         self.tracker.baseline([_totals(r) for r in now])
         self._stash.clear()
+        self._speed_rows.clear()
         self.stats.baselines += 1
         if restarted:
             self.stats.restarts += 1
@@ -600,9 +608,11 @@ class MonitorSession:
             1.0 if self.calibrating else 0.0,
         ]
         c, s = math.cos(pose.yaw), math.sin(pose.yaw)
-        for r, (rx, ry), (dx, dy), m in zip(now, raw, processed, self._mounts, strict=True):
+        speeds = self._speeds(t, dt, processed)
+        for r, (rx, ry), (dx, dy), m, (vx, vy) in zip(
+                now, raw, processed, self._mounts, speeds, strict=True):
             wx, wy = pose.x + c * m.x - s * m.y, pose.y + s * m.x + c * m.y
-            row += [rx, ry, dx, dy, dx / dt, dy / dt, wx, wy, r.lift_events, r.cpi,
+            row += [rx, ry, dx, dy, vx, vy, wx, wy, r.lift_events, r.cpi,
                     quality_figure(r.chip, r.quality), r.low_quality_events]
             self.log.append(
                 LogEntry(
@@ -611,6 +621,19 @@ class MonitorSession:
                 )
             )
         self.history.append(row)
+
+    def _speeds(self, t: float, dt: float,
+                processed: list[tuple[float, float]]) -> list[tuple[float, float]]:
+        """Each sensor's (vx, vy) (m/s): the displacements of the rows within
+        SPEED_WINDOW_S before ``t`` (this one included) over the time they cover (the sum
+        of their ``dt``: stamps of the newest polls, s)."""
+        rows = self._speed_rows
+        rows.append((t, dt, processed))
+        while len(rows) > 1 and rows[0][0] <= t - SPEED_WINDOW_S:
+            rows.popleft()
+        span = sum(r[1] for r in rows)
+        return [(sum(r[2][k][0] for r in rows) / span, sum(r[2][k][1] for r in rows) / span)
+                for k in range(len(processed))]
 
     def _append_map(self, t: float, pose: Pose2D) -> None:
         """The map's rows for this reply: its per-poll poses (decimated) or the reply's pose."""
@@ -716,5 +739,6 @@ class MonitorSession:
             f.reset()
         self.log.clear()
         self.gaps.clear()
+        self._speed_rows.clear()
         if self._prev and self.devices:
             self._t0_ns = self._prev[self.devices[0]].stamp_ns

@@ -1,7 +1,8 @@
 """Graphs of each sensor's displacement and speed over time, in a scrolling window.
 
 Per sensor two plots against t (s since the first reply): first the speed
-(mm/s, sensor frame X/Y), then the displacement per reply (processed:
+(mm/s, sensor frame X/Y; the displacement of the last 50 ms of replies over the time
+their poll stamps span, so it stays flat at 500 Hz), then the displacement per reply (processed:
 filtered and calibrated; mm). The displacement per reply depends on the
 request interval -- a late reply covers more time and shows a spike while
 the speed stays flat -- so it is second and its title says so. The legend
@@ -109,7 +110,8 @@ class GraphsView(QWidget):
         self.legend = QLabel(legend_html())
         self.legend.setWordWrap(True)
         self.legend.setToolTip(
-            "Speed is the displacement divided by the time the reply covers; the "
+            "Speed is the displacement of the replies of the last 50 ms divided by the "
+            "time their poll stamps span; the "
             "displacement per reply grows when a reply comes late (the request interval), "
             "so a spike there with a flat speed is no sensor glitch.")
         self.canvas = pg.GraphicsLayoutWidget()

@@ -1,0 +1,78 @@
+"""The Graphs tab never misleads (issue 29 items 4 and 5): a flat speed at 500 Hz, outages
+as breaks, one colour per sensor, and the plot habits (wheel zooms time, a modifier the
+value axis, double-click resets, a hover readout, linked time axes).
+
+Offscreen Qt, the real GraphsView fed the simulated replies through the real session.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+pytest.importorskip("PySide6")
+
+from mm_pc.monitor.context import MonitorContext
+from mm_pc.monitor.model.session import SPEED_WINDOW_S, MonitorSession
+from mm_pc.monitor.model.sim_feed import sim_replies
+from mm_pc.monitor.widgets.graphs_view import GraphsView
+
+SPEED = 0.22  # m/s, what the report drove
+
+
+def jittered(replies, jitter_ns: int, seed: int = 1):
+    """The replies with each stamp moved by up to +-``jitter_ns`` (uniform) from the time
+    its totals were read: what a poll stamp taken a little off its read does to a reply
+    that covers two polls (500 Hz): dx/dt of one reply swings up to 2x."""
+    rng = np.random.default_rng(seed)
+    first = True
+    for r in replies:
+        if first:  # the baseline
+            first = False
+            yield r
+            continue
+        shift = int(rng.integers(-jitter_ns, jitter_ns + 1))
+        yield dataclasses.replace(r, readings=tuple(
+            dataclasses.replace(x, stamp_ns=x.stamp_ns + shift) for x in r.readings))
+
+
+def graphs(qtbot, ctx) -> GraphsView:
+    view = GraphsView(ctx)
+    qtbot.addWidget(view)
+    view.resize(1000, 600)
+    view.show()
+    return view
+
+
+def test_the_speed_at_500_hz_stays_flat_with_jittered_stamps(qtbot, fake_bridge, feed):
+    ctx = MonitorContext(MonitorSession(), fake_bridge)
+    replies = list(jittered(sim_replies("straight", 500.0, 2.0, speed=SPEED), 500_000))
+    t = np.array([r.readings[0].stamp_ns for r in replies[1:]], float)
+    d = np.diff([r.readings[0].stamp_ns for r in replies]) / 1e6
+    assert d.min() <= 1.2 and d.max() >= 2.8  # a reply's stamps: 1..3 ms apart, not 2
+    feed(ctx, replies)
+    view = graphs(qtbot, ctx)
+    view.window_box.setValue(3)
+    view.refresh()
+    for k in range(2):
+        vx = view.curves[(k, "speed", "x")].getData()[1]
+        vy = view.curves[(k, "speed", "y")].getData()[1]
+        assert len(vy) == len(t)  # one point per reply (no min/max buckets at 1000 rows)
+        speed = np.hypot(vx, vy)  # mm/s
+        # the first SPEED_WINDOW_S averages fewer replies; after that within 4 % of the truth
+        settled = speed[int(SPEED_WINDOW_S * 500):]
+        assert settled.min() > 0.96 * SPEED * 1e3 and settled.max() < 1.04 * SPEED * 1e3, (
+            settled.min(), settled.max())
+    # what one reply's dx/dt would have drawn: up to twice the speed
+    hist = ctx.session.history
+    one = np.hypot(hist.column("s0_dx"), hist.column("s0_dy")) / hist.column("dt")
+    assert one.max() > 1.4 * SPEED and one.min() < 0.75 * SPEED
+
+
+def test_the_speed_at_15_hz_is_each_reply_s_own(fake_bridge, feed):
+    ctx = MonitorContext(MonitorSession(), fake_bridge)
+    feed(ctx, rate_hz=15.0, seconds=2.0, name="straight")
+    hist = ctx.session.history
+    np.testing.assert_allclose(hist.column("s0_vy"), hist.column("s0_dy") / hist.column("dt"))
