@@ -308,16 +308,20 @@ class RemoteAgent:
                 self._watch_link()
                 self._probe_credentials()
                 continue
-            try:
-                self._on_input(kind, data, recv_ns, tag, size)
-            except Refused as exc:
-                self.refused += 1
-                self._dropped(kind, str(exc))
-            except link.LinkError as exc:
-                self._dropped(kind, str(exc))
-            except Exception as exc:  # a bug or an input no check foresaw: drop it, go on
-                self._dropped(kind, f"{type(exc).__name__}: {str(exc)[:200]}")
+            self._handle(kind, data, recv_ns, tag, size)
             self._watch_link()
+
+    def _handle(self, kind: str, data: bytes, recv_ns: int, tag, size: int) -> None:
+        """Apply one input, or drop, count and log it: nothing raises out of here."""
+        try:
+            self._on_input(kind, data, recv_ns, tag, size)
+        except Refused as exc:
+            self.refused += 1
+            self._dropped(kind, str(exc))
+        except link.LinkError as exc:
+            self._dropped(kind, str(exc))
+        except Exception as exc:  # a bug or an input no check foresaw: drop it, go on
+            self._dropped(kind, f"{type(exc).__name__}: {str(exc)[:200]}")
 
     def _dropped(self, kind: str, why: str) -> None:
         self.bad_frames += 1
