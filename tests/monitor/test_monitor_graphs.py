@@ -76,3 +76,25 @@ def test_the_speed_at_15_hz_is_each_reply_s_own(fake_bridge, feed):
     feed(ctx, rate_hz=15.0, seconds=2.0, name="straight")
     hist = ctx.session.history
     np.testing.assert_allclose(hist.column("s0_vy"), hist.column("s0_dy") / hist.column("dt"))
+
+
+def test_an_outage_is_a_break_in_every_graph(qtbot, fake_bridge, feed):
+    ctx = MonitorContext(MonitorSession(), fake_bridge)
+    start = 1_700_000_000_000_000_000
+    feed(ctx, rate_hz=50.0, seconds=2.0, start_ns=start)
+    feed(ctx, rate_hz=50.0, seconds=2.0, start_ns=start + 10_000_000_000)  # 8 s without rows
+    view = graphs(qtbot, ctx)
+    view.window_box.setValue(20)
+    view.refresh()
+    t = ctx.session.history.column("t")
+    gap = np.flatnonzero(np.diff(t) > 5.0)
+    assert len(gap) == 1
+    for (_k, _key, _axis), curve in view.curves.items():
+        x, y = curve.getData()
+        nan = np.flatnonzero(np.isnan(y))
+        assert len(nan) == 1 and t[gap[0]] < x[nan[0]] < t[gap[0] + 1]
+        assert np.isfinite(np.delete(y, nan)).all() and len(x) == len(t) + 1
+        assert curve.opts["connect"] == "finite"
+        path = curve.curve.getPath()  # two strokes: drawn, a break, drawn again
+        starts = sum(path.elementAt(i).isMoveTo() for i in range(path.elementCount()))
+        assert starts == 2

@@ -12,7 +12,9 @@ with a binary search on t), so a redraw costs the same with a minute or an
 hour of history; a window of more than 4000 rows is drawn as the minimum
 and maximum of 1000-2000 buckets (spikes stay visible), kept from frame to
 frame so only newly completed buckets are computed
-(:class:`~mm_pc.monitor.model.peak_decimator.PeakDecimator`).
+(:class:`~mm_pc.monitor.model.peak_decimator.PeakDecimator`). An outage (no rows
+for a while: link lost, polling paused) is a break in the curves, not a line across
+it (a NaN at its middle, drawn with ``connect="finite"``; :mod:`..model.outages`).
 The axes are not moved with every frame: the time axis runs ``X_LEAD``
 (10 %) of the window ahead of the newest row and moves on only when the data
 reach its end (so the curves hold the window and up to the lead more), and
@@ -39,6 +41,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from mm_pc.monitor.model.outages import OutageFinder, with_breaks
 from mm_pc.monitor.model.peak_decimator import PeakDecimator, bucket_size
 from mm_pc.monitor.model.session import sensor_columns
 
@@ -84,6 +87,7 @@ class GraphsView(QWidget):
         self.curves: dict[tuple[int, str, str], pg.PlotDataItem] = {}
         self.plots: dict[tuple[int, str], pg.PlotItem] = {}
         self._peaks: dict[str, PeakDecimator] = {}  # history column -> its bucket min/max
+        self._outages = OutageFinder()
         self._rows_of: tuple = (None, 0)  # (history, dropped_rows) the caches belong to
         self._len = 0
         self._x_range: tuple[float, float] | None = None  # time range shown (s)
@@ -143,7 +147,7 @@ class GraphsView(QWidget):
                     pen = pg.mkPen(AXIS_COLOURS[axis], width=1)
                     # no clipping or downsampling by pyqtgraph: the points are the window's
                     # already (min/max buckets when long), and both cost with every frame
-                    curve = plot.plot([], [], pen=pen, skipFiniteCheck=True)
+                    curve = plot.plot([], [], pen=pen, skipFiniteCheck=True, connect="finite")
                     self.curves[(k, key, axis)] = curve
                 plot.disableAutoRange()  # the ranges are set in refresh (rarely)
                 if row < len(PLOTS) - 1:  # one time axis per column, under its last plot:
@@ -210,6 +214,7 @@ class GraphsView(QWidget):
     def _on_reset(self) -> None:
         for cache in self._peaks.values():
             cache.clear()
+        self._outages.reset()
         for curve in self.curves.values():
             curve.setData([], [])
         self._invalidate()
@@ -231,7 +236,9 @@ class GraphsView(QWidget):
         if (hist, hist.dropped_rows) != self._rows_of or len(t) < self._len:
             for cache in self._peaks.values():
                 cache.clear()  # rows were dropped or cleared: bucket numbers moved
+            self._outages.reset()
         self._rows_of, self._len = (hist, hist.dropped_rows), len(t)
+        outages = self._outages.update(t)
         end = float(t[-1])
         x0, _x1 = self._time_range(end)
         rows = slice(int(np.searchsorted(t, x0, side="left")), len(t))
@@ -243,7 +250,7 @@ class GraphsView(QWidget):
                 for axis, field in zip(("x", "y"), fields, strict=True):
                     cache = self._peaks.setdefault(names[field], PeakDecimator())
                     x, y = cache.window(t, hist.column(names[field]), rows.start, size)
-                    y = y * 1e3
+                    x, y = with_breaks(x, y * 1e3, outages)
                     self.curves[(k, key, axis)].setData(x, y)
                     finite = y[np.isfinite(y)]
                     if len(finite):
