@@ -405,3 +405,31 @@ def test_wrong_credentials_are_named_on_the_node(tmp_path):
             assert "refused our credentials" in (tmp_path / "node.log").read_text()
     finally:
         client.close()
+
+
+def test_with_credentials_every_message_is_tagged_and_the_node_follows(tmp_path):
+    """The agent tags every message (polls, status, replies) and the node, holding the
+    same credentials, accepts them all: link up, totals exact, a command answered."""
+    creds = link.make_credentials(str(tmp_path / "agent.credentials"))
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    client = BeagleClient("mm_hostile_tagged")
+    log = tmp_path / "node.log"
+    opts = {"backend": "sim", "listen": [endpoint], "credentials": creds}
+    params = {"backend": "remote", "agent": endpoint, "agent_credentials": creds,
+              "diagnostics_period": 0.5}  # fmt: skip
+    try:
+        with (
+            agent_process(opts, str(tmp_path / "agent.log")),
+            beagle_process(params, env=dict(os.environ), log_path=str(log)),
+        ):
+            assert client.wait(scaled(60))
+            wait_until(lambda: client.call("get_sensor_data", id="").success, 30,
+                       "the link up with credentials", interval=0.2)  # fmt: skip
+            res = client.call("set_resolution", id=S0, cpi=800, timeout=scaled(10))
+            assert res.success, res.message
+            d = client.diagnostics(time.monotonic(), timeout=scaled(10))[S0]
+            assert d["link_bad_frames"] == "0", d
+            assert int(d["sim_generated_y_counts"]) == int(d["y_total_counts"])
+            assert "dropped" not in log.read_text()
+    finally:
+        client.close()
