@@ -98,3 +98,52 @@ def test_an_outage_is_a_break_in_every_graph(qtbot, fake_bridge, feed):
         path = curve.curve.getPath()  # two strokes: drawn, a break, drawn again
         starts = sum(path.elementAt(i).isMoveTo() for i in range(path.elementCount()))
         assert starts == 2
+
+
+def test_one_colour_per_sensor_everywhere(qtbot, tmp_path):
+    """Every pen drawing a sensor's data takes that sensor's colour from style.py: the map's
+    paths and axes, the dials, the graphs (X the colour, Y its darker shade) and Health's
+    lifted-polls and quality curves with their legends."""
+    pytest.importorskip("rclpy")
+    from PySide6.QtGui import QColor
+
+    from mm_pc.monitor.context import MonitorConfig
+    from mm_pc.monitor.main_window import MainWindow
+    from mm_pc.monitor.ros_bridge import RosBridge
+    from mm_pc.monitor.widgets.style import sensor_axis_colour, sensor_colour
+
+    bridge = RosBridge("/mm_beagle", 100.0, node_name="mm_monitor_graphs_colours")
+    config = MonitorConfig(rate_hz=100.0, calibration_file=tmp_path / "cal.yaml")
+    window = MainWindow(MonitorContext(MonitorSession(), bridge, config))
+    qtbot.addWidget(window)
+    window._on_state("connected")
+    for r in sim_replies("figure_eight", 50.0, 1.0):
+        bridge.data_received.emit([r])
+    window.frame()
+    for view in window.views.values():
+        if hasattr(view, "refresh"):
+            view.refresh()
+
+    def name(pen) -> str:
+        return pen.color().name()
+
+    colours = [sensor_colour(k) for k in range(2)]
+    assert len(set(colours)) == 2
+    graphs_view = window.views["Graphs"]
+    for (k, _key, axis), curve in graphs_view.curves.items():
+        assert name(curve.opts["pen"]) == sensor_axis_colour(k, axis)
+        assert abs(QColor(name(curve.opts["pen"])).hue() - QColor(colours[k]).hue()) <= 2
+    assert len(graphs_view.curves) == 8
+    legend = graphs_view.legend.text()
+    assert all(sensor_axis_colour(k, a) in legend for k in range(2) for a in "xy")
+    for k in range(2):
+        assert colours[k] in graphs_view.plots[(k, "speed")].titleLabel.text
+    health = window.views["Health"]
+    assert [name(c.opts["pen"]) for c in health.lift_curves] == colours
+    assert all(c in health.lift_plot.titleLabel.text for c in colours)
+    assert name(health.residual_curve.opts["pen"]) not in colours  # the robot's, no sensor's
+    map_view = window.views["Map"]
+    for k in range(2):
+        assert name(map_view.paths[k].pen) == colours[k]
+        assert name(map_view.sensor_items[k]["axes"]._pen) == colours[k]
+    assert [d.colour.name() for d in window.direction_panel.widgets] == colours

@@ -44,6 +44,7 @@ from PySide6.QtWidgets import (
 from mm_pc.monitor.model.outages import OutageFinder, with_breaks
 from mm_pc.monitor.model.peak_decimator import PeakDecimator, bucket_size
 from mm_pc.monitor.model.session import sensor_columns
+from mm_pc.monitor.widgets.style import sensor_axis_colour, sensor_colour
 
 __all__ = ["AXIS_NAMES", "DEFAULT_WINDOW_S", "PLOTS", "GraphsView"]
 
@@ -56,7 +57,6 @@ PLOTS = (
 )
 #: the axes' names in the legend line (sensor frame)
 AXIS_NAMES = {"x": "X (sensor right)", "y": "Y (sensor forward)"}
-AXIS_COLOURS = {"x": "#d62728", "y": "#1f77b4"}
 #: the time axis runs this fraction of the window ahead of the newest row and moves only
 #: when the data reach its end (its labels are drawn again then, not with every frame)
 X_LEAD = 0.1
@@ -68,11 +68,19 @@ Y_SHRINK = 0.4
 MIN_PLOT_HEIGHT = 120
 
 
-def legend_html() -> str:
-    """The legend line: each axis's colour and name (drawn outside the plots)."""
-    parts = [f'<span style="color:{AXIS_COLOURS[a]}">&#9644;&#9644; {AXIS_NAMES[a]}</span>'
-             for a in ("x", "y")]
-    return "&nbsp;&nbsp;&nbsp;".join(parts) + "&nbsp;&nbsp;&nbsp;(t: seconds since the first reply)"
+def legend_html(devices: tuple[str, ...] = ()) -> str:
+    """The legend line (drawn outside the plots): each sensor's colour (the one it has
+    everywhere, :mod:`.style`), X in it and Y in its darker shade."""
+    if not devices:
+        devices = ("sensor 1",)
+    parts = []
+    for k, dev in enumerate(devices):
+        keys = " ".join(
+            f'<span style="color:{sensor_axis_colour(k, a)}">&#9644;&#9644; {a.upper()}</span>'
+            for a in ("x", "y"))
+        parts.append(f"{dev}: {keys}")
+    return ("&nbsp;&nbsp;&nbsp;".join(parts) + f"&nbsp;&nbsp;&nbsp;({AXIS_NAMES['x']}, "
+            f"{AXIS_NAMES['y']}; t: seconds since the first reply)")
 
 
 class GraphsView(QWidget):
@@ -141,10 +149,11 @@ class GraphsView(QWidget):
         for k, dev in enumerate(devices):
             for row, (key, title, _fields, unit) in enumerate(PLOTS):
                 plot = self.canvas.addPlot(row=row, col=k)
-                plot.setTitle(f"{dev}<br>{title}", color="#222222")
+                plot.setTitle(f'<span style="color:{sensor_colour(k)}">{dev}</span><br>{title}',
+                              color="#222222")
                 self._style(plot, title, unit)
                 for axis in ("x", "y"):
-                    pen = pg.mkPen(AXIS_COLOURS[axis], width=1)
+                    pen = pg.mkPen(sensor_axis_colour(k, axis), width=1)
                     # no clipping or downsampling by pyqtgraph: the points are the window's
                     # already (min/max buckets when long), and both cost with every frame
                     curve = plot.plot([], [], pen=pen, skipFiniteCheck=True, connect="finite")
@@ -154,6 +163,7 @@ class GraphsView(QWidget):
                     plot.hideAxis("bottom")  # the axes' labels are what a range step costs
                 self.plots[(k, key)] = plot
         self._built_for = tuple(devices)
+        self.legend.setText(legend_html(self._built_for))
         self._fit_canvas()
         self._apply_interaction()
         self._invalidate()

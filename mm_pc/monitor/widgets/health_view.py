@@ -49,6 +49,7 @@ from mm_pc.monitor.context import MonitorContext
 from mm_pc.monitor.model.chips import chip_key, chip_title, quality_label, quality_threshold
 from mm_pc.monitor.model.outages import OutageFinder, with_breaks
 from mm_pc.monitor.model.peak_decimator import PeakDecimator, bucket_peak
+from mm_pc.monitor.widgets.style import ROBOT_COLOUR, sensor_colour
 
 __all__ = ["DIAG_COLUMNS", "LEVEL_COLOURS", "HealthView"]
 
@@ -111,7 +112,6 @@ ZOOM_ROWS = 50_000
 STALE_S = 5.0
 #: the plots' least height (px): two plots with their titles and axes readable
 PLOTS_MIN_HEIGHT = 280
-SENSOR_PENS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd")
 #: the table's look when its values are old (link lost, or no /diagnostics for STALE_S)
 STALE_BACKGROUND = "#e6e6e6"
 STALE_TEXT = "#808080"
@@ -172,7 +172,8 @@ class HealthView(QWidget):
         # one unit, named once: mm (pyqtgraph's SI prefix showed µm beside a text in m)
         self.residual_plot.setLabel("left", "residual (mm)")
         self.residual_plot.getAxis("left").enableAutoSIPrefix(False)
-        self.residual_curve = self._curve(self.residual_plot, "#ff7f0e")
+        # the robot's colour: the residual belongs to no one sensor
+        self.residual_curve = self._curve(self.residual_plot, ROBOT_COLOUR)
         self.lift_plot = self.plots.addPlot(row=1, col=0, title="Lifted polls per reply")
         self.lift_plot.setLabel("left", "lifted polls (count)")
         self.lift_plot.setLabel("bottom", "time (s)")
@@ -406,10 +407,10 @@ class HealthView(QWidget):
         while len(self.lift_curves) < n:
             k = len(self.lift_curves)
             name = self.ctx.session.devices[k]
-            pen = SENSOR_PENS[k % len(SENSOR_PENS)]
+            pen = sensor_colour(k)
             self.lift_curves.append(self._curve(self.lift_plot, pen, name))
             keys = ", ".join(
-                f'<span style="color:{SENSOR_PENS[j % len(SENSOR_PENS)]}">&#9644; '
+                f'<span style="color:{sensor_colour(j)}">&#9644; '
                 f'{self.ctx.session.devices[j]}</span>' for j in range(len(self.lift_curves)))
             self.lift_plot.setTitle(f"Lifted polls per reply ({keys})")
         top = 1.0
@@ -441,7 +442,7 @@ class HealthView(QWidget):
         while len(self.quality_curves) < len(devices):
             k = len(self.quality_curves)
             self.quality_curves.append(self._curve(self.quality_plot,
-                                                   SENSOR_PENS[k % len(SENSOR_PENS)]))
+                                                   sensor_colour(k)))
         for line in self.threshold_lines.values():
             self.quality_plot.removeItem(line)
         self.threshold_lines.clear()
@@ -451,7 +452,7 @@ class HealthView(QWidget):
             if not chip or not name:
                 without.append(f"{dev}: no quality figure (chip {chip_title(chip)})")
                 continue
-            pen = SENSOR_PENS[k % len(SENSOR_PENS)]
+            pen = sensor_colour(k)
             with_figure.append(f'<span style="color:{pen}">&#9644; {dev} '
                                f'({chip_key(chip).upper()})</span>')
             names.add(name)

@@ -16,13 +16,15 @@ __all__ = [
     "ROBOT_COLOUR",
     "SENSOR_COLOURS",
     "parse_number",
+    "sensor_axis_colour",
     "sensor_colour",
 ]
 
 #: style sheet of the red message shown next to a field that refused its input
 ERROR_STYLE = "color: #b00020"
 
-#: Colours on the white map and in the direction widgets.
+#: Colours on the white map, in the direction widgets, the graphs and the Health plots:
+#: one colour per sensor everywhere (this module is the one source).
 ROBOT_COLOUR = "#1f3a93"
 #: a stretch of the path without its single polls (drawn dashed over the path)
 GAP_COLOUR = "#e0102f"
@@ -30,8 +32,25 @@ SENSOR_COLOURS = ("#e67e22", "#2e8b57", "#8e44ad", "#c0392b")
 
 
 def sensor_colour(k: int) -> str:
-    """Colour of sensor ``k`` (0-based) on the map and in the direction widgets."""
+    """Colour of sensor ``k`` (0-based): its path on the map, its direction dial, its
+    graphs and its curves on the Health tab."""
     return SENSOR_COLOURS[k % len(SENSOR_COLOURS)]
+
+
+#: a sensor's Y curve (sensor forward) is its colour darkened by this factor; X is its colour
+Y_SHADE = 0.55
+
+
+def sensor_axis_colour(k: int, axis: str) -> str:
+    """Colour of sensor ``k``'s ``axis`` curve ("x": its colour, "y": a darker shade of it),
+    so a plot with both axes still reads as that one sensor."""
+    colour = sensor_colour(k)
+    if axis == "x":
+        return colour
+    if axis != "y":
+        raise ValueError(f"axis must be 'x' or 'y', got {axis!r}")
+    r, g, b = (int(colour[i:i + 2], 16) for i in (1, 3, 5))
+    return "#" + "".join(f"{round(c * Y_SHADE):02x}" for c in (r, g, b))
 
 
 def parse_number(text: str, what: str) -> float:
