@@ -139,7 +139,9 @@ class RemoteAgent:
         self._seq_ref: list[tuple[float, int] | None] = [None] * n
         # per sensor: (x, y) counts of history polls applied since the last live totals
         self._pending = [[0, 0] for _ in range(n)]
-        self._zeroed = False  # the node's totals start at its first contact (read-and-clear)
+        # the node's counts start at its first contact: the stamp of that poll (node clock,
+        # ns), the origin of its first read-and-clear interval (0: not reached yet)
+        self.origin_ns = 0
         self.next_agent = [None] * n  # next agent seq expected
         self.base_i = np.zeros((n, ss.N_INT), np.int64)
         self.base_f = np.zeros((n, ss.N_FLOAT), np.float64)
@@ -419,6 +421,8 @@ class RemoteAgent:
             before = self.next_agent[block.index]
             self._apply(block, fetch_gaps=True)
             self._seq_reference(block, before, now)
+            if not self.origin_ns and np.frombuffer(block.ints, np.int64)[ss.I_STAMP_NS] > 0:
+                self.origin_ns = int(self.state.ints[block.index][ss.I_STAMP_NS])
         # a gap fetch can take seconds: frames that kept arriving meanwhile mean the link is
         # up (else the feeder would call it lost the moment the fetch returns)
         self.last_heard = max(self.last_heard, self.last_rx)

@@ -75,10 +75,12 @@ class BeagleNode(Node):
         self.last_errors = [""] * len(self.devices)  # why each sensor went down
         self.fatal = ""  # why the poller stopped for good
         self.stuck = ""  # why the poller counts as stuck, '' while it polls
-        start = ss.Totals.zero(time.time_ns())  # the read-and-clear cursors' origin
+        started_ns = time.time_ns()
         self.supervisor = PollerSupervisor(self)
         self.poller.start()
         self.supervisor.wait_for_first_bring_up(timeout=10.0, stop=stop)  # stop: Ctrl-C
+        # the read-and-clear cursors' origin: now, or the remote link's first contact
+        start = ss.Totals.zero(getattr(self.poller, "origin_ns", 0) or started_ns)
 
         self.sensor_services = SensorServices(self, start)
         # the service callbacks, also called directly (in-process tests)

@@ -344,7 +344,8 @@ def test_a_5s_agent_stop_is_an_error_with_the_wrap_estimate(rig):
 
 def test_the_first_read_and_clear_covers_only_the_interval_it_claims(tmp_path):
     """A node started 4 s after its agent: its first interval's polls and counts are its
-    own (it said 3.16 s but carried 6.38 s of polls, y_speed 0.488 m/s at 0.2)."""
+    own (it said 3.16 s but carried 6.38 s of polls, y_speed 0.488 m/s at 0.2; here
+    3945 polls in 0.137 s, y_speed 6.29 m/s before the fix)."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     client = BeagleClient("mm_hostile_first")
     opts = {"backend": "sim", "listen": [endpoint], "sim_trajectory": "straight"}
@@ -365,11 +366,13 @@ def test_the_first_read_and_clear_covers_only_the_interval_it_claims(tmp_path):
                     interval=0.2,
                 )
                 data = res.data[0]
+                # its interval starts at the first contact (the services came after it): no
+                # more polls than it claims (fewer when the shared machine slows the agent)
                 assert data.samples <= data.interval * 1000 * 1.05 + 20, (
                     data.samples,
                     data.interval,
                 )
-                assert abs(data.y_speed) <= 0.2 * 1.1, data.y_speed
+                assert 0.17 <= data.y_speed <= 0.23, data.y_speed  # sim_speed 0.2 m/s
     finally:
         client.close()
 
