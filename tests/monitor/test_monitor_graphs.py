@@ -147,3 +147,169 @@ def test_one_colour_per_sensor_everywhere(qtbot, tmp_path):
         assert name(map_view.paths[k].pen) == colours[k]
         assert name(map_view.sensor_items[k]["axes"]._pen) == colours[k]
     assert [d.colour.name() for d in window.direction_panel.widgets] == colours
+
+
+# -- the mouse: real wheel, double-click and move events on the plots' canvas ---------------
+
+def _at(canvas, plot):
+    """The canvas viewport's point at the middle of ``plot``'s data area."""
+    rect = plot.getViewBox().sceneBoundingRect()
+    return canvas.mapFromScene(rect.center())
+
+
+def wheel(canvas, point, delta: int = 120, modifiers=None) -> None:
+    from PySide6.QtCore import QPoint, QPointF, Qt
+    from PySide6.QtGui import QWheelEvent
+    from PySide6.QtWidgets import QApplication
+
+    vp = canvas.viewport()
+    mods = Qt.KeyboardModifier.NoModifier if modifiers is None else modifiers
+    ev = QWheelEvent(QPointF(point), QPointF(vp.mapToGlobal(point)), QPoint(0, 0),
+                     QPoint(0, delta), Qt.MouseButton.NoButton, mods,
+                     Qt.ScrollPhase.NoScrollPhase, False)
+    QApplication.sendEvent(vp, ev)
+
+
+def double_click(canvas, point) -> None:
+    from PySide6.QtCore import Qt
+    from PySide6.QtTest import QTest
+
+    vp, left = canvas.viewport(), Qt.MouseButton.LeftButton
+    # what a window system sends: press, release, double-click, release (QTest's
+    # mouseDClick alone sends only the double-click; pyqtgraph acts on the release)
+    QTest.mouseClick(vp, left, pos=point)
+    QTest.mouseDClick(vp, left, pos=point)
+    QTest.mouseRelease(vp, left, pos=point)
+
+
+def x_range(plot):
+    return tuple(plot.getViewBox().viewRange()[0])
+
+
+def y_range(plot):
+    return tuple(plot.getViewBox().viewRange()[1])
+
+
+def test_the_wheel_zooms_time_a_modifier_values_double_click_resets(qtbot, fake_bridge, feed):
+    from PySide6.QtCore import Qt
+
+    ctx = MonitorContext(MonitorSession(), fake_bridge)
+    feed(ctx, rate_hz=50.0, seconds=20.0)
+    view = graphs(qtbot, ctx)
+    qtbot.waitExposed(view)
+    view.refresh()
+    speed0, disp1 = view.plots[(0, "speed")], view.plots[(1, "disp")]
+    assert view.window_s == 10
+    x0 = x_range(speed0)
+    assert x0[1] - x0[0] == pytest.approx(11.0)  # the window and its 10 % lead
+    assert x_range(disp1) == pytest.approx(x0)  # time axes linked
+
+    # live: a notch away zooms time in by changing the window (x0.74): still live
+    wheel(view.canvas, _at(view.canvas, speed0), 120)
+    assert view.window_s == 7 and not view.paused
+    x1 = x_range(speed0)
+    assert x1[1] - x1[0] == pytest.approx(7.7) and x1[1] == pytest.approx(x0[1] - 0.3, abs=0.5)
+    _x, vy = view.curves[(0, "speed", "y")].getData()  # the value axis holds the window's data
+    assert y_range(speed0)[0] < np.nanmin(vy) and np.nanmax(vy) < y_range(speed0)[1]
+    assert x_range(disp1) == pytest.approx(x1)
+
+    # Ctrl + wheel zooms the value axis only (around the mouse), and holds it while live
+    for mod in (Qt.KeyboardModifier.ControlModifier, Qt.KeyboardModifier.ShiftModifier):
+        before = y_range(speed0)
+        wheel(view.canvas, _at(view.canvas, speed0), 120, mod)
+        after = y_range(speed0)
+        assert after[1] - after[0] == pytest.approx(0.74 * (before[1] - before[0]), rel=0.01)
+        assert x_range(speed0) == pytest.approx(x1)
+    held = y_range(speed0)
+    feed(ctx, rate_hz=50.0, seconds=1.0, start_ns=1_700_000_030_000_000_000)
+    view.refresh()
+    assert y_range(speed0) == pytest.approx(held)
+
+    # a double-click resets: the window typed before, the value axis back to the data
+    double_click(view.canvas, _at(view.canvas, speed0))
+    assert view.window_s == 10
+    x2, y2 = x_range(speed0), y_range(speed0)
+    assert x2[1] - x2[0] == pytest.approx(11.0)
+    assert y2[1] - y2[0] > held[1] - held[0]
+
+    # paused: the wheel zooms time around the mouse, the window length stays
+    view.set_paused(True)
+    wheel(view.canvas, _at(view.canvas, speed0), 120)
+    x3 = x_range(speed0)
+    assert view.window_s == 10 and x3[1] - x3[0] == pytest.approx(0.74 * 11.0, rel=0.01)
+    mid = (x2[0] + x2[1]) / 2
+    assert x3[0] > x2[0] and x3[1] < x2[1] and (x3[0] + x3[1]) / 2 == pytest.approx(mid, abs=0.2)
+    assert x_range(disp1) == pytest.approx(x3)
+    double_click(view.canvas, _at(view.canvas, disp1))
+    assert x_range(speed0) == pytest.approx(x2)
+
+
+def test_hovering_a_plot_reads_its_values_out(qtbot, fake_bridge, feed):
+    from PySide6.QtTest import QTest
+
+    ctx = MonitorContext(MonitorSession(), fake_bridge)
+    feed(ctx, rate_hz=50.0, seconds=5.0, name="straight")
+    view = graphs(qtbot, ctx)
+    qtbot.waitExposed(view)
+    view.refresh()
+    plot = view.plots[(1, "speed")]
+    point = _at(view.canvas, plot)
+    QTest.mouseMove(view.canvas.viewport(), point)
+    qtbot.waitUntil(lambda: "at t =" in view.readout.text(), timeout=2000)
+    text = view.readout.text()
+    t = plot.getViewBox().mapSceneToView(view.canvas.mapToScene(point)).x()
+    x, y = view.curves[(1, "speed", "y")].getData()
+    i = int(np.argmin(np.abs(x - t)))
+    assert text.startswith(f"{ctx.session.devices[1]} speed at t = {x[i]:.3f} s: ")
+    assert f"Y {y[i]:.3f}" in text and text.endswith("mm/s")
+    assert y[i] == pytest.approx(SPEED * 1e3 / 0.22 * 0.2, rel=0.05)  # 200 mm/s straight
+
+
+def test_on_health_the_wheel_scrolls_the_page_ctrl_zooms_the_plot(qtbot, qapp, feed, tmp_path):
+    from PySide6.QtCore import Qt
+
+    from mm_pc.monitor.context import MonitorConfig
+    from mm_pc.monitor.main_window import MainWindow
+
+    config = MonitorConfig(rate_hz=15.0, calibration_file=tmp_path / "cal.yaml")
+    window = MainWindow(MonitorContext(MonitorSession(), None, config), None)
+    qtbot.addWidget(window)
+    ctx = window.ctx
+    ctx.session.configure_odometry(method="two-sensor")
+    feed(ctx, rate_hz=50.0, seconds=10.0)
+    window.show()
+    window.resize(1024, 700)
+    health = window.views["Health"]
+    window.tabs.setCurrentIndex(5)
+    assert window.tabs.tabText(5) == "Health"
+    for _ in range(3):
+        window.frame()
+        qapp.processEvents()
+    health._last_plot = 0.0
+    health.refresh()
+    page = window.tabs.currentWidget()
+    bar = page.verticalScrollBar()
+    assert bar.maximum() > 0, "the Health page scrolls at 1024x700"
+    bar.setValue(0)
+    canvas, plot = health.plots, health.residual_plot
+    x0, y0 = x_range(plot), y_range(plot)
+    wheel(canvas, _at(canvas, plot), -120)  # towards the user: the page goes down
+    assert bar.value() > 0
+    assert x_range(plot) == pytest.approx(x0) and y_range(plot) == pytest.approx(y0)
+    scrolled = bar.value()
+    wheel(canvas, _at(canvas, plot), 120, Qt.KeyboardModifier.ControlModifier)  # zoom time
+    assert bar.value() == scrolled
+    x1 = x_range(plot)
+    assert x1[1] - x1[0] == pytest.approx(0.74 * (x0[1] - x0[0]), rel=0.01)
+    assert y_range(plot) == pytest.approx(y0)
+    # linked: the same time at the same x on the screen (the plots' left axes differ in width)
+    lift = health.lift_plot.getViewBox()
+    assert x_range(health.lift_plot)[1] == pytest.approx(x1[1], abs=0.01)
+    assert (x_range(health.lift_plot)[1] - x_range(health.lift_plot)[0]) / lift.width() == (
+        pytest.approx((x1[1] - x1[0]) / plot.getViewBox().width(), rel=0.01))
+    wheel(canvas, _at(canvas, plot), 120,
+          Qt.KeyboardModifier.ControlModifier | Qt.KeyboardModifier.ShiftModifier)
+    y1 = y_range(plot)
+    assert y1[1] - y1[0] == pytest.approx(0.74 * (y0[1] - y0[0]), rel=0.01)
+    double_click(canvas, _at(canvas, plot))
+    assert x_range(plot) == pytest.approx(x0) and y_range(plot) == pytest.approx(y0)

@@ -25,6 +25,11 @@ frame: with an hour of history in the monitor window, frame p50 ~15 ->
 ~6 ms, p95 ~20 -> ~9 ms.
 Paused, nothing is redrawn and the plots can be zoomed and panned; resuming
 jumps back to the live window.
+
+The mouse (:mod:`.plot_habits`): the wheel zooms time -- live by changing the window
+length (the plots stay live), paused around the mouse; Ctrl or Shift + wheel zooms the
+value axis (held until a double-click); a double-click resets the view; the time axes of
+all plots are linked; hovering a plot reads its values out under the legend.
 """
 
 from __future__ import annotations
@@ -44,6 +49,7 @@ from PySide6.QtWidgets import (
 from mm_pc.monitor.model.outages import OutageFinder, with_breaks
 from mm_pc.monitor.model.peak_decimator import PeakDecimator, bucket_size
 from mm_pc.monitor.model.session import sensor_columns
+from mm_pc.monitor.widgets.plot_habits import TimePlotBox
 from mm_pc.monitor.widgets.style import sensor_axis_colour, sensor_colour
 
 __all__ = ["AXIS_NAMES", "DEFAULT_WINDOW_S", "PLOTS", "GraphsView"]
@@ -100,6 +106,10 @@ class GraphsView(QWidget):
         self._len = 0
         self._x_range: tuple[float, float] | None = None  # time range shown (s)
         self._y_ranges: dict[tuple[int, str], tuple[float, float]] = {}  # value range per plot
+        #: plots whose value axis the user zoomed (held until a double-click)
+        self._y_held: set[tuple[int, str]] = set()
+        #: the window length before the wheel changed it (restored by a double-click)
+        self._window_before_zoom: int | None = None
 
         self.window_box = QSpinBox()
         self.window_box.setRange(1, MAX_WINDOW_S)
@@ -107,6 +117,8 @@ class GraphsView(QWidget):
         self.window_box.setSuffix(" s")
         self.window_box.setToolTip("seconds of history shown (1..3600)")
         self.window_box.valueChanged.connect(self._invalidate)
+        self.window_box.valueChanged.connect(self._window_typed)
+        self._zooming = False
         self.pause_button = QPushButton("Pause")
         self.pause_button.setCheckable(True)
         self.pause_button.setToolTip("freeze the graphs to zoom and pan; resume returns to live")
@@ -126,11 +138,16 @@ class GraphsView(QWidget):
             "time their poll stamps span; the "
             "displacement per reply grows when a reply comes late (the request interval), "
             "so a spike there with a flat speed is no sensor glitch.")
+        self.readout = QLabel("hover a plot to read its values; wheel: zoom time, "
+                              "Ctrl+wheel: zoom values, double-click: reset")
+        self.readout.setWordWrap(True)
         self.canvas = pg.GraphicsLayoutWidget()
         self.canvas.setBackground("w")
+        self.canvas.scene().sigMouseMoved.connect(self._hover)
         lay = QVBoxLayout(self)
         lay.addLayout(bar)
         lay.addWidget(self.legend)
+        lay.addWidget(self.readout)
         lay.addWidget(self.canvas, 1)
 
         ctx.devices_known.connect(self._build)
@@ -146,9 +163,19 @@ class GraphsView(QWidget):
         self.canvas.clear()
         self.curves.clear()
         self.plots.clear()
+        self._y_held.clear()
+        master = None
         for k, dev in enumerate(devices):
             for row, (key, title, _fields, unit) in enumerate(PLOTS):
-                plot = self.canvas.addPlot(row=row, col=k)
+                vb = TimePlotBox()
+                vb.on_time_zoom = self._zoom_time
+                vb.on_value_zoom = lambda pk=(k, key): self._y_held.add(pk)
+                vb.on_reset = self.reset_view
+                plot = self.canvas.addPlot(row=row, col=k, viewBox=vb)
+                if master is None:
+                    master = plot
+                else:
+                    plot.setXLink(master)  # one time axis for every plot
                 plot.setTitle(f'<span style="color:{sensor_colour(k)}">{dev}</span><br>{title}',
                               color="#222222")
                 self._style(plot, title, unit)
@@ -216,10 +243,83 @@ class GraphsView(QWidget):
         for plot in self.plots.values():
             plot.setMouseEnabled(x=self.paused, y=self.paused)
 
+    # -- mouse -----------------------------------------------------------------------
+
+    def _zoom_time(self, factor: float) -> bool:
+        """A wheel turn on the time axis: live, the window length scaled by ``factor``
+        (1..MAX_WINDOW_S s; True); paused, False (the plot zooms around the mouse)."""
+        if self.paused:
+            return False
+        old = self.window_s
+        new = round(old * factor)
+        if new == old:
+            new = old + (1 if factor > 1 else -1)
+        new = max(1, min(MAX_WINDOW_S, new))
+        if self._window_before_zoom is None:
+            self._window_before_zoom = old
+        self._zooming = True
+        try:
+            self.window_box.setValue(new)
+        finally:
+            self._zooming = False
+        self.refresh()
+        return True
+
+    def _window_typed(self, _value: int) -> None:
+        if not self._zooming:  # a length typed in: a double-click keeps it
+            self._window_before_zoom = None
+
+    def reset_view(self) -> None:
+        """A double-click: the window length the wheel changed back, the value axes back
+        to the data; paused, the time axis back to the window shown when paused."""
+        self._y_held.clear()
+        if self._window_before_zoom is not None:
+            window, self._window_before_zoom = self._window_before_zoom, None
+            self.window_box.setValue(window)
+        if not self.paused:
+            self._invalidate()
+            self.refresh()
+            return
+        rng = self._x_range
+        for plot in self.plots.values():
+            vb = plot.getViewBox()
+            if rng is not None:
+                vb.setXRange(*rng, padding=0.0)
+            vb.setAutoVisible(y=True)
+            vb.enableAutoRange(axis=pg.ViewBox.YAxis)
+            vb.updateAutoRange()  # now, not at the next paint
+
+    def _hover(self, pos) -> None:
+        """The values of the plot under the mouse (scene position ``pos``) at its time."""
+        for (k, key), plot in self.plots.items():
+            vb = plot.getViewBox()
+            if not vb.sceneBoundingRect().contains(pos):
+                continue
+            t = vb.mapSceneToView(pos).x()
+            title, unit = next((p[1], p[3]) for p in PLOTS if p[0] == key)
+            values = []
+            shown_t = None
+            for axis in ("x", "y"):
+                x, y = self.curves[(k, key, axis)].getData()
+                if x is None or not len(x):
+                    continue
+                i = int(np.clip(np.searchsorted(x, t), 1, len(x) - 1)) if len(x) > 1 else 0
+                if len(x) > 1 and abs(x[i - 1] - t) < abs(x[i] - t):
+                    i -= 1
+                shown_t = float(x[i])
+                v = "no data" if not np.isfinite(y[i]) else f"{y[i]:.3f}"
+                values.append(f"{axis.upper()} {v}")
+            if shown_t is None:
+                return
+            name = title.split("<br>")[0]
+            self.readout.setText(f"{self._built_for[k]} {name} at t = {shown_t:.3f} s: "
+                                 f"{', '.join(values)} {unit}")
+            return
+
     def _invalidate(self, *_args) -> None:
         self._version = -1
         self._x_range = None
-        self._y_ranges = {}
+        self._y_ranges = {k: v for k, v in self._y_ranges.items() if k in self._y_held}
 
     def _on_reset(self) -> None:
         for cache in self._peaks.values():
@@ -277,14 +377,14 @@ class GraphsView(QWidget):
         rng = self._x_range
         if rng is None or not rng[1] - lead - 1e-9 <= end <= rng[1]:
             rng = self._x_range = (end - self.window_s, end + lead)
-            for plot in self.plots.values():
-                plot.setXRange(*rng, padding=0.0)
+            if self.plots:  # the others are linked to the first
+                next(iter(self.plots.values())).setXRange(*rng, padding=0.0)
         return rng
 
     def _set_value_range(self, plot_key, lo: float, hi: float) -> None:
         """Set a plot's value range to hold [lo, hi] with room, changed only when the data
         leave the range or fill less than ``Y_SHRINK`` of it."""
-        if not lo <= hi:
+        if not lo <= hi or plot_key in self._y_held:
             return
         span = max(hi - lo, 1e-3)
         old = self._y_ranges.get(plot_key)

@@ -49,6 +49,7 @@ from mm_pc.monitor.context import MonitorContext
 from mm_pc.monitor.model.chips import chip_key, chip_title, quality_label, quality_threshold
 from mm_pc.monitor.model.outages import OutageFinder, with_breaks
 from mm_pc.monitor.model.peak_decimator import PeakDecimator, bucket_peak
+from mm_pc.monitor.widgets.plot_habits import TimePlotBox
 from mm_pc.monitor.widgets.style import ROBOT_COLOUR, sensor_colour
 
 __all__ = ["DIAG_COLUMNS", "LEVEL_COLOURS", "HealthView"]
@@ -168,13 +169,17 @@ class HealthView(QWidget):
         self.plots.setBackground("w")
         # the plots' axes and titles need this much; a lower window scrolls the page
         self.plots.setMinimumHeight(PLOTS_MIN_HEIGHT)
-        self.residual_plot = self.plots.addPlot(row=0, col=0, title="Two-sensor residual")
+        # the page scrolls with the wheel; Ctrl+wheel zooms time, Ctrl+Shift+wheel values;
+        # a double-click shows everything again (plot_habits)
+        self.residual_plot = self.plots.addPlot(row=0, col=0, title="Two-sensor residual",
+                                                viewBox=self._box())
         # one unit, named once: mm (pyqtgraph's SI prefix showed µm beside a text in m)
         self.residual_plot.setLabel("left", "residual (mm)")
         self.residual_plot.getAxis("left").enableAutoSIPrefix(False)
         # the robot's colour: the residual belongs to no one sensor
         self.residual_curve = self._curve(self.residual_plot, ROBOT_COLOUR)
-        self.lift_plot = self.plots.addPlot(row=1, col=0, title="Lifted polls per reply")
+        self.lift_plot = self.plots.addPlot(row=1, col=0, title="Lifted polls per reply",
+                                            viewBox=self._box())
         self.lift_plot.setLabel("left", "lifted polls (count)")
         self.lift_plot.setLabel("bottom", "time (s)")
         for plot in (self.lift_plot, self.residual_plot):
@@ -187,7 +192,8 @@ class HealthView(QWidget):
         self.lift_plot.setXLink(self.residual_plot)
         # no legend item over the curves: the title names each sensor's colour
         self.lift_curves: list[pg.PlotDataItem] = []
-        self.quality_plot = self.plots.addPlot(row=2, col=0, title="Surface quality")
+        self.quality_plot = self.plots.addPlot(row=2, col=0, title="Surface quality",
+                                               viewBox=self._box())
         self.quality_plot.setLabel("left", "quality figure")
         self.quality_plot.setLabel("bottom", "time (s)")
         for axis in ("left", "bottom"):
@@ -227,6 +233,21 @@ class HealthView(QWidget):
         ctx.data_state_changed.connect(lambda _s: self._show_stale())
         self.residual_plot.getViewBox().sigXRangeChanged.connect(self._range_changed)
         self._show_counters()
+
+    def _box(self) -> TimePlotBox:
+        box = TimePlotBox(page_scroll=True)
+        box.on_reset = self.reset_view
+        return box
+
+    def reset_view(self) -> None:
+        """A double-click on a plot: every plot shows all its data again."""
+        for plot in (self.residual_plot, self.quality_plot):
+            plot.enableAutoRange()
+        self.lift_plot.enableAutoRange(x=True)  # its count axis is set from the data
+        for plot in (self.residual_plot, self.lift_plot, self.quality_plot):
+            plot.getViewBox().updateAutoRange()  # now, not at the next paint
+        self._version = -1
+        self._last_plot = 0.0
 
     @staticmethod
     def _curve(plot, colour: str, name: str | None = None) -> pg.PlotDataItem:
