@@ -61,6 +61,7 @@ GLOB_HOLD_S = 1.0
 # A new boot id is followed only when its status arrives after the current boot's frames
 # stopped for this long (a restarted agent is silent for seconds: import, bring-up).
 BOOT_SILENCE_S = 0.5
+RESYNC_S = 2.0  # live blocks refused or stale this long, none taken: follow the agent again
 CREDENTIALS_PROBE_S = 3.0  # TCP reaches the agent but zenoh does not open for this long
 
 
@@ -138,6 +139,8 @@ class RemoteAgent:
         # per sensor (node time, agent seq end) of the newest block that brought new polls
         self._seq_ref: list[tuple[float, int] | None] = [None] * n
         # per sensor: (x, y) counts of history polls applied since the last live totals
+        self._accepted_t = [time.monotonic()] * n  # when its last live block was taken
+        self.resyncs = 0  # times a sensor followed the agent again after a forgery
         self._pending = [[0, 0] for _ in range(n)]
         # the node's counts start at its first contact: the stamp of that poll (node clock,
         # ns), the origin of its first read-and-clear interval (0: not reached yet)
@@ -217,6 +220,7 @@ class RemoteAgent:
             "link_polls_lost": self.polls_lost,
             "link_bad_frames": self.bad_frames,
             "link_refused_frames": self.refused,
+            "link_resyncs": self.resyncs,
             "link_dropped_by_kind": self._drop_counts(),
             "agent_restarts": self.restarts,
             "link_latency_p50_ms": f"{np.nanpercentile(lat, 50):.2f}",
@@ -505,7 +509,9 @@ class RemoteAgent:
             self.state.ints[i][ss.I_RING_FROM] = self.base_i[i][ss.I_SEQ] + end
             check = False
         elif end < expected or (end == expected and count):
-            return  # already applied (a history reply overlapping the live stream)
+            if not (totals and self._resync_due(i, block)):
+                return  # already applied (a history reply overlapping the live stream)
+            expected, check = self._resync(i, block, "are behind the node's"), False
         if first > expected:
             if fetch_gaps:
                 self._fill_gap(i, expected, first)
@@ -534,7 +540,11 @@ class RemoteAgent:
             have = [int(self.agent_i[i][k]) + p for k, p in zip(XY, self._pending[i], strict=True)]
             got = [int(ints[k]) for k in XY]
             if [h + d for h, d in zip(have, sums, strict=True)] != got:
-                raise Refused(f"sensor {i}'s totals {got} are not {have} + its polls {sums}")
+                if not self._resync_due(i, block):
+                    raise Refused(f"sensor {i}'s totals {got} are not {have} + its polls {sums}")
+                expected = self._resync(i, block, "do not add up to the node's")
+                skip = 0
+                sums = [int(np.frombuffer(block.arrays[k], RING_DTYPES[k]).sum()) for k in (1, 2)]
             self._pending[i] = [0, 0]
         elif not totals:  # a history reply: its counts are in the next live block's totals
             self._pending[i] = [p + d for p, d in zip(self._pending[i], sums, strict=True)]
@@ -565,6 +575,8 @@ class RemoteAgent:
             self.state.floats[i][: ss.N_TOTAL_FLOAT] += self.base_f[i][: ss.N_TOTAL_FLOAT]
         if end >= expected:
             self.next_agent[i] = end
+            if totals:
+                self._accepted_t[i] = time.monotonic()
         st[ss.I_VERSION] += 1  # even: consistent
 
     def _zero_at(self, i: int, block: link.Block) -> None:
@@ -576,6 +588,26 @@ class RemoteAgent:
         zero = [k for k in self._mono if k != ss.I_REINITS]
         self.base_i[i][zero] = -ints[zero]
         self.base_f[i][: ss.N_TOTAL_FLOAT] = -floats[: ss.N_TOTAL_FLOAT]
+
+    def _resync_due(self, i: int, block: link.Block) -> bool:
+        """Live blocks of sensor i have been refused or skipped as already applied for
+        RESYNC_S while none was accepted: the node took a forged one before (consistent
+        enough to pass) and now refuses the agent's own. Time to follow the agent again."""
+        return bool(block.count) and time.monotonic() - self._accepted_t[i] >= RESYNC_S
+
+    def _resync(self, i: int, block: link.Block, why: str) -> int:
+        """Follow the agent's ``block`` again: its polls overwrite the node's from its first
+        seq on and its totals replace what a forged block had put there."""
+        self.resyncs += 1
+        self._pending[i] = [0, 0]
+        self._emit(
+            "log",
+            f"{self.cfg.devices[i]}: the agent's polls {why} for {RESYNC_S:g} s (a forged "
+            f"frame was taken before): following the agent's own again from its seq "
+            f"{block.first_seq}; the totals are the agent's",
+        )
+        self.next_agent[i] = block.first_seq
+        return block.first_seq
 
     def _fill_gap(self, i: int, since: int, until: int) -> None:
         """Fetch the missing polls since..until of sensor i from the agent's ring.

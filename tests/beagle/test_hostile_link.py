@@ -342,19 +342,23 @@ def test_a_5s_agent_stop_is_an_error_with_the_wrap_estimate(rig):
     assert float(d["longest_poll_gap_ms"]) > 4000
 
 
+# The tests below run their own agent and node, in namespaces of their own: the module's
+# rig (its node in the default namespace) is still up until the module ends.
+
+
 def test_the_first_read_and_clear_covers_only_the_interval_it_claims(tmp_path):
     """A node started 4 s after its agent: its first interval's polls and counts are its
     own (it said 3.16 s but carried 6.38 s of polls, y_speed 0.488 m/s at 0.2; here
     3945 polls in 0.137 s, y_speed 6.29 m/s before the fix)."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    client = BeagleClient("mm_hostile_first")
+    client = BeagleClient("mm_hostile_first", namespace="/first/mm_beagle")
     opts = {"backend": "sim", "listen": [endpoint], "sim_trajectory": "straight"}
     try:
         with agent_process(opts, str(tmp_path / "agent.log")):
             time.sleep(4.0)
             with beagle_process(
                 {"backend": "remote", "agent": endpoint}, env=dict(os.environ),
-                log_path=str(tmp_path / "node.log"),
+                log_path=str(tmp_path / "node.log"), namespace="/first",
             ):  # fmt: skip
                 assert client.wait(scaled(60))
                 res = wait_until(
@@ -372,7 +376,7 @@ def test_the_first_read_and_clear_covers_only_the_interval_it_claims(tmp_path):
                     data.samples,
                     data.interval,
                 )
-                assert 0.17 <= data.y_speed <= 0.23, data.y_speed  # sim_speed 0.2 m/s
+                assert 0.17 <= data.y_speed <= 0.23, data.y_speed  # sim_speed 0.2 m/s (was 6.29)
     finally:
         client.close()
 
@@ -383,7 +387,7 @@ def test_wrong_credentials_are_named_on_the_node(tmp_path):
     wrong.write_text("mm:not-the-password-at-all\n")
     wrong.chmod(0o600)
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    client = BeagleClient("mm_hostile_creds")
+    client = BeagleClient("mm_hostile_creds", namespace="/creds/mm_beagle")
     opts = {"backend": "sim", "listen": [endpoint], "credentials": creds}
     try:
         with (
@@ -392,6 +396,7 @@ def test_wrong_credentials_are_named_on_the_node(tmp_path):
                 {"backend": "remote", "agent": endpoint, "agent_credentials": str(wrong)},
                 env=dict(os.environ),
                 log_path=str(tmp_path / "node.log"),
+                namespace="/creds",
             ),
         ):
             assert client.wait(scaled(60))
@@ -415,7 +420,7 @@ def test_with_credentials_every_message_is_tagged_and_the_node_follows(tmp_path)
     same credentials, accepts them all: link up, totals exact, a command answered."""
     creds = link.make_credentials(str(tmp_path / "agent.credentials"))
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    client = BeagleClient("mm_hostile_tagged")
+    client = BeagleClient("mm_hostile_tagged", namespace="/tagged/mm_beagle")
     log = tmp_path / "node.log"
     opts = {"backend": "sim", "listen": [endpoint], "credentials": creds}
     params = {"backend": "remote", "agent": endpoint, "agent_credentials": creds,
@@ -423,7 +428,7 @@ def test_with_credentials_every_message_is_tagged_and_the_node_follows(tmp_path)
     try:
         with (
             agent_process(opts, str(tmp_path / "agent.log")),
-            beagle_process(params, env=dict(os.environ), log_path=str(log)),
+            beagle_process(params, env=dict(os.environ), log_path=str(log), namespace="/tagged"),
         ):
             assert client.wait(scaled(60))
             wait_until(lambda: client.call("get_sensor_data", id="").success, 30,

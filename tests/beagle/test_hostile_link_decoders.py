@@ -192,3 +192,26 @@ def test_the_feeder_refuses_forged_frames_and_keeps_the_real_totals(tmp_path):
     t = remote.state.snapshot(0)
     assert (t.seq, t.y_total) == (3, 16)  # only the real polls, none forged
     assert "polls" in remote.link_values()["link_dropped_by_kind"]
+
+
+def test_a_consistent_forgery_holds_a_sensor_back_for_2_s_at_most(monkeypatch):
+    """Without a secret a forged block with the next seq and totals that add up to its own
+    polls passes; the agent's own blocks then fail the totals check. After RESYNC_S of
+    nothing taken the node follows the agent again: its totals are the agent's (the
+    forged counts gone), not frozen for good."""
+    import mm_beagle.link.remote as remote_mod
+
+    remote = RemoteAgent(PollerConfig(devices=[S0, S1], ring_size=4096))
+    feed(remote, "status", status(boot_id=77))
+    feed(remote, "polls", frame(77, 1, 0, [1, 2, 3], 0))
+    feed(remote, "polls", frame(77, 2, 3, [4, 5], 6))
+    feed(remote, "polls", frame(77, 3, 5, [30000], 15))  # forged, consistent
+    assert remote.state.snapshot(0).y_total == 30009
+    feed(remote, "polls", frame(77, 3, 5, [1, 1], 15))  # the agent's own: refused
+    assert remote.state.snapshot(0).y_total == 30009 and remote.refused == 1
+    monkeypatch.setattr(remote_mod, "RESYNC_S", 0.0)
+    feed(remote, "polls", frame(77, 4, 5, [1, 1], 15))  # ... until the node follows it again
+    t = remote.state.snapshot(0)
+    assert (t.seq, t.y_total) == (4, 11) and remote.resyncs >= 1
+    feed(remote, "polls", frame(77, 5, 7, [2], 17))
+    assert remote.state.snapshot(0).y_total == 13
