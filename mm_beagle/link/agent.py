@@ -10,8 +10,10 @@ backend:=remote`` on any ROS machine turns that back into the ROS services
 Debian's python3-spidev and python3-yaml and the eclipse-zenoh wheel; ``--backend sim``
 also needs python3-numpy. The command line and configuration: :mod:`mm_beagle.link.agent_cli`.
 
-No peer can hold up the poll: two worker threads take the command queries and the
-history requests, refuse what is too large, too frequent or malformed
+No peer can hold up the poll: the poll thread never calls zenoh. It hands its batches,
+events and status requests to a sender thread (:class:`Outbox`), and two worker threads
+take the command queries and the history requests, refuse what is too large, too
+frequent or malformed
 (:mod:`mm_beagle.link.agent_requests`), and hand the rest to the poll thread as a
 :class:`Job` in a bounded lane; the poll thread runs at most one step of each lane per
 service (a patch load goes in steps of a few register transfers), and the workers send
@@ -57,6 +59,7 @@ LANE_SIZE = 2  # jobs waiting per lane (each worker waits for its own: at most o
 COMMAND_RATE = (50.0, 50)  # commands per second and burst, all peers together (<= 100/s run)
 HISTORY_RATE = (100.0, 50)  # history requests per second and burst, all peers together
 QUERY_QUEUE = 16  # requests received and waiting for their worker, per key
+OUTBOX_SIZE = 300  # messages waiting for the sender thread (3 s of batches)
 
 
 def agent_zenoh_config(listen: list[str], credentials: str = ""):
@@ -64,15 +67,23 @@ def agent_zenoh_config(listen: list[str], credentials: str = ""):
     past. Messages over :data:`RX_MAX_MESSAGE_BYTES` are dropped by zenoh before Python
     sees them (a 200 MB command once cost 490 MB of RSS); no shared-memory transport; a
     full transmission queue drops a message after at most 2 ms, fragments included
-    (zenoh's default waits 50 ms)."""
+    (zenoh's default waits 50 ms), and a peer that reads no reply for 1 s is
+    disconnected (command replies keep the congestion control of their query)."""
     cfg = link.zenoh_config(listen=listen, credentials=credentials)
     cfg.insert_json5("transport/link/rx/max_message_size", str(RX_MAX_MESSAGE_BYTES))
     # No shared memory: a local peer's messages over 3 kB came in its 16 MB zenoh segment,
     # mapped into the agent (+16 MB RSS per peer, and past max_message_size).
     cfg.insert_json5("transport/shared_memory/enabled", "false")
     cfg.insert_json5(
-        "transport/link/tx/queue/congestion_control/drop",
-        json.dumps({"wait_before_drop": 1000, "max_wait_before_drop_fragments": 2000}),
+        "transport/link/tx/queue/congestion_control",
+        json.dumps(
+            {
+                "drop": {"wait_before_drop": 1000, "max_wait_before_drop_fragments": 2000},
+                # a reply that cannot be queued for 1 s (its peer reads nothing) closes
+                # that peer's session: the command worker is free again (zenoh: 5 s)
+                "block": {"wait_before_close": 1_000_000},
+            }
+        ),
     )
     return cfg
 
@@ -134,6 +145,29 @@ class Lane:
             if job.cancelled:  # its worker gave up before it started
                 job = None
         self.current = None if job.step(time.perf_counter() + budget_s) else job
+
+
+class Outbox:
+    """Messages from the poll thread to the sender thread, (kind, bytes); at most
+    :data:`OUTBOX_SIZE` wait, the oldest dropped beyond (the node fetches missed polls)."""
+
+    def __init__(self, size: int = 0) -> None:
+        self.items: collections.deque[tuple[str, bytes]] = collections.deque(
+            maxlen=size or OUTBOX_SIZE
+        )
+        self.ready = threading.Event()
+        self.closed = False
+        self.dropped = 0
+
+    def put(self, item: tuple[str, bytes]) -> None:
+        if len(self.items) == self.items.maxlen:
+            self.dropped += 1
+        self.items.append(item)
+        self.ready.set()
+
+    def close(self) -> None:
+        self.closed = True
+        self.ready.set()
 
 
 class Inbox:
@@ -212,7 +246,9 @@ class AgentLink:
                 ((self.history_in, self._history_request), "mm_agent_history"),
             )
         ]
-        for t in self.workers:
+        self.outbox = Outbox()
+        self.sender = threading.Thread(target=self._send, name="mm_agent_sender", daemon=True)
+        for t in (*self.workers, self.sender):
             t.start()
 
     # --- between polls (the poll thread) ---
@@ -231,7 +267,7 @@ class AgentLink:
             self.history_lane.step(JOB_BUDGET_S)
         if now >= self.next_status:
             self.next_status = now + STATUS_S
-            self.publish_status(now)
+            self.outbox.put(("status", b""))  # built by the sender thread
 
     def _block(self, ch, first: int, end: int) -> link.Block:
         n = ch.n
@@ -252,7 +288,7 @@ class AgentLink:
             self.boot_id, self.number, self.poller.state.glob_view.tobytes(), blocks
         )
         self.bytes_sent += len(frame)
-        self.pub.put(frame, attachment=self.auth.tag("polls", frame))
+        self.outbox.put(("polls", frame))
 
     def run_command(self, name: str, i: int | None, args: tuple) -> tuple[str, object, list]:
         """One checked command on the poll thread: (status, payload, seq after it)."""
@@ -415,7 +451,28 @@ class AgentLink:
 
     # --- status and events ---
 
-    def publish_status(self, now: float) -> None:
+    def _send(self) -> None:
+        """The sender thread: every message the poll thread hands over, put on its key. A
+        put that waits (a peer that stops reading, zenoh's queue full) waits here."""
+        pubs = {"polls": self.pub, "status": self.status_pub, "events": self.events_pub}
+        box = self.outbox
+        while True:
+            box.ready.wait(0.2)
+            box.ready.clear()
+            while box.items:
+                kind, body = box.items.popleft()
+                try:
+                    if kind == "status":
+                        body = self.status_body(time.monotonic())
+                    pubs[kind].put(body, attachment=self.auth.tag(kind, body))
+                except Exception as exc:  # a session closing under us
+                    self.refusals.refuse("send", "put failed", f"{kind}: {exc!r}")
+            if box.closed:  # after what was left: the final batch of a stopping agent
+                return
+
+    def status_body(self, now: float) -> bytes:
+        """The status message (JSON), built on the sender thread: reads of the poller's
+        counters only (its own copies: each ``tobytes`` is one step under the GIL)."""
         times, wall = os.times(), time.monotonic()
         last, last_wall = self.cpu_last
         if wall > last_wall:
@@ -437,21 +494,22 @@ class AgentLink:
             **self.refusals.status(),
             "hist_z": base64.b64encode(hist_z).decode(),
         }
-        body = json.dumps(status).encode()
-        self.status_pub.put(body, attachment=self.auth.tag("status", body))
+        status["outbox_dropped"] = self.outbox.dropped
+        return json.dumps(status).encode()
 
     def event(self, kind: str, args: tuple) -> None:
         device = str(args[0]) if kind in ("up", "down") else ""
         text = str(args[-1]) if args else ""
         body = json.dumps({"kind": kind, "device": device, "text": text}).encode()
-        self.events_pub.put(body, attachment=self.auth.tag("events", body))
+        self.outbox.put(("events", body))
 
     def close(self) -> None:
         for entity in (self.cmd_q, self.history_sub):
             entity.undeclare()
         self.cmd_in.close()
         self.history_in.close()
-        for t in self.workers:
+        self.outbox.close()
+        for t in (*self.workers, self.sender):
             t.join(1.0)
         for entity in (self.history_pub, self.pub, self.status_pub, self.events_pub):
             entity.undeclare()

@@ -39,7 +39,7 @@ class PollWatch:
         self.status: dict = {}
         self._answers: list[bytes] = []
         self._lock = threading.Lock()
-        self._rid = 1000
+        self._rid = 1 << 40  # far from other peers' ids: their answers come here too
         s = self.session
         self._subs = [
             s.declare_subscriber(self.keys["polls"], self._on_polls),
@@ -107,8 +107,8 @@ class PollWatch:
             req = {"id": rid, "sensor": i, "since": since, "max": until - since}
             self.session.put(self.keys["history_req"], json.dumps(req).encode())
             block = self._answer(rid, min(2.0, deadline - time.monotonic()))
-            if block is None:
-                continue  # dropped or rate limited: ask again
+            if block is None or block.index != i or block.first_seq < since:
+                continue  # dropped, rate limited (or another peer's answer): ask again
             if block.first_seq > since:
                 raise AssertionError(f"polls {since}..{block.first_seq} no longer in the ring")
             take = min(block.count, until - since)
