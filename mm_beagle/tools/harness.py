@@ -213,14 +213,18 @@ def emulated_sensors(
     log_path: str,
     through_agent: bool = False,
     chips: str = "",
+    sim_mounts: list[float] | None = None,
 ) -> Iterator[subprocess.Popen]:
     """mm-beagle on emulated sensors: its own sim backend, or (``through_agent``) an
     mm-beagle-agent on emulated sensors and the node in backend:=remote on its link,
     the whole BBB chain on this machine. ``chips``: "pmw3360,pmw3360" (one per device,
-    or one for all; '' = PLN2033s). Yields the node's process."""
+    or one for all; '' = PLN2033s); ``sim_mounts``: the node's parameter (x, y, yaw rad
+    per sensor; not with the agent). Yields the node's process."""
     chip_param = {"chips": [chips]} if chips else {}
     if not through_agent:
         params = {"backend": "sim", "sim_trajectory": trajectory, **chip_param}
+        if sim_mounts:
+            params["sim_mounts"] = sim_mounts
         with beagle_process(params, env, log_path) as p:
             yield p
         return

@@ -2,6 +2,8 @@
 
     mm-monitor                          window, asks /mm_beagle at 15 Hz
     mm-monitor --sim                    also start mm-beagle on emulated sensors (private domain)
+    mm-monitor --sim calibration_run    ... driving the calibration wizard's guided run, the
+                                        sensors mounted with a known error (--sim-mounts)
     mm-monitor --headless --duration 10 --screenshot monitor.png
                                         offscreen run, a screenshot of the main window, exit 0
     mm-monitor --replay run.mcap        replay a recording into the monitor (no node needed)
@@ -33,6 +35,7 @@ MAX_DURATION_S = 2_000_000  # QTimer.singleShot's milliseconds are a 32-bit int
 
 def _parser() -> argparse.ArgumentParser:
     from mm_pc.core.odometry import METHODS
+    from mm_pc.sim.robot import TRAJECTORIES
 
     p = argparse.ArgumentParser(prog="mm-monitor", description=__doc__.split("\n\n")[0])
     p.add_argument("--beagle", default="/mm_beagle", help="namespace/name of the mm_beagle node")
@@ -49,7 +52,15 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--sim", nargs="?", const="figure_eight", default=None, metavar="TRAJECTORY",
         help="start mm-beagle on emulated sensors driving TRAJECTORY (default figure_eight; "
-        "a name or file:PATH, a CSV t,v,w or t,vx,vy,w)",
+        f"one of {', '.join(TRAJECTORIES)} or file:PATH, a CSV t,v,w or t,vx,vy,w); "
+        "calibration_run is the calibration wizard's guided run, which the wizard can "
+        "drive for you",
+    )  # fmt: skip
+    p.add_argument(
+        "--sim-mounts", default=None, metavar="X,Y,YAW;...",
+        help="with --sim: where the emulated sensors sit, per sensor base_link x, y (m) and "
+        "yaw (deg); default: as designed, or with --sim calibration_run a known error "
+        "(51,-38.5 mm +3 deg; 47,41 mm -2 deg) for the wizard to find",
     )  # fmt: skip
     p.add_argument(
         "--agent", action="store_true",
@@ -161,6 +172,9 @@ def main(argv: list[str] | None = None) -> int:
         except ValueError as e:
             print(f"mm-monitor: --sim: {e}", file=sys.stderr)
             return 2
+    if problem := _sim_mounts_problem(args):
+        print(f"mm-monitor: {problem}", file=sys.stderr)
+        return 2
     if args.record is not None and (problem := _record_problem(args)):
         print(f"mm-monitor: --record {args.record}: {problem}", file=sys.stderr)
         return 2
@@ -292,6 +306,44 @@ def _quiet_qt_messages() -> None:
     qInstallMessageHandler(handler)
 
 
+def _sim_mounts_problem(args) -> str:
+    """Why --sim-mounts cannot be used ('' = fine)."""
+    if args.sim_mounts is None:
+        return ""
+    if not args.sim or args.agent:
+        return "--sim-mounts goes with --sim (without --agent: the agent mounts them as designed)"
+    from mm_pc.monitor.model.sim_mounts import parse_sim_mounts
+
+    try:
+        parse_sim_mounts(args.sim_mounts)
+    except ValueError as e:
+        return str(e)
+    return ""
+
+
+def _sim_mounts(args):
+    """The --sim node's sensor mounts: --sim-mounts, calibration_run's known error, or
+    None (as designed, or behind the agent)."""
+    from mm_pc.monitor.model.sim_mounts import CALIBRATION_SIM_MOUNTS, parse_sim_mounts
+
+    if args.sim_mounts is not None:
+        return parse_sim_mounts(args.sim_mounts)
+    if args.sim == "calibration_run" and not args.agent:
+        return CALIBRATION_SIM_MOUNTS
+    return None
+
+
+def _sim_mounts_parameter(mounts) -> list[float] | None:
+    """The node's sim_mounts parameter for ``mounts`` (said on the console), or None."""
+    from mm_pc.monitor.model.sim_mounts import describe_sim_mounts, to_parameter
+
+    if mounts is None:
+        return None
+    print(f"mm-monitor: the emulated sensors are mounted at {describe_sim_mounts(mounts)}",
+          flush=True)  # fmt: skip
+    return to_parameter(mounts)
+
+
 def _run(args, headless: bool) -> int:
     from PySide6.QtCore import QTimer
     from PySide6.QtWidgets import QApplication
@@ -304,6 +356,7 @@ def _run(args, headless: bool) -> int:
     from mm_pc.monitor.settings import open_settings
 
     config = MonitorConfig(beagle=args.beagle, rate_hz=args.rate, method=args.method)
+    config.sim, config.sim_mounts = args.sim, _sim_mounts(args)
     if args.calibration is not None:
         config.calibration_file = args.calibration
     node_exit: list[str] = []
@@ -323,8 +376,9 @@ def _run(args, headless: bool) -> int:
                 f"ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}); node log: {log}",
                 flush=True,
             )
+            mounts = _sim_mounts_parameter(config.sim_mounts)
             node = stack.enter_context(
-                emulated_sensors(args.sim, env, str(log), args.agent, args.sim_chips)
+                emulated_sensors(args.sim, env, str(log), args.agent, args.sim_chips, mounts)
             )
         app = QApplication.instance() or QApplication([sys.argv[0]])
         app.setApplicationName("Mouse Monitor")

@@ -43,6 +43,9 @@ class MonitorConfig:
     rate_hz: float = 15.0
     calibration_file: Path = field(default_factory=default_calibration_path)
     method: str = "exact"
+    #: --sim's trajectory (None: not a sim) and where its sensors are mounted (None: unknown)
+    sim: str | None = None
+    sim_mounts: tuple | None = None
 
 
 class MonitorContext(QObject):

@@ -1,7 +1,9 @@
 """The calibration run's state (model/calibration_run.py): steps, sums, checks; no Qt.
 
-The session's use of it (the pose standing still, the fit of a guided run) is in
-tests/monitor/test_monitor_session.py.
+The session's use of it (the pose integrating on, the fit of a guided run) is in
+tests/monitor/test_monitor_session.py; the step checks of a spin that moved, a
+straight that turned and a piece of the figure eight, and the auto driver on the
+simulated guided run, are in tests/monitor/test_monitor_calibration_steps.py.
 """
 
 from __future__ import annotations
@@ -59,11 +61,16 @@ def test_refusals_change_nothing():
     assert run.kind == "spin" and run.steps == []
     check = run.stop_step(DEFAULT_MOUNTS)  # nothing recorded: kept, but refused
     assert not check.ok and len(run.steps) == 1
+    assert check.message.startswith("not a spin: it moved 0.0 cm and turned 0°")
+    # a failed step blocks the next one until it is discarded (issue 29)
+    with pytest.raises(ValueError, match=r"step 1 failed \(not a spin: .*press Discard failed"):
+        run.start_step("straight")
+    assert run.kind is None and len(run.steps) == 1
+    assert run.discard_step() == 0 and run.steps == []
     run.start_step("straight")
     straight(run, 10)
     short = run.stop_step(DEFAULT_MOUNTS)
     assert not short.ok and short.message.startswith("straight too short: 1.0 cm")
-    run.discard_step(0)
     assert [s.kind for s, _ in run.steps] == ["straight"]
     with pytest.raises(ValueError, match=r"step 1 \(straight\): straight too short"):
         run.fit(DEVICES, DEFAULT_MOUNTS, sensor=0)

@@ -140,7 +140,7 @@ def test_sim_figure_eight_matches_ground_truth():
     assert s.pose.y == pytest.approx(truth[1], abs=2e-3)
 
 
-def test_calibration_run_keeps_the_robot_still_and_fits_the_mount():
+def test_calibration_run_keeps_the_pose_integrating_and_fits_the_mount():
     mounts = with_mount_yaw(DEFAULT_MOUNTS, math.radians(5))
     s = MonitorSession()
     replies = list(sim_replies("calibration_run", 50, mounts=mounts))
@@ -162,7 +162,10 @@ def test_calibration_run_keeps_the_robot_still_and_fits_the_mount():
     for r in replies[i:]:
         s.process(r)  # standing after Stop: nothing recorded
     assert s.calibrating and s.recording_step is None
-    assert s.pose == type(s.pose)()  # did not move on uncalibrated data
+    # the pose kept integrating (issue 29: a frozen pose resumed where the robot was not):
+    # 0.5 m forward and back, then the spins, back where it started
+    assert s.history.column("x").max() > 0.4
+    assert s.pose.x == pytest.approx(0.0, abs=1e-3) and s.pose.y == pytest.approx(0.0, abs=1e-3)
     assert s.history.column("calibrating").min() == 1.0
     fit = s.compute_calibration(true_distance=0.5)
     cal = fit.calibration()

@@ -4,18 +4,27 @@ A run is a sequence of steps (straight / spin, :mod:`mm_pc.core.calibration_fit`
 each recorded between :meth:`CalibrationRun.start_step` and
 :meth:`CalibrationRun.stop_step`: the raw (unfiltered, uncalibrated)
 displacement of every interval (m, sensor frame, mount order) is kept, nothing
-after Stop. The session owns at most one run; while it is open the pose stands
-still (no pose from uncalibrated data).
+after Stop. The pose keeps integrating meanwhile (with the calibration in force).
+
+Besides :func:`~mm_pc.core.calibration_fit.check_step`'s residuals, each step's
+rigid motion (two sensors or more, nominal mounts) must fit its kind: a spin
+turns in place (at least ``MIN_SPIN_RAD``, its centre moving at most
+``MAX_SPIN_MOVE_M``), a straight does not turn (at most ``MAX_STRAIGHT_TURN_RAD``).
+A failed step blocks the next one until it is discarded. An
+:class:`~mm_pc.monitor.model.calibration_autodrive.AutoDrive` may press
+Start/Stop itself, per interval (:meth:`CalibrationRun.record`).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from mm_pc.core.calibration_fit import (
+    MIN_SPIN_RAD,
     MIN_STRAIGHT_M,
     STEP_KINDS,
     CalibrationStep,
@@ -25,8 +34,65 @@ from mm_pc.core.calibration_fit import (
     fit_mounts,
 )
 from mm_pc.core.geometry import SensorMount
+from mm_pc.core.odometry import Odometry
 
-__all__ = ["CalibrationRun"]
+if TYPE_CHECKING:
+    from mm_pc.monitor.model.calibration_autodrive import AutoDrive
+
+__all__ = [
+    "MAX_SPIN_MOVE_M",
+    "MAX_STRAIGHT_TURN_RAD",
+    "CalibrationRun",
+    "motion_failure",
+    "step_motion",
+]
+
+#: A spin turns in place: base_link (the axle centre) may end at most this far (m) from
+#: where it started (a hand-turned robot wobbles a little; a push moves it much further).
+MAX_SPIN_MOVE_M = 0.05
+#: A straight turns at most this much (rad). Generous: before calibration, sensors of the
+#: same CPI differ in scale by a few per cent, which the nominal mounts read as a turn.
+MAX_STRAIGHT_TURN_RAD = math.radians(30.0)
+
+
+def step_motion(d: np.ndarray, mounts: Sequence[SensorMount]) -> tuple[float, float, float] | None:
+    """base_link's (x m, y m, yaw rad) at the end of the displacements ``d`` (N, n, 2 m,
+    sensor frame) from the nominal ``mounts``: the two-sensor rigid motion (no no-slip
+    assumption, so a sideways push is not read as a turn). None with fewer than two
+    sensors (one sensor cannot tell a turn from a push)."""
+    d = np.asarray(d, dtype=float)
+    n = d.shape[1] if d.ndim == 3 else 0
+    if n < 2 or len(mounts) < n or d.shape[0] == 0:
+        return None
+    poses = Odometry(tuple(mounts)[:n], "two-sensor").integrate(1.0, d)
+    x, y, yaw = (float(v) for v in poses[-1])
+    return x, y, yaw
+
+
+def motion_failure(kind: str, motion: tuple[float, float, float] | None, final: bool) -> str:
+    """Why the step's rigid motion does not fit ``kind`` ("" = it fits, or cannot tell).
+
+    ``final``: the step has stopped (a spin must then have turned enough); while it
+    records only what can no longer be undone fails (a spin that moved, a straight that
+    turned)."""
+    if motion is None:
+        return ""
+    moved, turned = math.hypot(motion[0], motion[1]), abs(motion[2])
+    what = f"it moved {moved * 100:.1f} cm and turned {math.degrees(turned):.0f}°"
+    if kind == "spin":
+        if moved > MAX_SPIN_MOVE_M or (final and turned < MIN_SPIN_RAD):
+            return (
+                f"not a spin: {what}: a spin turns in place (at least "
+                f"{math.degrees(MIN_SPIN_RAD):.0f}°, moving at most {MAX_SPIN_MOVE_M * 100:.0f} "
+                "cm); discard it and turn the robot on the spot"
+            )
+    elif turned > MAX_STRAIGHT_TURN_RAD:
+        return (
+            f"not a straight: {what}: a straight does not turn (at most "
+            f"{math.degrees(MAX_STRAIGHT_TURN_RAD):.0f}°); discard it and push the robot "
+            "straight along an edge"
+        )
+    return ""
 
 
 class CalibrationRun:
@@ -37,22 +103,37 @@ class CalibrationRun:
         self.steps: list[tuple[CalibrationStep, StepCheck]] = []
         #: the kind of the step being recorded ("straight" / "spin"), None between steps
         self.kind: str | None = None
+        #: the driver pressing Start/Stop itself (a simulated robot), or None
+        self.auto: AutoDrive | None = None
         self._rec: list[list[tuple[float, float]]] = []  # its raw per-interval displacements
 
+    def failed_step(self) -> int | None:
+        """Index of the first recorded step that failed, or None."""
+        return next((k for k, (_, c) in enumerate(self.steps) if not c.ok), None)
+
     def start_step(self, kind: str) -> None:
-        """Start recording a step; ValueError (nothing changed) if one is recording or the
-        kind is unknown."""
+        """Start recording a step; ValueError (nothing changed) if one is recording, a
+        failed step is still in the list, or the kind is unknown."""
         if self.kind is not None:
             raise ValueError(f"a {self.kind} step is recording; stop it first")
         if kind not in STEP_KINDS:
             raise ValueError(f"step kind must be one of {STEP_KINDS}, got {kind!r}")
+        bad = self.failed_step()
+        if bad is not None:
+            raise ValueError(
+                f"step {bad + 1} failed ({self.steps[bad][1].message}); press Discard failed "
+                "step before recording the next one"
+            )
         self.kind = kind
         self._rec = []
 
-    def record(self, raw: Sequence[tuple[float, float]]) -> None:
-        """One interval's raw displacements (m, mount order); ignored between steps."""
+    def record(self, raw: Sequence[tuple[float, float]], dt: float | None = None) -> None:
+        """One interval's raw displacements (m, mount order) and its length (s); kept
+        while a step records; the auto driver (if any) then sees the interval."""
         if self.kind is not None:
             self._rec.append([tuple(p) for p in raw])
+        if self.auto is not None and dt is not None and dt > 0:
+            self.auto.feed(self, raw, dt)
 
     def current_step(self, sensors: int) -> CalibrationStep | None:
         """The step being recorded so far, of ``sensors`` sensors (None: none recording)."""
@@ -63,10 +144,27 @@ class CalibrationRun:
             d = np.zeros((1, sensors, 2))
         return CalibrationStep(self.kind, d)
 
+    @staticmethod
+    def _check(step: CalibrationStep, mounts: Sequence[SensorMount], final: bool) -> StepCheck:
+        chk = check_step(step, tuple(mounts))
+        why = motion_failure(step.kind, step_motion(step.d, mounts), final)
+        if not why:
+            return chk
+        return StepCheck(step.kind, False, why, chk.distance, chk.deviation, chk.spread,
+                         chk.angle)  # fmt: skip
+
     def step_check(self, mounts: Sequence[SensorMount]) -> StepCheck | None:
         """The live residuals and pass/fail of the step being recorded (None: none)."""
         step = self.current_step(len(mounts))
-        return None if step is None else check_step(step, tuple(mounts))
+        return None if step is None else self._check(step, mounts, final=False)
+
+    def live_failure(self, mounts: Sequence[SensorMount]) -> str:
+        """Why the step being recorded has already failed for good ("" = not, or none
+        recording): a spin that moved, a straight that turned. The wizard stops it."""
+        step = self.current_step(len(mounts))
+        if step is None:
+            return ""
+        return motion_failure(step.kind, step_motion(step.d, mounts), final=False)
 
     def stop_step(self, mounts: Sequence[SensorMount]) -> StepCheck:
         """Stop recording: the step is kept (passing or not) and its check returned.
@@ -75,17 +173,28 @@ class CalibrationRun:
         step = self.current_step(len(mounts))
         if step is None:
             raise ValueError("no calibration step is recording")
-        check = check_step(step, tuple(mounts))
+        check = self._check(step, mounts, final=True)
         self.steps.append((step, check))
         self.kind = None
         self._rec = []
         return check
 
-    def discard_step(self, index: int = -1) -> None:
-        """Drop a recorded step (default the last); ValueError if there is none."""
+    def cancel_step(self) -> None:
+        """Drop the step being recorded without keeping it (nothing if none records)."""
+        self.kind = None
+        self._rec = []
+
+    def discard_step(self, index: int | None = None) -> int:
+        """Drop a recorded step: ``index``, by default the failed one (else the last);
+        its index is returned. ValueError if there is none."""
         if not self.steps:
             raise ValueError("no recorded calibration step to discard")
+        if index is None:
+            bad = self.failed_step()
+            index = len(self.steps) - 1 if bad is None else bad
+        index = range(len(self.steps))[index]  # IndexError for a bad index, -1 = the last
         del self.steps[index]
+        return index
 
     def sums(self, devices: Sequence[str]) -> dict[str, tuple[float, float]]:
         """Raw summed X, Y (m) per sensor of the step being recorded ({} if none)."""
@@ -106,10 +215,14 @@ class CalibrationRun:
     ) -> MountFit:
         """Fit the whole mount from the recorded steps (:func:`fit_mounts`; nothing applied).
 
-        ValueError while a step is still recording; a
+        ValueError while a step is still recording or a failed step is in the list; a
         :class:`~mm_pc.core.calibration_fit.CalibrationRefusedError` for a refused run."""
         if self.kind is not None:
             raise ValueError(f"a {self.kind} step is still recording; press Stop first")
+        bad = self.failed_step()
+        if bad is not None:
+            step, chk = self.steps[bad]
+            raise ValueError(f"step {bad + 1} ({step.kind}): {chk.message}")
         return fit_mounts(
             [s for s, _ in self.steps],
             tuple(devices),

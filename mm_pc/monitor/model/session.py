@@ -15,9 +15,10 @@ Every reply of mm_beagle (live, or replayed from a recording) goes through
 2. **Median filter** per sensor and axis (optional, :mod:`mm_pc.core.filters`).
 3. **Calibration** (mounting angle and scale, :mod:`mm_pc.core.calibration`).
 4. **Pose math** (:mod:`mm_pc.core.odometry`, method selectable; the mounts
-   with the calibration's fitted positions) -- unless a calibration run is
-   open: then the raw displacements of a recording step are kept and the
-   robot stays where it is (no pose from uncalibrated data). When the reply
+   with the calibration's fitted positions); while a calibration run is open
+   the raw displacements of a recording step are also kept, and the pose
+   carries on with the calibration in force (a frozen pose would resume where
+   the robot no longer is). When the reply
    carries the single polls its totals cover (``Reply.polls``, fetched with
    ``get_samples`` by the bridge), the pose is integrated **per poll**
    (:class:`mm_pc.core.polls.PollTracker`), so the request rate, a pause or a
@@ -324,7 +325,7 @@ class MonitorSession:
     # -- calibration wizard ----------------------------------------------------------
     #
     # The run's state is a CalibrationRun (model/calibration_run.py); the session
-    # feeds it the raw displacements and stands the pose still while it is open.
+    # feeds it the raw displacements; the pose keeps integrating while it is open.
 
     @property
     def calibration(self) -> Calibration:
@@ -357,7 +358,7 @@ class MonitorSession:
 
     @property
     def calibrating(self) -> bool:
-        """True while a calibration run is open (the robot does not move on the map)."""
+        """True while a calibration run is open (the pose keeps integrating meanwhile)."""
         return self._cal_run is not None
 
     @property
@@ -375,7 +376,7 @@ class MonitorSession:
         return self._mounts[: len(self.devices)]
 
     def start_calibration(self) -> None:
-        """Open a run (no steps yet); the pose stops until finished or cancelled."""
+        """Open a run (no steps yet); the pose keeps integrating (calibration in force)."""
         self._cal_run = CalibrationRun()
 
     def start_calibration_step(self, kind: str) -> None:
@@ -397,11 +398,12 @@ class MonitorSession:
             raise ValueError("no calibration step is recording")
         return self._cal_run.stop_step(self._step_mounts())
 
-    def discard_calibration_step(self, index: int = -1) -> None:
-        """Drop a recorded step (default the last); ValueError if there is none."""
+    def discard_calibration_step(self, index: int | None = None) -> int:
+        """Drop a recorded step (default the failed one, else the last); its index.
+        ValueError if there is none."""
         if self._cal_run is None:
             raise ValueError("no recorded calibration step to discard")
-        self._cal_run.discard_step(index)
+        return self._cal_run.discard_step(index)
 
     def calibration_steps(self) -> list[tuple[CalibrationStep, StepCheck]]:
         """The recorded steps with their checks, in order."""
@@ -555,7 +557,7 @@ class MonitorSession:
             fx, fy = self.filters[r.id].push(rx, ry)
             processed.append(self.calibration.apply(r.id, fx, fy))
         if self._cal_run is not None:
-            self._cal_run.record(raw)
+            self._cal_run.record(raw, dt)
         self.stats.used += 1
         if reply.polls is not None:
             self._stash_polls(reply)
@@ -566,11 +568,8 @@ class MonitorSession:
                 self._flush()
             return
         self._flush()  # rows in the order of their replies
-        if self.calibrating:
-            pose = self.odometry.pose
-        else:
-            self.stats.per_reply += 1
-            pose = self.odometry.update(Sample.of(dt, *processed))
+        self.stats.per_reply += 1
+        pose = self.odometry.update(Sample.of(dt, *processed))
         self._row(_Deferred(reply, now, raw, processed, t, dt), pose, self.odometry.residual)
         self._append_map(t, pose)
 
@@ -680,8 +679,6 @@ class MonitorSession:
             if pf.filter_x or pf.filter_y:
                 dx, dy = pf.push_many(dx, dy)
             d[:, k, 0], d[:, k, 1] = self.calibration.apply(dev, dx, dy)
-        if self.calibrating:
-            return None, None  # a calibration run is open: the robot stays put
         poses, resid = integrate_steps(self.odometry, steps, d, return_residual=True)
         poses = np.asarray(poses, float)
         self._poll_poses = ((steps.stamp_ns - self._t0_ns) / 1e9, poses)

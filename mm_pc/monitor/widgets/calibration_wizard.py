@@ -3,16 +3,21 @@
 Pages: (1) instructions; (2) record -- explicit steps, each between Start
 (straight or spin) and Stop: the session keeps the raw (unfiltered,
 uncalibrated) displacements of every interval of the step, nothing after
-Stop; the robot stands still on the map while the run is open. Live
+Stop; the map keeps drawing the robot meanwhile (calibration in force). Live
 residuals (distance, how far the path left a line, the spin angle) and a
-pass/fail per step; Next once a straight and a spin passed, every step
-passed and nothing records; (3) the straights' measured length (optional)
+pass/fail per step: a step whose motion does not fit its kind (a spin that
+moved, a straight that turned) is stopped at once with the reason, and no
+step starts until the failed one is discarded. With ``mm-monitor --sim
+calibration_run`` the page drives the run itself (:class:`AutoDrive`, which
+presses Start/Stop per recorded interval). Next once a straight and a spin
+passed, every step passed and nothing records; (3) the straights' measured length (optional)
 and the angle of each spin; (4) results per sensor with their standard
 errors and the predicted heading drift per metre (the whole-mount fit,
 ``MonitorSession.compute_calibration``), the seed's straight-run angle next
-to it, and which of the two to use; a refused run is shown with what to do
-and changes nothing; (5) save: the YAML file (``Calibration.save``) and the
-calibration in force (``MonitorContext.set_calibration``).
+to it, the sim's true mounts when known, and which of the two to use; a
+refused run is shown with what to do and changes nothing; (5) save: the YAML
+file (``Calibration.save``) and the calibration in force
+(``MonitorContext.set_calibration``), then an offer to restart the path.
 
 Cancel (or closing the window) at any time ends the run with the old
 calibration still in force (``finish_calibration(None)``); Finish applies the
@@ -36,6 +41,7 @@ from PySide6.QtWidgets import (
     QHeaderView,
     QLabel,
     QLineEdit,
+    QProgressBar,
     QPushButton,
     QTableWidget,
     QTableWidgetItem,
@@ -48,6 +54,7 @@ from PySide6.QtWidgets import (
 from mm_pc.core.calibration import Calibration
 from mm_pc.core.calibration_fit import MIN_STRAIGHT_M, MountFit
 from mm_pc.monitor.context import MonitorContext
+from mm_pc.monitor.model.calibration_autodrive import DONE, GUIDED_KINDS, AutoDrive
 from mm_pc.monitor.settings import last_folder, remember_folder
 from mm_pc.monitor.widgets.style import ERROR_STYLE
 
@@ -140,16 +147,21 @@ class IntroPage(QWizardPage):
             "<li>Press <b>Start spin</b>, turn the robot <b>on the spot one full turn</b> "
             "(back to where it pointed), press <b>Stop</b>. Once left, once right, twice "
             "each is better.</li></ol>"
-            "<p>Each step shows its residuals and passes or fails; a failed step is "
-            "discarded and recorded again. While the run is open, the robot <b>stands "
-            "still on the map</b>. Cancel at any time keeps the old calibration.</p>"
+            "<p>Each step shows its residuals and passes or fails; a step that cannot be "
+            "what you pressed (a spin that moved, a straight that turned) stops at once "
+            "with the reason. Discard the failed step and record it again. The map keeps "
+            "drawing the robot with the old calibration. Cancel at any time keeps the old "
+            "calibration.</p>"
+            "<p>With <tt>mm-monitor --sim calibration_run</tt> the next page can drive "
+            "the whole run for you.</p>"
         )
         text.setWordWrap(True)
         QVBoxLayout(self).addWidget(text)
 
 
 class DrivePage(QWizardPage):
-    """Start/Stop per step; live residuals of the recording step; the steps so far."""
+    """Start/Stop per step; live residuals of the recording step; the steps so far; for
+    a ``--sim calibration_run`` node, "Drive the calibration run for me"."""
 
     COLUMNS = ("Sensor", "X sum (cm)", "Y sum (cm)", "Distance (cm)", "Off line (mm)",
                "Spin (deg)")
@@ -175,9 +187,19 @@ class DrivePage(QWizardPage):
                                     "then press Stop")
         self.stop_button.setToolTip("end the step: nothing after Stop is recorded; the step "
                                     "passes or fails")
-        self.discard_button.setToolTip("forget the last recorded step (e.g. a failed one)")
+        self.discard_button.setToolTip("forget the failed step (or, if none failed, the last "
+                                       "one)")
         # kept for the old name: Restart = discard everything and open the run again
         self.start_button = self.straight_button
+        self.auto_button = QPushButton("Drive the calibration run for me")
+        self.auto_button.clicked.connect(self.start_auto)
+        self.auto_cancel_button = QPushButton("Cancel driving")
+        self.auto_cancel_button.setToolTip("stop pressing Start/Stop; the recorded steps stay")
+        self.auto_cancel_button.clicked.connect(self.cancel_auto)
+        self.auto_progress = QProgressBar()
+        self.auto_progress.setFormat("%v of %m steps")
+        self.auto_label = QLabel("")
+        self.auto_label.setWordWrap(True)
         self.table = _table(list(self.COLUMNS))
         self.steps_table = _table(list(self.STEP_COLUMNS))
         self.state = QLabel("not started")
@@ -187,13 +209,23 @@ class DrivePage(QWizardPage):
         for b in (self.straight_button, self.spin_button, self.stop_button, self.discard_button):
             buttons.addWidget(b)
         buttons.addStretch(1)
+        auto = QHBoxLayout()
+        auto.addWidget(self.auto_button)
+        auto.addWidget(self.auto_progress, 1)
+        auto.addWidget(self.auto_cancel_button)
+        self.auto_row = QWidget()
+        self.auto_row.setLayout(auto)
+        self.auto_row.layout().setContentsMargins(0, 0, 0, 0)
         lay = QVBoxLayout(self)
+        lay.addWidget(self.auto_row)
+        lay.addWidget(self.auto_label)
         lay.addLayout(buttons)
         lay.addWidget(QLabel("Step being recorded"))
         lay.addWidget(self.table)
         lay.addWidget(self.state)
         lay.addWidget(QLabel("Recorded steps"))
         lay.addWidget(self.steps_table)
+        self._setup_auto()
         ctx.reply_processed.connect(self.update_sums)
         ctx.devices_known.connect(self.update_sums)
 
@@ -202,22 +234,102 @@ class DrivePage(QWizardPage):
         """The shortest straight accepted (m)."""
         return MIN_STRAIGHT_M
 
+    # -- the sim's run, driven ----------------------------------------------------------
+
+    def _setup_auto(self) -> None:
+        """The auto-drive row: shown for a --sim node, usable on its calibration_run."""
+        sim = self.ctx.config.sim
+        self.auto_row.setVisible(bool(sim))
+        self.auto_label.setVisible(bool(sim))
+        if not sim:
+            return
+        usable = sim == "calibration_run"
+        self.auto_button.setToolTip(
+            "the sim drives the guided run over and over (straight forward and back, two "
+            "full turns each way); this presses Start and Stop for you, per reply, and "
+            "records one whole lap (about 35 s, plus up to one lap to find its start)"
+            if usable else
+            f"the sim drives {sim}, not the guided run: start mm-monitor --sim "
+            "calibration_run to have the run driven for you"
+        )  # fmt: skip
+        self.auto_label.setText(
+            "The robot is simulated: the wizard can drive the calibration run for you."
+            if usable else
+            f"The robot is simulated on {sim}: start mm-monitor --sim calibration_run to have "
+            "the calibration run driven for you, or record the steps by hand."
+        )  # fmt: skip
+        self.auto_progress.setRange(0, len(GUIDED_KINDS))
+        self.auto_progress.setValue(0)
+
+    @property
+    def auto(self) -> AutoDrive | None:
+        """The driver of the open run (None: none started)."""
+        run = self.ctx.session.calibration_run
+        return None if run is None else run.auto
+
+    def start_auto(self) -> bool:
+        """Drive the sim's guided run; False (reason shown) if it cannot start."""
+        session = self.ctx.session
+        if not session.calibrating:
+            session.start_calibration()
+        run = session.calibration_run
+        why = ""
+        if not session.devices:
+            why = "no sensor data yet: wait for the first reply"
+        elif session.recording_step is not None:
+            why = f"a {session.recording_step} step is recording: press Stop first"
+        elif run.failed_step() is not None:
+            why = "a step failed: press Discard failed step first"
+        if why:
+            self.auto_label.setText(why)
+            return False
+        run.auto = AutoDrive(session.odometry_mounts)
+        self.auto_progress.setRange(0, run.auto.total)
+        self.ctx.status_message.emit("driving the calibration run: " + run.auto.message)
+        self.update_sums()
+        return True
+
+    def cancel_auto(self) -> None:
+        auto = self.auto
+        if auto is not None and auto.active:
+            auto.cancel(self.ctx.session.calibration_run)
+        self.update_sums()
+        self.update_steps()
+
+    def _update_auto(self) -> bool:
+        """Show the driver's progress; True while it drives."""
+        auto = self.auto
+        driving = auto is not None and auto.active
+        usable = self.ctx.config.sim == "calibration_run"
+        self.auto_button.setEnabled(usable and not driving and bool(self.ctx.session.devices))
+        self.auto_cancel_button.setEnabled(driving)
+        if auto is not None:
+            self.auto_progress.setValue(auto.recorded)
+            self.auto_label.setText(auto.message)
+            self.auto_label.setStyleSheet(
+                OK_STYLE if auto.state == DONE else ERROR_STYLE if not auto.active else ""
+            )
+        return driving
+
+    # -- steps by hand -------------------------------------------------------------------
+
     def initializePage(self) -> None:  # noqa: N802 - Qt API
         if not self.ctx.session.calibrating:
             self.ctx.session.start_calibration()
-            self.ctx.status_message.emit("calibration run open: the robot stands still on the map")
+            self.ctx.status_message.emit("calibration run open: record the steps")
         self.update_sums()
         self.update_steps()
 
     def cleanupPage(self) -> None:  # noqa: N802 - Qt API
-        """Back to the instructions: the run ends, the old calibration stays, the robot moves."""
+        """Back to the instructions: the run ends, the old calibration stays."""
         if self.ctx.session.calibrating:
             self.ctx.session.finish_calibration(None)
         self.update_sums()
         self.update_steps()
 
     def start(self, kind: str) -> bool:
-        """Start recording a ``kind`` step; False (message shown) if one is recording."""
+        """Start recording a ``kind`` step; False (message shown) if one is recording or
+        a failed step is still in the list."""
         session = self.ctx.session
         if not session.calibrating:
             session.start_calibration()
@@ -243,8 +355,10 @@ class DrivePage(QWizardPage):
         self.update_sums()
 
     def discard(self) -> None:
+        """Forget the failed step (if none failed, the last one)."""
         if self.ctx.session.calibration_steps():
-            self.ctx.session.discard_calibration_step()
+            k = self.ctx.session.discard_calibration_step()
+            self.ctx.status_message.emit(f"calibration step {k + 1} discarded")
         self.update_steps()
         self.update_sums()
 
@@ -258,17 +372,36 @@ class DrivePage(QWizardPage):
                 " / ".join(f"{v * 1000:.1f}" for v in check.deviation),
                 "pass" if check.ok else f"fail: {check.message}",
             ])
+            item = self.steps_table.item(k, 4)
+            item.setToolTip(item.text())
+        failed = any(not c.ok for _, c in steps)
+        self.discard_button.setText("Discard failed step" if failed else "Discard last step")
         self._recheck()
 
     def update_sums(self, *_args) -> None:
-        """Show the live residuals of the recording step and re-check completeness."""
+        """Show the live residuals of the recording step and re-check completeness; a
+        step that already failed for good (a spin that moved, a straight that turned)
+        is stopped here, at once."""
         session = self.ctx.session
+        run = session.calibration_run
+        mounts = session.odometry_mounts[: len(session.devices)]
+        if run is not None and run.kind is not None and run.auto is None and run.live_failure(
+            mounts
+        ):
+            self.stop()
+            return
+        if run is not None and len(run.steps) != self.steps_table.rowCount():
+            self.update_steps()  # the driver stopped or started a step
+        driving = self._update_auto()
         devices = session.devices
         recording = session.recording_step
+        failed = run is not None and run.failed_step() is not None
         for b in (self.straight_button, self.spin_button):
-            b.setEnabled(bool(devices) and recording is None)
-        self.stop_button.setEnabled(recording is not None)
-        self.discard_button.setEnabled(recording is None and bool(session.calibration_steps()))
+            b.setEnabled(bool(devices) and recording is None and not failed and not driving)
+        self.stop_button.setEnabled(recording is not None and not driving)
+        self.discard_button.setEnabled(
+            recording is None and bool(session.calibration_steps()) and not driving
+        )
         sums = session.calibration_sums()
         check = session.calibration_step_check()
         if self.table.rowCount() != len(devices):
@@ -291,13 +424,16 @@ class DrivePage(QWizardPage):
             self.state.setText(f"recording {recording}: passes so far; stop the robot, press Stop")
         else:
             self.state.setText(f"recording {recording}: {check.message}")
+        self.state.setStyleSheet(ERROR_STYLE if failed else "")
         self._recheck()
 
     def _next_hint(self) -> str:
         steps = self.ctx.session.calibration_steps()
         kinds = [s.kind for s, c in steps if c.ok]
-        if any(not c.ok for _, c in steps):
-            return "a step failed: press Discard last step and record it again"
+        bad = next((k for k, (_, c) in enumerate(steps) if not c.ok), None)
+        if bad is not None:
+            return (f"step {bad + 1} failed: {steps[bad][1].message}. Press Discard failed "
+                    "step and record it again")
         if "straight" not in kinds:
             return "press Start straight, push the robot straight forward, press Stop"
         if "spin" not in kinds:
@@ -308,10 +444,12 @@ class DrivePage(QWizardPage):
         session = self.ctx.session
         steps = session.calibration_steps()
         kinds = {s.kind for s, c in steps if c.ok}
+        auto = self.auto
         complete = (
             session.recording_step is None
             and all(c.ok for _, c in steps)
             and kinds == {"straight", "spin"}
+            and not (auto is not None and auto.active)
         )
         if complete != self._complete:
             self._complete = complete
@@ -366,6 +504,8 @@ class ResultsPage(QWizardPage):
 
     COLUMNS = ("Sensor", "Yaw (deg)", "Scale X", "Scale Y", "x (cm)", "y (cm)",
                "Straight-run angle (deg)", "Previous angle (deg)")
+    TRUTH_COLUMNS = ("Sensor", "Yaw fitted (deg)", "Yaw true (deg)", "x fitted (cm)",
+                     "x true (cm)", "y fitted (cm)", "y true (cm)")
 
     def __init__(self, wizard: CalibrationWizard) -> None:
         super().__init__(wizard)
@@ -388,10 +528,16 @@ class ResultsPage(QWizardPage):
         row.addWidget(self.use_box)
         row.addStretch(1)
         lay = QVBoxLayout(self)
+        self.truth_label = QLabel("The sim's sensors are mounted with a known error: the "
+                                  "fit next to the truth")
+        self.truth_table = _table(list(self.TRUTH_COLUMNS))
         lay.addWidget(self.table)
+        lay.addWidget(self.truth_label)
+        lay.addWidget(self.truth_table)
         lay.addWidget(self.drift)
         lay.addLayout(row)
         lay.addWidget(self.error)
+        self._show_truth(None)
 
     def initializePage(self) -> None:  # noqa: N802 - Qt API
         self._wizard.compute()
@@ -424,7 +570,33 @@ class ResultsPage(QWizardPage):
                 "uncertainty): " + "; ".join(parts)
                 + f". Method in use: {self._wizard.ctx.session.method}."
             )
+        self._show_truth(fit)
         self.completeChanged.emit()
+
+    def _show_truth(self, fit: MountFit | None) -> None:
+        """The fit next to the sim's true mounts (``MonitorConfig.sim_mounts``), if known:
+        angle offset = true yaw - the geometry's yaw; positions in base_link."""
+        ctx = self._wizard.ctx
+        truth = ctx.config.sim_mounts
+        shown = fit is not None and bool(truth) and len(truth) >= len(fit.devices)
+        self.truth_label.setVisible(shown)
+        self.truth_table.setVisible(shown)
+        if not shown:
+            return
+        nominal = ctx.session.odometry_mounts
+        cal = fit.calibration()
+        self.truth_table.setRowCount(len(fit.devices))
+        for k, dev in enumerate(fit.devices):
+            c, t = cal[dev], truth[k]
+            yaw_true = math.degrees(t.yaw - (nominal[k].yaw if k < len(nominal) else 0.0))
+            x = c.x if c.position is not None else math.nan
+            y = c.y if c.position is not None else math.nan
+            _set_row(self.truth_table, k, [
+                dev,
+                f"{c.angle_offset_deg:.3f}", f"{yaw_true:.3f}",
+                f"{x * 100:.2f}", f"{t.x * 100:.2f}",
+                f"{y * 100:.2f}", f"{t.y * 100:.2f}",
+            ])
 
     def cleanupPage(self) -> None:  # noqa: N802 - Qt API
         self._wizard.calibration = None
@@ -460,12 +632,40 @@ class SavePage(QWizardPage):
         self.status = QLabel("")
         self.status.setStyleSheet(OK_STYLE)
         self.status.setWordWrap(True)
+        self.restart_label = QLabel(
+            "The map's path so far was drawn with the old calibration. Restart it here to "
+            "draw the robot with the new one from the origin."
+        )
+        self.restart_label.setWordWrap(True)
+        self.restart_button = QPushButton("Restart the path here")
+        self.restart_button.setToolTip("clear the path and values; the pose starts again at "
+                                       "the origin, with the new calibration")
+        self.restart_button.clicked.connect(self.restart_path)
+        self.restart_label.hide()
+        self.restart_button.hide()
         lay = QVBoxLayout(self)
         lay.addWidget(QLabel("Calibration file (YAML)"))
         lay.addLayout(row)
         lay.addWidget(self.error)
         lay.addWidget(self.status)
+        lay.addWidget(self.restart_label)
+        lay.addWidget(self.restart_button, 0, Qt.AlignLeft)
         lay.addStretch(1)
+
+    def offer_restart(self) -> None:
+        """After the calibration is in force: offer to restart the path from here."""
+        self.restart_label.show()
+        self.restart_button.show()
+        self.restart_button.setEnabled(True)
+
+    def restart_path(self) -> None:
+        """Restart the path and values (``MonitorContext.reset``): the pose from the origin
+        with the new calibration."""
+        self._wizard.ctx.reset()
+        self.restart_button.setEnabled(False)
+        self.restart_label.setText("path restarted: the robot is drawn with the new "
+                                   "calibration from the origin")
+        self._wizard.ctx.status_message.emit("path restarted with the new calibration")
 
     def _browse(self) -> None:
         """A save dialog in the folder the last calibration went to (never the repository)."""
@@ -561,6 +761,7 @@ class CalibrationWizard(QWizard):
         remember_folder(FOLDER_KIND, path)
         self._apply(cal, str(path))
         page.status.setText(f"saved to {path} and applied")
+        page.offer_restart()
         return True
 
     def _apply(self, cal: Calibration, source: str = "") -> None:
