@@ -22,6 +22,7 @@ import collections
 import contextlib
 import json
 import queue
+import secrets
 import socket
 import threading
 import time
@@ -120,7 +121,7 @@ class RemoteAgent:
         self.query_error = ""
         self._history_q: queue.Queue = queue.Queue(maxsize=64)
         self._history_pub = None
-        self._history_id = 0
+        self._history_id = secrets.randbits(40)  # request ids a peer cannot guess ahead
         self.latency_ms: collections.deque = collections.deque(maxlen=4096)
         # poll stamp -> applied here (ms; meaningful on one clock: benchmarks)
         self.apply_latency_ms: collections.deque = collections.deque(maxlen=100_000)
