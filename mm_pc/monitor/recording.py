@@ -1,5 +1,9 @@
 """The window's File > Record: pick the file, attach a recorder, show that it records.
 
+While it records, the status bar shows ``● REC run.mcap 01:23 1.4 MB``: the time since
+it started and the bytes on disk so far (the writer keeps up to a chunk in memory, so
+the size grows in chunk steps), updated every second.
+
 The recording itself (the MCAP layout, serialisation, reading back) is Qt-free in
 :mod:`mm_pc.monitor.io` (:class:`~mm_pc.monitor.io.mcap_writer.McapRecorder`).
 """
@@ -7,6 +11,7 @@ The recording itself (the MCAP layout, serialisation, reading back) is Qt-free i
 from __future__ import annotations
 
 import contextlib
+import time
 import warnings
 from datetime import datetime
 from pathlib import Path
@@ -18,7 +23,40 @@ from mm_pc.monitor.io.bag_format import live_topics
 from mm_pc.monitor.io.mcap_writer import McapRecorder
 from mm_pc.monitor.settings import last_folder, remember_folder
 
-__all__ = ["start_recording", "stop_recording", "toggle_recording"]
+__all__ = ["recording_text", "start_recording", "stop_recording", "toggle_recording"]
+
+#: how often the status bar's REC figure is updated (ms)
+UPDATE_MS = 1000
+
+
+def recording_text(name: str, elapsed_s: float, size_bytes: int) -> str:
+    """``● REC run.mcap 01:23 1.4 MB`` (hours shown from the first hour on)."""
+    secs = int(max(elapsed_s, 0.0))
+    h, m, sec = secs // 3600, secs // 60 % 60, secs % 60
+    clock = f"{h}:{m:02d}:{sec:02d}" if h else f"{m:02d}:{sec:02d}"
+    if size_bytes < 1_000_000:
+        size = f"{size_bytes / 1e3:.0f} kB"
+    elif size_bytes < 1_000_000_000:
+        size = f"{size_bytes / 1e6:.1f} MB"
+    else:
+        size = f"{size_bytes / 1e9:.2f} GB"
+    return f"● REC {name} {clock} {size}"
+
+
+def _file_size(recorder: McapRecorder) -> int:
+    try:
+        return recorder.file.stat().st_size
+    except OSError:
+        return 0
+
+
+def _update_indicator(window) -> None:
+    recorder = window.ctx.recorder
+    began = getattr(window, "_recording_began", None)
+    if recorder is None or began is None:
+        return
+    _set_indicator(window, recording_text(recorder.path.name, time.monotonic() - began,
+                                          _file_size(recorder)))
 
 
 def _set_indicator(window, text: str | None) -> None:
@@ -32,8 +70,13 @@ def _set_indicator(window, text: str | None) -> None:
     if label is None:
         label = QLabel()
         label.setStyleSheet("color: #b00020; font-weight: bold")
+        label.setToolTip("recording: time since it started, bytes written to disk so far")
         window.statusBar().addPermanentWidget(label)
         window._recording_label = label
+        timer = QTimer(label)  # goes with the label
+        timer.setInterval(UPDATE_MS)
+        timer.timeout.connect(lambda: _update_indicator(window))
+        timer.start()
     label.setText(text)
 
 
@@ -63,7 +106,8 @@ def start_recording(window, path: str | Path, live: bool = True) -> bool:
         if live:
             ctx.bridge.record_topics(live_topics(ctx.config.beagle), recorder.write_live)
     window.record_action.setText("Stop &recording")
-    _set_indicator(window, f"● REC {recorder.path.name}")
+    window._recording_began = time.monotonic()
+    _set_indicator(window, recording_text(recorder.path.name, 0.0, _file_size(recorder)))
     window.statusBar().showMessage(f"recording to {recorder.path}")
     return True
 

@@ -96,6 +96,10 @@ def reply_times(replies: list[Reply]) -> np.ndarray:
     return out
 
 
+#: replies fed together by a seek (the views are told once per chunk)
+SEEK_CHUNK = 2000
+
+
 class Replayer(QObject):
     """Feeds recorded replies to ``ctx.on_reply`` at ``speed`` times the recorded pace.
 
@@ -113,6 +117,9 @@ class Replayer(QObject):
         self.times = reply_times(self.replies)
         self.position = 0
         self.on_end = None
+        #: called before a seek backwards feeds the replies again from the first one: the
+        #: session must start over (its path is integrated reply by reply)
+        self.on_rewind = None
         self._elapsed = 0.0  # recorded seconds already played before the last (re)start
         self._started: float | None = None
         self._done = False
@@ -168,6 +175,30 @@ class Replayer(QObject):
         """End now (the replies fed so far stay processed)."""
         self.timer.stop()
         self._finish()
+
+    def seek(self, target_s: float) -> None:
+        """Go to recorded time ``target_s`` (s from the first reply; clamped), running or
+        paused as before. Forward, the replies up to it are fed at once; backward, the
+        path starts over (:attr:`on_rewind`) and the replies up to it are fed again (the
+        pose is integrated reply by reply: there is no other way back). Ignored once the
+        replay ended or was stopped."""
+        if self._done or not len(self.replies):
+            return
+        target = min(max(float(target_s), 0.0), self.total_s)
+        i = int(np.searchsorted(self.times, target, side="right"))
+        if i < self.position:
+            if self.on_rewind is not None:
+                self.on_rewind()
+            self.position = 0
+        for start in range(self.position, i, SEEK_CHUNK):
+            self.ctx.on_replies(self.replies[start:min(start + SEEK_CHUNK, i)])
+        self.position = i
+        self._elapsed = target
+        if self._started is not None:
+            self._started = time.perf_counter()
+        if self.position >= len(self.replies):
+            self.timer.stop()
+            self._finish()
 
     def _played(self) -> float:
         if math.isinf(self.speed):
@@ -430,7 +461,12 @@ def begin_replay(
         )
         _set_mode_controls(window, False)
 
+    def rewind() -> None:
+        ctx.reset()
+        ctx.session.forget_baselines(keep_t0=False)
+
     replayer.on_end = ended
+    replayer.on_rewind = rewind
     window.replayer = replayer
     bar.attach(replayer, path.name, ctx.bridge is not None, SPEEDS, speed_name(speed))
     window._on_state("replay")

@@ -1003,3 +1003,77 @@ def test_a_stretch_without_single_polls_is_drawn_dashed_in_the_gap_colour(view, 
     ctx.reset()
     view.refresh()
     assert len(view.gap_segments()) == 0
+
+
+# -- cursor coordinates, measure, Fit's margin, the zoom label (issue 29 items 5, 13) -------
+
+
+def _viewport_point(view: MapView, x: float, y: float):
+    """The map viewport's pixel at odom (x, y) m."""
+    return view.plot.mapFromScene(view.vb.mapViewToScene(QPointF(x, y)))
+
+
+def test_the_cursor_s_coordinates_and_a_measured_distance(qtbot, view, ctx, feed):
+    from PySide6.QtTest import QTest
+    from PySide6.QtWidgets import QApplication
+
+    feed(ctx, rate_hz=50, seconds=2)
+    view.refresh()
+    view.follow_check.setChecked(False)
+    view.set_visible_width(2.0, (0.0, 0.0))
+    vp = view.plot.viewport()
+    label = view.pointer.label
+    qtbot.wait(20)  # pyqtgraph passes on at most one move per 10 ms
+    QTest.mouseMove(vp, _viewport_point(view, 0.3, -0.2))
+    text = label.text()
+    assert label.isVisible() and text.startswith("cursor x +0.3") and "y -0.2" in text
+    cx, cy = (float(v) for v in (text.split("x ")[1].split(" m")[0],
+                                 text.split("y ")[1].split(" m")[0]))
+    px = view.visible_width() / view.vb.width()  # one pixel (m)
+    assert cx == pytest.approx(0.3, abs=2 * px) and cy == pytest.approx(-0.2, abs=2 * px)
+    assert "distance" not in text
+    assert label.width() >= label.sizeHint().width()  # not cut
+
+    QTest.mouseClick(vp, Qt.MouseButton.LeftButton, pos=_viewport_point(view, 0.0, 0.0))
+    assert view.pointer.a is None  # Measure is off: a click measures nothing
+    view.measure_button.setChecked(True)
+    QTest.mouseClick(vp, Qt.MouseButton.LeftButton, pos=_viewport_point(view, -0.3, -0.3))
+    qtbot.wait(20)  # pyqtgraph passes on at most one move per 10 ms
+    QTest.mouseMove(vp, _viewport_point(view, 0.0, 0.1))  # the line follows the mouse
+    assert "distance 0.5" in label.text()
+    qtbot.wait(QApplication.doubleClickInterval() + 50)  # two clicks, not a double-click
+    QTest.mouseClick(vp, Qt.MouseButton.LeftButton, pos=_viewport_point(view, 0.3, 0.5))
+    (ax, ay), (bx, by) = view.pointer.a, view.pointer.b
+    d = math.hypot(bx - ax, by - ay)
+    assert d == pytest.approx(1.0, abs=3 * px)  # a 0.6 x 0.8 m right triangle
+    assert f"distance {d:.3f} m (dx {bx - ax:+.3f}, dy {by - ay:+.3f})" in label.text()
+    x, y = view.pointer.line.getData()
+    assert list(x) == [ax, bx] and list(y) == [ay, by] and view.pointer.line.isVisible()
+    qtbot.wait(20)  # pyqtgraph passes on at most one move per 10 ms
+    QTest.mouseMove(vp, _viewport_point(view, -0.5, 0.5))  # fixed once both points are set
+    assert f"distance {d:.3f} m" in label.text()
+    view.measure_button.setChecked(False)
+    assert view.pointer.a is None and not view.pointer.line.isVisible()
+    assert "distance" not in label.text()
+
+
+def test_fit_leaves_a_margin_around_the_paths_and_the_robot(view, ctx, feed):
+    feed(ctx, rate_hz=50, seconds=30)
+    view.refresh()
+    view.fit_paths()
+    (x0, x1), (y0, y1) = view.vb.viewRange()
+    width = x1 - x0
+    x0b, x1b, y0b, y1b = view.paths["robot"].decimator.bounds
+    pose = ctx.session.pose
+    for px, py in ((x0b, y0b), (x1b, y1b), (pose.x, pose.y)):
+        # every path point and the robot's centre at least its reach and 5 % inside
+        assert x0 + 0.15 + 0.04 * width < px < x1 - 0.15 - 0.04 * width
+        assert y0 + 0.15 < py < y1 - 0.15
+
+
+def test_the_zoom_label_keeps_one_unit(view):
+    texts = []
+    for w in (0.2, 0.5, 0.99, 1.0, 1.01, 5.0, 150.0):
+        view.set_visible_width(w)
+        texts.append(view.width_label.text())
+    assert texts == ["0.2 m", "0.5 m", "0.99 m", "1 m", "1.01 m", "5 m", "150 m"]

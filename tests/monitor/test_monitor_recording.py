@@ -27,7 +27,12 @@ from mm_pc.monitor.io.schemas import META_TOPIC, POLLS_TYPE, SENSOR_TOPIC, ros2m
 from mm_pc.monitor.main_window import MainWindow
 from mm_pc.monitor.model.session import MonitorSession
 from mm_pc.monitor.model.sim_feed import sim_replies
-from mm_pc.monitor.recording import start_recording, stop_recording, toggle_recording
+from mm_pc.monitor.recording import (
+    recording_text,
+    start_recording,
+    stop_recording,
+    toggle_recording,
+)
 from mm_pc.monitor.replay import Replayer, parse_speed, start_replay
 from mm_pc.monitor.ros_bridge import RosBridge
 
@@ -297,6 +302,7 @@ def test_record_from_the_window_and_stop(qtbot, tmp_path):
     assert window.record_action.text() == "Stop &recording"
     assert str(path) in window.statusBar().currentMessage()
     assert "REC live.mcap" in window._recording_label.text()
+    assert window._recording_label.text() == "● REC live.mcap 00:00 0 kB"
     assert not start_recording(window, tmp_path / "second.mcap")  # one at a time
     assert "already recording" in window.statusBar().currentMessage()
     replies = list(sim_replies("straight", 50.0, 1.0))
@@ -786,3 +792,22 @@ def test_per_poll_quality_is_recorded_and_old_polls_without_it_replay(tmp_path):
     for r in old:
         b.process(r)
     assert a.pose == b.pose and a.stats.polls == b.stats.polls == 3000
+
+
+def test_the_status_bar_shows_elapsed_time_and_size_while_recording(qtbot, tmp_path):
+    assert recording_text("a.mcap", 83.9, 1_420_000) == "● REC a.mcap 01:23 1.4 MB"
+    assert recording_text("a.mcap", 3725, 2_500_000_000) == "● REC a.mcap 1:02:05 2.50 GB"
+    assert recording_text("a.mcap", 0, 512) == "● REC a.mcap 00:00 1 kB"
+    window = make_window(qtbot, tmp_path)
+    path = tmp_path / "long.mcap"
+    assert start_recording(window, path)
+    for r in sim_replies("figure_eight", 100.0, 30.0):  # enough for chunks on disk
+        window.ctx.on_reply(r)
+    window._recording_began = time.monotonic() - 75.0  # as if it began 75 s ago
+    label = window._recording_label
+    qtbot.waitUntil(lambda: " 01:1" in label.text(), timeout=3000)  # the 1 s update
+    size = path.stat().st_size
+    assert size > 100_000
+    assert label.text() in (recording_text("long.mcap", s, size) for s in (75, 76, 77))
+    stop_recording(window)
+    assert window._recording_label is None

@@ -331,3 +331,49 @@ def test_the_csv_dialog_starts_in_the_remembered_folder_with_the_recording_name(
     assert last_folder("csv") == str(out)
     table.choose_export()
     assert starts[-1] == str(out / "run4_dev_spidev1.1.csv")
+
+
+def _fraction_x(bar, fraction: float) -> int:
+    return round(fraction * bar.progress.width())
+
+
+def test_the_progress_bar_seeks_by_click_drag_and_keys(qtbot, tmp_path, run4):
+    from PySide6.QtCore import QPoint, Qt
+    from PySide6.QtTest import QTest
+
+    window = make_window(qtbot, tmp_path)
+    window.show()
+    replayer = start_replay(window, run4, 1.0)
+    bar = window.replay_bar
+    bar.toggle_pause()
+    assert not replayer.running
+    progress = bar.progress
+    y = progress.height() // 2
+    QTest.mouseClick(progress, Qt.MouseButton.LeftButton, pos=QPoint(_fraction_x(bar, 0.75), y))
+    assert replayer.played_s == pytest.approx(3.0, abs=0.03)  # fed at once up to 3 s
+    assert replayer.position == int(np.searchsorted(replayer.times, replayer.played_s)) + 1
+    assert window.ctx.session.pose.x == pytest.approx(0.6, abs=0.005)  # 3 s at 0.2 m/s
+    assert bar.label.text() == replay_text("run4.mcap", replayer.played_s, 4.0, "paused")
+    assert progress.value() == pytest.approx(750, abs=8)
+    assert not replayer.running  # paused stays paused
+
+    # a drag back: only the label follows until the release, then the path starts over
+    QTest.mousePress(progress, Qt.MouseButton.LeftButton, pos=QPoint(_fraction_x(bar, 0.6), y))
+    QTest.mouseMove(progress, QPoint(_fraction_x(bar, 0.25), y))
+    assert "seek" in bar.label.text() and replayer.played_s == pytest.approx(3.0, abs=0.03)
+    QTest.mouseRelease(progress, Qt.MouseButton.LeftButton, pos=QPoint(_fraction_x(bar, 0.25), y))
+    assert replayer.played_s == pytest.approx(1.0, abs=0.03)
+    hist = window.ctx.session.history
+    t = hist.column("t")
+    assert t[0] >= 0 and t[-1] == pytest.approx(replayer.played_s, abs=1e-6)  # one path, 0..1 s
+    assert np.all(np.diff(t) > 0)
+    pose = window.ctx.session.pose
+    assert math.hypot(pose.x, pose.y) == pytest.approx(0.2, abs=0.01)  # 1 s at 0.2 m/s
+
+    # keys, the bar focused: Right 5 s on (clamped at the end: the replay ends), Home
+    progress.setFocus()
+    QTest.keyClick(progress, Qt.Key.Key_Home)
+    assert replayer.played_s == 0.0
+    QTest.keyClick(progress, Qt.Key.Key_Right)
+    assert replayer.done and replayer.position == len(replayer.replies)
+    assert window.ctx.session.pose.x == pytest.approx(0.8, abs=1e-4)  # as a whole replay

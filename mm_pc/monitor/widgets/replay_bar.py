@@ -1,21 +1,22 @@
 """The replay bar: replay as a mode of its own, shown only while a recording is on screen.
 
 ``REPLAY run.mcap 12.0/16.4 s`` (recorded seconds: the last fed reply's time
-from the recording's first reply / the recording's length), a progress bar
-over the recorded time, Pause/Resume, the speed (1x .. max, changeable while it
-runs) and Stop. When the replay has ended or was stopped, the replayed path
-stays on screen and live data keeps waiting: **Back to live** starts a new
-path for the live data (with no node: **Close**, the path stays). The bar is a
-tool bar of the main window that can shrink (its overflow goes into the tool
-bar's extension menu), so it never widens the window.
+from the recording's first reply / the recording's length), a progress bar over
+the recorded time that seeks (click or drag it to a time; focused, the arrow keys
+go 5 s back or on, Home and End to the start and the end), Pause/Resume, the
+speed (1x .. max, changeable while it runs) and Stop. When the replay has ended
+or was stopped, the replayed path stays on screen and live data keeps waiting:
+**Back to live** starts a new path for the live data (with no node: **Close**,
+the path stays). The bar is a tool bar of the main window that can shrink (its
+overflow goes into the tool bar's extension menu), so it never widens the window.
 """
 
 from __future__ import annotations
 
-from PySide6.QtCore import QTimer, Signal
+from PySide6.QtCore import Qt, QTimer, Signal
 from PySide6.QtWidgets import QComboBox, QLabel, QProgressBar, QPushButton, QToolBar
 
-__all__ = ["ReplayBar", "replay_text"]
+__all__ = ["ReplayBar", "SeekBar", "replay_text"]
 
 #: label refresh while a replay runs (ms); the replayer itself feeds at its own pace
 UPDATE_MS = 100
@@ -27,6 +28,64 @@ def replay_text(name: str, played_s: float, total_s: float, state: str = "") -> 
     """``REPLAY run.mcap 12.0/16.4 s`` (+ `` paused`` / `` ended`` / `` stopped``)."""
     text = f"REPLAY {name} {played_s:.1f}/{total_s:.1f} s"
     return f"{text} {state}" if state else text
+
+
+#: a Left/Right key moves the replay this far (recorded s)
+KEY_STEP_S = 5.0
+
+
+class SeekBar(QProgressBar):
+    """The replay's progress that seeks: ``seek_to(fraction)`` (0..1 of the recording) on a
+    click and at the end of a drag (while dragging, ``dragging(fraction)`` only: a seek
+    backwards replays from the start); ``step(seconds)`` for the arrow keys, Home, End."""
+
+    seek_to = Signal(float)
+    dragging = Signal(float)
+    step = Signal(float)
+
+    def __init__(self, parent=None) -> None:
+        super().__init__(parent)
+        self.setFocusPolicy(Qt.FocusPolicy.StrongFocus)
+        self.setCursor(Qt.CursorShape.PointingHandCursor)
+        self._drag = False
+
+    def fraction_at(self, x: float) -> float:
+        return min(max(x / max(self.width(), 1), 0.0), 1.0)
+
+    def mousePressEvent(self, ev) -> None:  # noqa: N802 - Qt API
+        if ev.button() != Qt.MouseButton.LeftButton:
+            return super().mousePressEvent(ev)
+        self._drag = True
+        self.setFocus()
+        f = self.fraction_at(ev.position().x())
+        self.setValue(round(f * self.maximum()))
+        self.dragging.emit(f)
+        ev.accept()
+
+    def mouseMoveEvent(self, ev) -> None:  # noqa: N802 - Qt API
+        if self._drag:
+            f = self.fraction_at(ev.position().x())
+            self.setValue(round(f * self.maximum()))
+            self.dragging.emit(f)
+        ev.accept()
+
+    def mouseReleaseEvent(self, ev) -> None:  # noqa: N802 - Qt API
+        if self._drag and ev.button() == Qt.MouseButton.LeftButton:
+            self._drag = False
+            self.seek_to.emit(self.fraction_at(ev.position().x()))
+        ev.accept()
+
+    def keyPressEvent(self, ev) -> None:  # noqa: N802 - Qt API
+        key = ev.key()
+        if key in (Qt.Key.Key_Left, Qt.Key.Key_Right):
+            self.step.emit(KEY_STEP_S if key == Qt.Key.Key_Right else -KEY_STEP_S)
+        elif key == Qt.Key.Key_Home:
+            self.seek_to.emit(0.0)
+        elif key == Qt.Key.Key_End:
+            self.seek_to.emit(1.0)
+        else:
+            return super().keyPressEvent(ev)
+        ev.accept()
 
 
 class ReplayBar(QToolBar):
@@ -55,7 +114,9 @@ class ReplayBar(QToolBar):
             "recorded seconds replayed / length of the recording; live data is not shown "
             "until you go back to live"
         )
-        self.progress = QProgressBar()
+        self.progress = SeekBar()
+        self.progress.setToolTip("click or drag to a time of the recording; focused: Left/Right "
+                                 f"{KEY_STEP_S:g} s back/on, Home/End start/end")
         self.progress.setRange(0, STEPS)
         self.progress.setTextVisible(False)
         self.progress.setMinimumWidth(60)
@@ -82,6 +143,9 @@ class ReplayBar(QToolBar):
         self.timer.setInterval(UPDATE_MS)
         self.timer.timeout.connect(self.update_view)
         self.speed_box.activated.connect(self._speed_chosen)
+        self.progress.seek_to.connect(self._seek_fraction)
+        self.progress.dragging.connect(self._show_drag)
+        self.progress.step.connect(self._step)
 
     def setVisible(self, visible: bool) -> None:  # noqa: N802 - Qt API
         super().setVisible(bool(visible) and self.active)
@@ -131,7 +195,7 @@ class ReplayBar(QToolBar):
     def update_view(self) -> None:
         """Label, progress and buttons from the replayer's position."""
         r = self.replayer
-        if r is None or not self.active:
+        if r is None or not self.active or self.progress._drag:
             return
         played, total = r.played_s, r.total_s
         self.label.setText(replay_text(self.name, played, total, self.state()))
@@ -156,6 +220,26 @@ class ReplayBar(QToolBar):
         else:
             r.start()
         self.update_view()
+
+    def seek(self, seconds: float) -> None:
+        """Go to recorded time ``seconds`` of the running or paused replay."""
+        if not self.replaying:
+            return
+        self.replayer.seek(seconds)
+        self.update_view()
+
+    def _seek_fraction(self, fraction: float) -> None:
+        if self.replayer is not None:
+            self.seek(fraction * self.replayer.total_s)
+
+    def _step(self, seconds: float) -> None:
+        if self.replayer is not None:
+            self.seek(self.replayer.played_s + seconds)
+
+    def _show_drag(self, fraction: float) -> None:
+        r = self.replayer
+        if r is not None and self.replaying:
+            self.label.setText(replay_text(self.name, fraction * r.total_s, r.total_s, "seek"))
 
     def _speed_chosen(self, _index: int) -> None:
         self.set_speed(self.speed_box.currentText())

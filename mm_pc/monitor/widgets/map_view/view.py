@@ -45,6 +45,7 @@ from mm_pc.monitor.widgets.map_view.items import (
     colour_icon,
     sensor_dot,
 )
+from mm_pc.monitor.widgets.map_view.pointer import MapPointer
 from mm_pc.monitor.widgets.map_view.raster import PathRaster
 from mm_pc.monitor.widgets.style import GAP_COLOUR, ROBOT_COLOUR, sensor_colour
 
@@ -77,6 +78,11 @@ MAX_ROWS_PER_REFRESH = 10_000
 #: Width of the map's left axis (labels like "-123.4" fit).
 AXIS_WIDTH_PX = 62
 
+#: Fit path: the paths' box grown by the robot's reach from its centre (outline and
+#: heading arrow, m) on every side, then by this fraction of the width on each side.
+ROBOT_EXTENT_M = 0.15
+FIT_MARGIN = 0.05
+
 #: Sensor axis arrows and robot heading arrow (m, drawn to scale).
 AXIS_ARROW_M = 0.025
 HEADING_ARROW_M = 0.10
@@ -87,7 +93,9 @@ class MapView(QWidget):
 
     Toolbar: zoom slider (visible width 0.2 m ... 200 m, log scale), follow
     robot, fit path, show/hide each path, reset path and values.
-    Mouse: wheel zooms, drag pans (and ends follow mode).
+    Mouse: wheel zooms, drag pans (and ends follow mode); the cursor's odom coordinates
+    show in the map's corner, and **Measure** measures a distance by two clicks
+    (:mod:`.pointer`).
     """
 
     def __init__(self, ctx: MonitorContext, parent: QWidget | None = None) -> None:
@@ -137,6 +145,7 @@ class MapView(QWidget):
         self._build_toolbar()
         self._build_robot_items()
         self._add_path("robot", "robot", ROBOT_COLOUR, 2.0, ("x", "y"))
+        self.pointer = MapPointer(self.vb, self.plot, self.measure_button)
 
         lay = QVBoxLayout(self)
         lay.setContentsMargins(2, 2, 2, 2)
@@ -181,6 +190,11 @@ class MapView(QWidget):
         self.fit_button.setToolTip("zoom to show every path")
         self.fit_button.clicked.connect(self.fit_paths)
         bar.addWidget(self.fit_button)
+        self.measure_button = QPushButton("Measure")
+        self.measure_button.setCheckable(True)
+        self.measure_button.setToolTip("measure a distance: click a first point, then a "
+                                       "second; a third click starts again")
+        bar.addWidget(self.measure_button)
         bar.addStretch(1)
         self.reset_button = QPushButton("Reset")
         self.reset_button.setToolTip("reset path and values: clear the paths and put the "
@@ -322,9 +336,10 @@ class MapView(QWidget):
         arr = np.array(boxes, dtype=float)
         x0, x1 = arr[:, 0].min(), arr[:, 1].max()
         y0, y1 = arr[:, 2].min(), arr[:, 3].max()
-        margin = 0.1  # room for the robot outline
         w_px, h_px = max(self.vb.width(), 1.0), max(self.vb.height(), 1.0)
-        width = max(x1 - x0, (y1 - y0) * w_px / h_px) + 2 * margin
+        span = max(x1 - x0, (y1 - y0) * w_px / h_px)
+        # room for the robot's outline around the path, and a margin of FIT_MARGIN
+        width = (span + 2 * ROBOT_EXTENT_M) * (1 + 2 * FIT_MARGIN)
         self.set_visible_width(width, ((x0 + x1) / 2, (y0 + y1) / 2))
 
     def set_path_visible(self, key, visible: bool) -> None:
@@ -582,4 +597,5 @@ def _pose_text(x: float, y: float, yaw: float) -> str:
 
 
 def _format_length(m: float) -> str:
-    return f"{m * 100:.0f} cm" if m < 1 else f"{m:.3g} m"
+    """Always in metres (switching between "100 cm" and "1 m" read as a jump)."""
+    return f"{m:.3g} m"
