@@ -7,9 +7,11 @@ The console-script launcher (:func:`mm_pc.prerequisites.launch`) sets three phas
    the process at once (``os._exit``: no lock is waited for, no traceback).
 2. **While it runs** a signal becomes a KeyboardInterrupt in the main thread (SIGTERM as
    Ctrl-C), which the program's ``try``/``finally`` and ``with`` blocks clean up after;
-   never while the main thread is inside the logging module or ``threading``: a
+   never while the main thread is inside the logging module or ``threading`` (a
    KeyboardInterrupt between a lock's acquire and its ``try`` leaves the lock held and the
-   next log line deadlocks. There it is put off by 20 ms at a time (at most 1 s). A second
+   next log line deadlocks) or inside an installed package's code (PySide6 turned one that
+   landed in its lazy attribute lookup into an AttributeError and a traceback). There it is
+   put off by 20 ms at a time, at most 1 s (then raised wherever it lands). A second
    signal while stopping is ignored for 2 s, then ends the process and its children.
    A program with its own handlers (the nodes' :func:`mm_pc.ros.spin.init`, the agent,
    the monitor's Qt loop) replaces these when it installs them.
@@ -32,6 +34,8 @@ EXIT_STOPPED = 0
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 #: while the main thread is in these files a KeyboardInterrupt could land inside a lock
 _UNSAFE_FILES = (f"{os.sep}logging{os.sep}", f"{os.sep}threading.py")
+_PACKAGES = (f"{os.sep}site-packages{os.sep}", f"{os.sep}dist-packages{os.sep}")
+_OURS = frozenset({"mm_pc", "mm_beagle", "pln2033", "__main__"})
 _DEFER_S = 0.02  # a put-off signal is sent again after this
 _DEFER_MAX_S = 1.0  # and raised anyway after this
 _SECOND_SIGNAL_S = 2.0  # a repeated signal within this of the first is ignored
@@ -124,11 +128,16 @@ def ignore_more() -> None:
 
 
 def in_unsafe_code(frame) -> bool:
-    """Whether the main thread, at ``frame``, is inside logging or threading."""
+    """Whether the main thread, at ``frame``, is inside logging, threading or an installed
+    package other than ours (anywhere up its stack)."""
     while frame is not None:
         name = frame.f_code.co_filename
         if any(part in name for part in _UNSAFE_FILES):
             return True
+        if any(part in name for part in _PACKAGES):
+            module = str(frame.f_globals.get("__name__", ""))
+            if module.partition(".")[0] not in _OURS:
+                return True
         frame = frame.f_back
     return False
 

@@ -217,6 +217,38 @@ except KeyboardInterrupt as e:
     assert out.stdout.split() == ["<module>", "1", "clean"], out.stderr
 
 
+def test_a_signal_inside_an_installed_package_is_raised_once_it_returns(tmp_path):
+    """Phase 2: a SIGTERM that lands inside an installed package's code (PySide6 turned a
+    KeyboardInterrupt inside its lazy lookups into an AttributeError) is raised only back in
+    the caller, and the package's call ran to its end."""
+    (pkgs := tmp_path / "site-packages").mkdir()
+    (pkgs / "fakepkg.py").write_text(
+        "import os, signal, time\n"
+        "def work():\n"
+        "    os.kill(os.getpid(), signal.SIGTERM)\n"
+        "    time.sleep(0.2)\n"
+        "    return 'finished'\n"
+    )
+    code = (
+        "import sys, time\n"
+        f"sys.path.insert(0, {str(pkgs)!r})\n"
+        "from mm_pc import stop_signals\n"
+        "import fakepkg\n"
+        "stop_signals.while_running('mm-x')\n"
+        "result = None\n"
+        "try:\n"
+        "    result = fakepkg.work()\n"
+        "    time.sleep(5)\n"
+        "except KeyboardInterrupt:\n"
+        "    print(result, stop_signals.stopped_by())\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=scaled(30),
+        cwd=tmp_path,
+    )  # fmt: skip
+    assert out.stdout.split() == ["finished", str(int(signal.SIGTERM))], out.stderr
+
+
 def test_children_left_by_a_program_are_ended_with_it(tmp_path):
     """Phase 3: what launch() does at the end: every child still running is ended."""
     code = (
