@@ -313,3 +313,20 @@ def test_on_health_the_wheel_scrolls_the_page_ctrl_zooms_the_plot(qtbot, qapp, f
     assert y1[1] - y1[0] == pytest.approx(0.74 * (y0[1] - y0[0]), rel=0.01)
     double_click(canvas, _at(canvas, plot))
     assert x_range(plot) == pytest.approx(x0) and y_range(plot) == pytest.approx(y0)
+
+
+def test_a_long_window_over_little_data_shows_the_data_not_an_empty_axis(qtbot, fake_bridge,
+                                                                         feed):
+    ctx = MonitorContext(MonitorSession(), fake_bridge)
+    feed(ctx, rate_hz=50.0, seconds=20.0)
+    view = graphs(qtbot, ctx)
+    view.window_box.setValue(3600)
+    view.refresh()
+    t = ctx.session.history.column("t")
+    x0, x1 = x_range(view.plots[(0, "speed")])
+    assert x0 == pytest.approx(t[0]) and x1 == pytest.approx(t[-1] + 0.1 * (t[-1] - t[0]))
+    assert (t[-1] - t[0]) / (x1 - x0) > 0.9  # the data fill the axis
+    view.window_box.setValue(10)  # a window shorter than the data: its last 10 s, as before
+    view.refresh()
+    x0, x1 = x_range(view.plots[(0, "speed")])
+    assert (x0, x1) == pytest.approx((t[-1] - 10.0, t[-1] + 1.0))

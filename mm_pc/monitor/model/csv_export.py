@@ -1,5 +1,9 @@
 """One sensor's rows of the history as a table: the columns (units in the names) and the
 CSV export of every row (no Qt; the Data list picks the file and shows the result).
+
+The CSV holds each value rounded to what it means (:data:`CSV_DECIMALS`: t to the µs,
+displacements to the µm, speeds to the µm/s) in its shortest form, and the counts as
+integers: ``-1.81``, not ``-1.8097499999998323``; ``1600``, not ``1600.0``.
 """
 
 from __future__ import annotations
@@ -7,10 +11,12 @@ from __future__ import annotations
 import csv
 from pathlib import Path
 
+import numpy as np
+
 from mm_pc.monitor.model.history import History
 from mm_pc.monitor.model.session import sensor_columns
 
-__all__ = ["COLUMNS", "CSV_HEADER", "column_name", "export_csv"]
+__all__ = ["COLUMNS", "CSV_DECIMALS", "CSV_HEADER", "column_name", "export_csv"]
 
 #: (header with unit, field: "t" or a sensor field, scale from SI, format)
 COLUMNS: tuple[tuple[str, str, float, str], ...] = (
@@ -33,6 +39,22 @@ CSV_HEADER = (
 )
 
 
+#: per CSV column: decimals it is rounded to, or None: an integer count ("nan" where the
+#: history has none, e.g. the quality of a chip without a figure)
+CSV_DECIMALS: tuple[int | None, ...] = (6, 3, 3, 3, 3, 3, 3, None, None, None, None)
+
+
+def _csv_values(col: np.ndarray, decimals: int | None) -> list:
+    """A column as the CSV writes it (floats print in their shortest form)."""
+    if decimals is not None:
+        return (np.round(col, decimals) + 0.0).tolist()  # + 0.0: no "-0.0"
+    finite = np.isfinite(col)
+    if finite.all():
+        return np.rint(col).astype(np.int64).tolist()
+    return [round(v) if ok else "nan" for v, ok in zip(col.tolist(), finite.tolist(),
+                                                              strict=True)]
+
+
 def column_name(sensor_index: int, field: str) -> str:
     """The history column of ``field`` ("t" or a sensor field) of sensor ``sensor_index``."""
     return field if field == "t" else sensor_columns(sensor_index)[field]
@@ -43,7 +65,7 @@ def export_csv(history: History | None, sensor_index: int, path: str | Path) -> 
 
     Columns (header line first): t_s, dx_mm, dy_mm (processed), raw_dx_mm,
     raw_dy_mm, vx_mm_s, vy_mm_s, lifts, cpi, quality (nan: the chip has none),
-    low_quality_polls. Raises ValueError for no data or
+    low_quality_polls; rounded as :data:`CSV_DECIMALS` says. Raises ValueError for no data or
     a sensor the history does not have (no file written), OSError when the
     file cannot be written.
     """
@@ -59,5 +81,6 @@ def export_csv(history: History | None, sensor_index: int, path: str | Path) -> 
     with open(path, "w", newline="") as fh:
         out = csv.writer(fh)
         out.writerow(CSV_HEADER)
-        out.writerows(zip(*(c.tolist() for c in cols), strict=True))
+        out.writerows(zip(*(_csv_values(c, d) for c, d in zip(cols, CSV_DECIMALS, strict=True)),
+                          strict=True))
     return len(history)

@@ -350,7 +350,7 @@ class GraphsView(QWidget):
         self._rows_of, self._len = (hist, hist.dropped_rows), len(t)
         outages = self._outages.update(t)
         end = float(t[-1])
-        x0, _x1 = self._time_range(end)
+        x0, _x1 = self._time_range(end, float(t[0]))
         rows = slice(int(np.searchsorted(t, x0, side="left")), len(t))
         size = bucket_size(rows.stop - rows.start)
         for k in range(len(self._built_for)):
@@ -370,13 +370,16 @@ class GraphsView(QWidget):
         every = f", min/max of {size}-sample buckets" if size > 1 else ""
         self.note.setText(f"{shown} of {len(t)} samples in the window{every}, t = {end:.1f} s")
 
-    def _time_range(self, end: float) -> tuple[float, float]:
-        """The shown time range: ``window_s`` plus a lead of ``X_LEAD`` of it, moved on
-        only when the newest row ``end`` (s) passes its end (or the window changed)."""
-        lead = X_LEAD * self.window_s
+    def _time_range(self, end: float, first: float = -np.inf) -> tuple[float, float]:
+        """The shown time range: ``window_s`` back from the newest row ``end`` (s) -- or
+        from the first row ``first`` when the history is shorter (a 3600 s window over a
+        minute of data shows that minute, not an empty axis) -- plus a lead of ``X_LEAD``
+        of it; moved on only when ``end`` leaves it (or the window changed)."""
         rng = self._x_range
-        if rng is None or not rng[1] - lead - 1e-9 <= end <= rng[1]:
-            rng = self._x_range = (end - self.window_s, end + lead)
+        if rng is None or not rng[0] <= end <= rng[1]:
+            start = max(end - self.window_s, first)
+            span = max(end - start, min(self.window_s, 1.0))
+            rng = self._x_range = (start, end + X_LEAD * span)
             if self.plots:  # the others are linked to the first
                 next(iter(self.plots.values())).setXRange(*rng, padding=0.0)
         return rng
