@@ -60,6 +60,8 @@ COMMAND_RATE = (50.0, 50)  # commands per second and burst, all peers together (
 HISTORY_RATE = (100.0, 50)  # history requests per second and burst, all peers together
 QUERY_QUEUE = 16  # requests received and waiting for their worker, per key
 OUTBOX_SIZE = 300  # messages waiting for the sender thread (3 s of batches)
+# zenoh's log on the agent: only its lines about peers accepted or refused (credentials)
+ZENOH_LOG = "off,zenoh_transport::unicast::establishment::accept=debug"
 
 
 def agent_zenoh_config(listen: list[str], credentials: str = ""):
@@ -68,7 +70,14 @@ def agent_zenoh_config(listen: list[str], credentials: str = ""):
     sees them (a 200 MB command once cost 490 MB of RSS); no shared-memory transport; a
     full transmission queue drops a message after at most 2 ms, fragments included
     (zenoh's default waits 50 ms), and a peer that reads no reply for 1 s is
-    disconnected (command replies keep the congestion control of their query)."""
+    disconnected (command replies keep the congestion control of their query). Unless
+    ``RUST_LOG`` says otherwise, zenoh logs one line per peer link accepted and per peer
+    refused ("UsrPwd extension - Recv OpenSyn. Invalid password."): who was refused is
+    known only inside zenoh, before any of the agent's code runs."""
+    import zenoh
+
+    if "RUST_LOG" not in os.environ:  # (RUST_LOG: zenoh's own log as asked, link.zenoh_config)
+        zenoh.init_log_from_env_or(ZENOH_LOG)
     cfg = link.zenoh_config(listen=listen, credentials=credentials)
     cfg.insert_json5("transport/link/rx/max_message_size", str(RX_MAX_MESSAGE_BYTES))
     # No shared memory: a local peer's messages over 3 kB came in its 16 MB zenoh segment,

@@ -172,3 +172,33 @@ def test_request_parsing_is_bounded_and_field_by_field():
     lines = out.getvalue().splitlines()
     assert len(lines) == 1 and "too large second line" in lines[0]  # one line per second
     assert r.status()["requests_refused"] == 5 and r.status()["refused_by_reason"] == {"size": 5}
+
+
+def test_a_peer_with_wrong_credentials_is_logged_by_the_agent(tmp_path):
+    import subprocess
+    import sys
+    import threading
+
+    good = tmp_path / "agent.credentials"
+    made = subprocess.run(
+        [sys.executable, "-m", "mm_beagle.link.agent_cli", "--make-credentials", str(good)],
+        capture_output=True, text=True, timeout=30,
+    )  # fmt: skip
+    assert made.returncode == 0, made.stderr
+    wrong = tmp_path / "wrong.credentials"
+    wrong.write_text("mm:not-the-password-at-all\n")
+    wrong.chmod(0o600)
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    log = tmp_path / "agent.log"
+    opts = {"backend": "sim", "listen": [endpoint], "credentials": str(good)}
+    with agent_process(opts, str(log)):
+        opened: list = []
+
+        def connect() -> None:  # never returns: the agent refuses the session
+            opened.append(zenoh.open(link.zenoh_config(connect=[endpoint],
+                                                       credentials=str(wrong))))  # fmt: skip
+
+        threading.Thread(target=connect, daemon=True).start()
+        wait_until(lambda: "Invalid password" in log.read_text(), 30,
+                   "the agent's log line for the refused peer")  # fmt: skip
+        assert not opened  # and zenoh's own line on the agent said why
