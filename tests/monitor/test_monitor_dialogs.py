@@ -254,7 +254,7 @@ def test_wizard_refuses_a_figure_eight_as_a_straight(qtbot, ctx, feed):
     (_, check), = ctx.session.calibration_steps()
     assert not check.ok
     assert check.message.startswith("not a straight: it moved ")
-    assert "a straight does not turn (at most 30°)" in check.message
+    assert "a straight does not turn (at most 90°)" in check.message
     assert page.steps_table.item(0, 4).text() == f"fail: {check.message}"
     assert page.state.text().startswith("step 1 failed: not a straight")
     assert "Press Discard failed step" in page.state.text()

@@ -81,15 +81,15 @@ class AutoDrive:
                 self._moving, self._move = True, []
             self._still = 0.0
             self._move.append(raw)
-            return
-        self._still += dt
-        if self._moving:
-            self._move.append(raw)
-            if self._still >= STOPPED_S:
-                self._moving = False
-                self._move_ended(run)
-        elif self.state == WAITING and self._still >= LAP_STILL_S:
-            self._begin(run, 0)  # the stand between laps: the straight forward comes next
+        else:
+            self._still += dt
+            if self._moving:
+                self._move.append(raw)
+                if self._still >= STOPPED_S:
+                    self._moving = False
+                    self._move_ended(run)
+            elif self.state == WAITING and self._still >= LAP_STILL_S:
+                self._begin(run, 0)  # the stand between laps: the straight forward is next
         if self.state == WAITING and self._elapsed > SYNC_S:
             self._fail(run, f"no guided run seen in {SYNC_S:.0f} s: is the sim driving "
                             "calibration_run (mm-monitor --sim calibration_run)?")

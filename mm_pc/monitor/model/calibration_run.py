@@ -51,8 +51,10 @@ __all__ = [
 #: where it started (a hand-turned robot wobbles a little; a push moves it much further).
 MAX_SPIN_MOVE_M = 0.05
 #: A straight turns at most this much (rad). Generous: before calibration, sensors of the
-#: same CPI differ in scale by a few per cent, which the nominal mounts read as a turn.
-MAX_STRAIGHT_TURN_RAD = math.radians(30.0)
+#: same CPI differ in scale by a few per cent, which the nominal mounts read as a turn
+#: growing with the distance (10 % over 1 m: ~70 deg); a smaller turn is left to
+#: check_step's spread of the sensors' distances.
+MAX_STRAIGHT_TURN_RAD = math.radians(90.0)
 
 
 def step_motion(d: np.ndarray, mounts: Sequence[SensorMount]) -> tuple[float, float, float] | None:
