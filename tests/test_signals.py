@@ -98,7 +98,12 @@ def signal_run(tmp_path, cmd, sig: signal.Signals, moment: str) -> dict:
     (cwd := tmp_path / "cwd").mkdir(exist_ok=True)
     script = console_script(prog, bin_dir)
     err_path = tmp_path / "stderr.txt"
-    env = {**isolated_ros_env(), "PYTHONUNBUFFERED": "1", "QT_QPA_PLATFORM": "offscreen"}
+    env = {
+        **isolated_ros_env(),
+        "PYTHONUNBUFFERED": "1",
+        "QT_QPA_PLATFORM": "offscreen",
+        "PYTHONFAULTHANDLER": "1",
+    }  # a crash shows where it was
     with open(err_path, "w") as err:
         proc = subprocess.Popen(
             [sys.executable, script, *_args(name, args)],
