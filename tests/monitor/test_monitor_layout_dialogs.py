@@ -121,5 +121,5 @@ def test_geometry_load_names_a_calibration_file(qtbot, ctx, tmp_path):
     assert not dlg.load(path)
     text = dlg.error.text()
     assert text.startswith("not loaded: calibration.yaml: this is a calibration file")
-    assert "mm-monitor --calibration FILE" in text
+    assert "load it with Load… under Calibration in the Pose panel" in text
     assert "unsupported version" not in text

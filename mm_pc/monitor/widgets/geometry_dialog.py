@@ -65,8 +65,8 @@ def calibration_file_note(text: str) -> str:
         return ""
     if isinstance(data, dict) and "sensors" in data and "mounts" not in data:
         return ("this is a calibration file (each sensor's angle and scales), not a robot "
-                "geometry: open it with mm-monitor --calibration FILE, or make a new one "
-                "with the Calibration wizard")
+                "geometry: load it with Load… under Calibration in the Pose panel (or "
+                "mm-monitor --calibration FILE)")
     return ""
 
 @dataclass
