@@ -30,6 +30,10 @@ def _detached(*_args: object) -> Any:
     raise RuntimeError("the channel has no driver attached")
 
 
+def _no_resync() -> None:
+    """No fast poll holds copies of the totals (no PLN2033 driver attached)."""
+
+
 class Channel:
     """One sensor: its driver, state and its slice of the shared memory."""
 
@@ -68,6 +72,7 @@ class Channel:
         self.gap_m = LiftGapEstimator()  # in metres: right across a CPI change
         self._gap_busy = False  # self.gap.busy, as the hot path reads it
         self._fast_poll: Callable[[int], None] = _detached
+        self._resync: Callable[[], None] = _no_resync  # the fast poll's copies of the totals
         # the hot path's view of the driver (see attach)
         self._xfer: Callable[[list[int]], list[int]] = _detached
         self._decode: Callable[[list[int]], Motion] = _detached
@@ -100,7 +105,7 @@ class Channel:
                 self._tx = pln.motion_tx
                 self._unusual = pln.unusual_status_bits
                 self._motion_bit = pln.map.status_motion
-                self._fast_poll = self._make_fast_poll()
+                self._fast_poll, self._resync = self._make_fast_poll()
                 if type(self).poll is Channel.poll:  # no subclass wraps it: call it directly
                     self.poll = self._fast_poll  # type: ignore[method-assign,assignment]  # as below
             else:
@@ -146,14 +151,17 @@ class Channel:
         function, which :meth:`attach` also binds as ``poll`` itself). Raises SensorError."""
         self._fast_poll(stamp_ns)
 
-    def _make_fast_poll(self) -> Callable[[int], None]:
-        """The PLN2033's poll as a function of the stamp, made at each ``attach``.
+    def _make_fast_poll(self) -> tuple[Callable[[int], None], Callable[[], None]]:
+        """The PLN2033's poll as a function of the stamp, made at each ``attach``, and the
+        function that re-reads its copies of the totals (:meth:`record` calls it).
 
         The common poll (no lift, no overflow, no lift gap open or waiting for
         its after-window) is recorded here with as few Python operations as
         possible: what is fixed while this driver is attached (its bus transfer, burst,
         status bits, this channel's shared-memory views) is held by the function instead
-        of read from attributes, and field indices are literals (see shared_state);
+        of read from attributes, the four totals it adds to are kept as its own copies too
+        (written to the shared memory, never read back from it, except after a
+        :meth:`record`), and field indices are literals (see shared_state);
         anything else goes through :meth:`record`, the one general implementation. The
         lift gap costs the hot path nothing but the ``_gap_busy`` check (the estimator's
         ``busy``, mirrored after each of its updates): the polls before a gap are read
@@ -164,8 +172,14 @@ class Channel:
         ints, floats, n = self.ints, self.floats, self.n
         stamps, rdx, rdy, rstatus, rcpi, rflags, _rq = self.ring
         ch = self
+        xt, yt, xm, ym = ints[2], ints[3], floats[0], floats[1]
+
+        def resync() -> None:
+            nonlocal xt, yt, xm, ym
+            xt, yt, xm, ym = ints[2], ints[3], floats[0], floats[1]
 
         def fast_poll(stamp_ns: int) -> None:
+            nonlocal xt, yt, xm, ym
             rx = xfer(tx)
             status = (rx[1] << 8) | rx[2] if len(rx) == 9 else 0xFFFF
             if status & unusual or ch._gap_busy:
@@ -184,17 +198,21 @@ class Channel:
             rcpi[slot] = ch.cpi_y
             rflags[slot] = 2 if status & motion_bit else 0  # FLAG_MOTION
             if dx:
-                ints[2] += dx  # I_X_TOTAL
-                floats[0] += dx * ch.scale_x  # F_X_TOTAL_M
+                xt += dx
+                ints[2] = xt  # I_X_TOTAL
+                xm += dx * ch.scale_x
+                floats[0] = xm  # F_X_TOTAL_M
             if dy:
-                ints[3] += dy  # I_Y_TOTAL
-                floats[1] += dy * ch.scale_y  # F_Y_TOTAL_M
+                yt += dy
+                ints[3] = yt  # I_Y_TOTAL
+                ym += dy * ch.scale_y
+                floats[1] = ym  # F_Y_TOTAL_M
             ch.seq = seq = seq + 1
             ints[1] = seq  # I_SEQ
             ints[10] = stamp_ns  # I_STAMP_NS
             ints[0] = version + 1  # even: consistent
 
-        return fast_poll
+        return fast_poll, resync
 
     def record(self, stamp_ns: int, m: Motion | None, extra_flags: int = 0) -> None:
         """Add one read to the totals and the ring (under the sequence lock).
@@ -252,6 +270,7 @@ class Channel:
         ints[ss.I_SEQ] = self.seq
         ints[ss.I_STAMP_NS] = stamp_ns
         ints[ss.I_VERSION] += 1  # even: consistent
+        self._resync()  # the fast poll goes on from these totals
 
     def _update_lift_gap(self, dx: int, dy: int, lifted: bool) -> None:
         """Feed one poll to the estimators; add their estimate when it is complete."""
