@@ -1,8 +1,8 @@
 """The window's File > Record: pick the file, attach a recorder, show that it records.
 
-While it records, the status bar shows ``● REC run.mcap 01:23 1.4 MB``: the time since
-it started and the bytes on disk so far (the writer keeps up to a chunk in memory, so
-the size grows in chunk steps), updated every second.
+While it records, the status bar shows ``● REC 01:23 1.4 MB`` (the file in its
+tooltip): the time since it started and the bytes on disk so far (the writer keeps up
+to a chunk in memory, so the size grows in chunk steps), updated every second.
 
 The recording itself (the MCAP layout, serialisation, reading back) is Qt-free in
 :mod:`mm_pc.monitor.io` (:class:`~mm_pc.monitor.io.mcap_writer.McapRecorder`).
@@ -29,8 +29,8 @@ __all__ = ["recording_text", "start_recording", "stop_recording", "toggle_record
 UPDATE_MS = 1000
 
 
-def recording_text(name: str, elapsed_s: float, size_bytes: int) -> str:
-    """``● REC run.mcap 01:23 1.4 MB`` (hours shown from the first hour on)."""
+def recording_text(elapsed_s: float, size_bytes: int) -> str:
+    """``● REC 01:23 1.4 MB`` (hours shown from the first hour on)."""
     secs = int(max(elapsed_s, 0.0))
     h, m, sec = secs // 3600, secs // 60 % 60, secs % 60
     clock = f"{h}:{m:02d}:{sec:02d}" if h else f"{m:02d}:{sec:02d}"
@@ -40,7 +40,7 @@ def recording_text(name: str, elapsed_s: float, size_bytes: int) -> str:
         size = f"{size_bytes / 1e6:.1f} MB"
     else:
         size = f"{size_bytes / 1e9:.2f} GB"
-    return f"● REC {name} {clock} {size}"
+    return f"● REC {clock} {size}"
 
 
 def _file_size(recorder: McapRecorder) -> int:
@@ -55,8 +55,7 @@ def _update_indicator(window) -> None:
     began = getattr(window, "_recording_began", None)
     if recorder is None or began is None:
         return
-    _set_indicator(window, recording_text(recorder.path.name, time.monotonic() - began,
-                                          _file_size(recorder)))
+    _set_indicator(window, recording_text(time.monotonic() - began, _file_size(recorder)))
 
 
 def _set_indicator(window, text: str | None) -> None:
@@ -70,7 +69,6 @@ def _set_indicator(window, text: str | None) -> None:
     if label is None:
         label = QLabel()
         label.setStyleSheet("color: #b00020; font-weight: bold")
-        label.setToolTip("recording: time since it started, bytes written to disk so far")
         window.statusBar().addPermanentWidget(label)
         window._recording_label = label
         timer = QTimer(label)  # goes with the label
@@ -78,6 +76,10 @@ def _set_indicator(window, text: str | None) -> None:
         timer.timeout.connect(lambda: _update_indicator(window))
         timer.start()
     label.setText(text)
+    recorder = window.ctx.recorder
+    if recorder is not None:
+        label.setToolTip(f"recording to {recorder.path}: time since it started, bytes "
+                         "written to disk so far")
 
 
 def start_recording(window, path: str | Path, live: bool = True) -> bool:
@@ -107,7 +109,7 @@ def start_recording(window, path: str | Path, live: bool = True) -> bool:
             ctx.bridge.record_topics(live_topics(ctx.config.beagle), recorder.write_live)
     window.record_action.setText("Stop &recording")
     window._recording_began = time.monotonic()
-    _set_indicator(window, recording_text(recorder.path.name, 0.0, _file_size(recorder)))
+    _set_indicator(window, recording_text(0.0, _file_size(recorder)))
     window.statusBar().showMessage(f"recording to {recorder.path}")
     return True
 

@@ -68,8 +68,9 @@ __all__ = ["Gap", "LogEntry", "MonitorSession", "SessionStats", "sensor_columns"
 #: raw_dx/raw_dy  displacement served for the interval (m, sensor frame)
 #: dx/dy          after the median filter and the calibration (m)
 #: vx/vy          speed (m/s): dx, dy summed over the rows of the last SPEED_WINDOW_S
-#:                divided by the time their poll stamps span (not dx/dt of one reply: a
-#:                reply stamp off by a poll at 500 Hz made dx/dt swing by 2x)
+#:                divided by the time this sensor's newest-poll stamps span over them (not
+#:                dx/dt of one reply: at 500 Hz a reply's stamps a poll apart between the
+#:                sensors made the second sensor's dx/dt swing 0..606 mm/s at 200)
 #: wx/wy          the sensor's position in odom (m)
 #: lifts          polls with the lift bit set in the interval
 #: cpi            resolution in force
@@ -241,8 +242,10 @@ class MonitorSession:
         #: replies of a batch whose rows wait for the batch's per-poll poses
         self._deferred: list[_Deferred] = []
         self._batching = False
-        #: the newest rows' (t, dt, processed (dx, dy) per sensor) the speed is taken over
-        self._speed_rows: deque[tuple[float, float, list[tuple[float, float]]]] = deque()
+        #: the newest rows' (t, dt, per sensor (dx, dy, dt: s between its own poll stamps))
+        #: the speed is taken over, and each sensor's stamp of the previous row (ns)
+        self._speed_rows: deque[tuple[float, float, list[tuple[float, float, float]]]] = deque()
+        self._speed_stamps: list[int] = []
         if devices is not None:
             self._set_devices(tuple(devices))
 
@@ -538,6 +541,7 @@ class MonitorSession:
         self.tracker.baseline([_totals(r) for r in now])
         self._stash.clear()
         self._speed_rows.clear()
+        self._speed_stamps = [r.stamp_ns for r in now]
         self.stats.baselines += 1
         if restarted:
             self.stats.restarts += 1
@@ -607,7 +611,7 @@ class MonitorSession:
             1.0 if self.calibrating else 0.0,
         ]
         c, s = math.cos(pose.yaw), math.sin(pose.yaw)
-        speeds = self._speeds(t, dt, processed)
+        speeds = self._speeds(t, dt, now, processed)
         for r, (rx, ry), (dx, dy), m, (vx, vy) in zip(
                 now, raw, processed, self._mounts, speeds, strict=True):
             wx, wy = pose.x + c * m.x - s * m.y, pose.y + s * m.x + c * m.y
@@ -621,18 +625,26 @@ class MonitorSession:
             )
         self.history.append(row)
 
-    def _speeds(self, t: float, dt: float,
+    def _speeds(self, t: float, dt: float, now: list[Reading],
                 processed: list[tuple[float, float]]) -> list[tuple[float, float]]:
-        """Each sensor's (vx, vy) (m/s): the displacements of the rows within
-        SPEED_WINDOW_S before ``t`` (this one included) over the time they cover (the sum
-        of their ``dt``: stamps of the newest polls, s)."""
+        """Each sensor's (vx, vy) (m/s): its displacements of the rows within
+        SPEED_WINDOW_S before ``t`` (this one included) over the time its own newest-poll
+        stamps moved on over them (``dt``, the row's, where a sensor's stamp is unknown
+        or did not move)."""
+        stamps = [r.stamp_ns for r in now]
+        last = self._speed_stamps if len(self._speed_stamps) == len(now) else stamps
+        own = [max(s1 - s0, 0) / 1e9 for s1, s0 in zip(stamps, last, strict=True)]
+        self._speed_stamps = stamps
         rows = self._speed_rows
-        rows.append((t, dt, processed))
+        rows.append((t, dt, [(dx, dy, d) for (dx, dy), d in zip(processed, own, strict=True)]))
         while len(rows) > 1 and rows[0][0] <= t - SPEED_WINDOW_S:
             rows.popleft()
-        span = sum(r[1] for r in rows)
-        return [(sum(r[2][k][0] for r in rows) / span, sum(r[2][k][1] for r in rows) / span)
-                for k in range(len(processed))]
+        out = []
+        for k in range(len(processed)):
+            span = sum(r[2][k][2] for r in rows) or sum(r[1] for r in rows)
+            out.append((sum(r[2][k][0] for r in rows) / span,
+                        sum(r[2][k][1] for r in rows) / span))
+        return out
 
     def _append_map(self, t: float, pose: Pose2D) -> None:
         """The map's rows for this reply: its per-poll poses (decimated) or the reply's pose."""

@@ -70,6 +70,9 @@ X_LEAD = 0.1
 #: changed only when the data leave it or fill less than Y_SHRINK of it
 Y_PAD = 0.1
 Y_SHRINK = 0.4
+#: every plot's value axis this wide (px): the plots of a column line up, so their linked
+#: time axes show the same times one above the other
+AXIS_WIDTH_PX = 64
 #: a plot is never drawn lower than this (px): below it the page scrolls
 MIN_PLOT_HEIGHT = 120
 
@@ -199,6 +202,9 @@ class GraphsView(QWidget):
         """The canvas never shrinks below what its plots need (pyqtgraph would draw the
         last column past the edge, unseen): a narrower tab scrolls (the window's scroll
         area) to every sensor's plots instead."""
+        for plot in self.plots.values():  # the axes' fixed widths in the hints
+            plot.layout.invalidate()
+        self.canvas.ci.layout.invalidate()
         need = self.canvas.ci.effectiveSizeHint(Qt.MinimumSize)
         frame = 2 * self.canvas.frameWidth() + 4
         self.canvas.setMinimumSize(int(need.width()) + frame,
@@ -216,6 +222,7 @@ class GraphsView(QWidget):
         plot.setLabel("left", f"{title.split('<br>')[0].split(' (')[0]} ({unit})")
         plot.getAxis("left").enableAutoSIPrefix(False)
         plot.getAxis("bottom").enableAutoSIPrefix(False)
+        plot.getAxis("left").setWidth(AXIS_WIDTH_PX)
 
     # -- state -----------------------------------------------------------------------
 
