@@ -267,7 +267,7 @@ class RemoteAgent:
         q = self._queue
 
         limits = {
-            "polls": link.max_batch_bytes(self.n),
+            "polls": min(link.max_batch_bytes(self.n), link.NODE_RX_MAX_BYTES),
             "status": link.MAX_STATUS_BYTES,
             "events": link.MAX_EVENT_BYTES,
         }

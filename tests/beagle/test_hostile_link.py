@@ -187,8 +187,9 @@ def test_unbounded_payloads_on_every_key_are_dropped_counted_and_logged(rig):
     since = rig.log_size()
     rig.until_logged("dropped a events input", 0)
     wait_until(lambda: rig.counts()[0] >= bad0 + 7, 10, "/diagnostics counting the drops")
-    # the bombs never inflated (was +621 MB): an inflated 100 MB bomb alone would pass 80
-    assert vm_hwm_mb(rig.node.pid) - hwm0 < 80
+    # the bombs never inflated (was +621 MB); measured +1.6 MB for all of these (no zenoh
+    # shared memory in the node, a linear depth check)
+    assert vm_hwm_mb(rig.node.pid) - hwm0 < 10
     rig.alive_and_exact()
     assert "nests deeper" in rig.log.read_text(errors="replace")
     assert time.monotonic() - t0 < scaled(40)

@@ -215,3 +215,19 @@ def test_a_consistent_forgery_holds_a_sensor_back_for_2_s_at_most(monkeypatch):
     assert (t.seq, t.y_total) == (4, 11) and remote.resyncs >= 1
     feed(remote, "polls", frame(77, 5, 7, [2], 17))
     assert remote.state.snapshot(0).y_total == 13
+
+
+@pytest.mark.parametrize(
+    "payload",
+    [b'"\\' * 50_000, b'"' * 100_001, b"[" * 100_000, b'["' + b"x" * 200_000 + b'"]'],
+)
+def test_the_depth_check_is_linear_and_needs_no_memory(payload):
+    """A regex over strings took 38 s on '"\\' x 50 000 and 15 MB of stack for one 130 kB
+    string; the scan is linear (well under 0.5 s here) and allocates nothing per byte."""
+    import resource
+
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    t0 = time.perf_counter()
+    link.json_depth_ok(payload, 8)
+    assert time.perf_counter() - t0 < 0.5
+    assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before < 4096  # kB
