@@ -306,6 +306,7 @@ def decode_status(payload: bytes, n_sensors: int, hist_bins: int) -> dict:
         v = field(msg, key, (int, float), what, optional=True)
         out[key] = float("nan") if v is None else float(v)
     out["bytes_sent"] = field(msg, "bytes_sent", int, what, optional=True) or 0
+    out["requests_refused"] = field(msg, "requests_refused", int, what, optional=True) or 0
     hist = None
     if "hist_z" in msg:
         raw = b64_bounded(msg["hist_z"], MAX_STATUS_BYTES, "status hist_z")

@@ -227,6 +227,7 @@ class RemoteAgent:
             "link_latency_p50_ms": f"{np.nanpercentile(lat, 50):.2f}",
             "link_latency_p99_ms": f"{np.nanpercentile(lat, 99):.2f}",
             "agent_rss_mb": self.agent_status.get("rss_mb", ""),
+            "agent_requests_refused": self.agent_status.get("requests_refused", ""),
         }
 
     def _drop_counts(self) -> str:
