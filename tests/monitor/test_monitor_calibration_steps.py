@@ -286,6 +286,10 @@ def test_the_drive_offer_follows_the_sim(qtbot, tmp_path):
     assert page.start_auto()
     while ctx.session.recording_step != "spin":
         ctx.on_reply(next(replies))
+    for _ in range(60):  # 1.2 s: the spin under way is not "too small" yet
+        ctx.on_reply(next(replies))
+    assert page.state.text().startswith("recording spin: about ")
+    assert page.state.text().endswith("° so far; turn it on the spot a full turn, then press Stop")
     qtbot.mouseClick(page.auto_cancel_button, Qt.LeftButton)
     assert page.auto_label.text() == "cancelled: the recorded steps stay"
     assert ctx.session.recording_step is None

@@ -32,6 +32,7 @@ import math
 from contextlib import suppress
 from pathlib import Path
 
+import numpy as np
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import (
     QComboBox,
@@ -422,6 +423,10 @@ class DrivePage(QWizardPage):
             self.state.setText(self._next_hint())
         elif check.ok:
             self.state.setText(f"recording {recording}: passes so far; stop the robot, press Stop")
+        elif check.message.startswith("spin too small"):  # not yet: the spin is under way
+            turned = float(np.nanmean(check.angle)) if np.any(np.isfinite(check.angle)) else 0.0
+            self.state.setText(f"recording spin: about {math.degrees(turned):.0f}° so far; turn "
+                               "it on the spot a full turn, then press Stop")
         else:
             self.state.setText(f"recording {recording}: {check.message}")
         self.state.setStyleSheet(ERROR_STYLE if failed else "")
@@ -597,6 +602,13 @@ class ResultsPage(QWizardPage):
                 f"{x * 100:.2f}", f"{t.x * 100:.2f}",
                 f"{y * 100:.2f}", f"{t.y * 100:.2f}",
             ])
+        # as tall as its rows: the page keeps its room for the drift and the choice
+        table = self.truth_table
+        table.resizeRowsToContents()
+        rows = sum(table.rowHeight(r) for r in range(table.rowCount()))
+        table.setMaximumHeight(table.horizontalHeader().sizeHint().height() + rows
+                               + 2 * table.frameWidth() + table.horizontalScrollBar().sizeHint()
+                               .height())
 
     def cleanupPage(self) -> None:  # noqa: N802 - Qt API
         self._wizard.calibration = None
