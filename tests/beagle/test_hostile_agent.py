@@ -202,3 +202,42 @@ def test_a_peer_with_wrong_credentials_is_logged_by_the_agent(tmp_path):
         wait_until(lambda: "Invalid password" in log.read_text(), 30,
                    "the agent's log line for the refused peer")  # fmt: skip
         assert not opened  # and zenoh's own line on the agent said why
+
+
+def test_patch_files_are_size_checked_unread_and_loaded_in_steps(tmp_path):
+    from mm_beagle.poller.patches import (
+        PatchPathError,
+        check_patch_file_size,
+        max_patch_file_bytes,
+        patch_load_steps,
+    )
+    from pln2033.errors import PatchError
+    from pln2033.pln2033 import PLN2033
+    from pln2033.pln2033.emulator import EmulatedPLN2033
+
+    assert max_patch_file_bytes(4096) == 65536
+    big = tmp_path / "big.patch"
+    big.write_bytes(b"\x00" * (65536 + 1))
+    with pytest.raises(PatchPathError, match=r"65537 bytes.*refused unread"):
+        check_patch_file_size(str(big), 4096)
+    with pytest.raises(PatchPathError, match="not a regular file"):
+        check_patch_file_size(str(tmp_path), 4096)
+    check_patch_file_size(str(big), 4097 * 8)  # a larger RAM takes it
+
+    emu = EmulatedPLN2033()
+    driver = PLN2033(emu)
+    words = [(7 * k) & 0xFFFF for k in range(100)]
+    steps = sum(1 for _ in patch_load_steps(driver, words, step=32))
+    assert steps == 8  # 4 write steps of 32 words, 4 verify steps, then the enable
+    assert emu.ram[:100] == words and emu.patch_enabled
+
+    class Flaky(EmulatedPLN2033):
+        def _read_memory(self) -> int:  # the read-back differs at word 40
+            value = super()._read_memory()
+            return value ^ 1 if self._mem_ptr == 41 else value
+
+    bad = Flaky()
+    with pytest.raises(PatchError, match="verify failed at word 40"):
+        for _ in patch_load_steps(PLN2033(bad), words, step=32):
+            pass
+    assert not bad.patch_enabled
