@@ -337,3 +337,37 @@ def test_a_long_window_over_little_data_shows_the_data_not_an_empty_axis(qtbot, 
     view.refresh()
     x0, x1 = x_range(view.plots[(0, "speed")])
     assert (x0, x1) == pytest.approx((t[-1] - 10.0, t[-1] + 1.0))
+
+
+def test_health_s_labels_never_overlap_the_table_at_first_start_height(qtbot, qapp, feed,
+                                                                        tmp_path):
+    """1024x640: the first start's inner size on a 1024x700 screen with a panel. The
+    session counters wrap to a third line once data came: the pane grows (the page
+    scrolls), the labels are not drawn over the table's last rows (seen in a real X run)."""
+    from mm_pc.monitor.context import MonitorConfig
+    from mm_pc.monitor.main_window import MainWindow
+
+    config = MonitorConfig(rate_hz=15.0, calibration_file=tmp_path / "cal.yaml")
+    window = MainWindow(MonitorContext(MonitorSession(), None, config), None)
+    qtbot.addWidget(window)
+    window.show()
+    window.resize(1024, 640)
+    window.tabs.setCurrentIndex(5)
+    health = window.views["Health"]
+    for _ in range(3):
+        window.frame()
+        qapp.processEvents()
+    feed(window.ctx, rate_hz=50.0, seconds=20.0)  # the counters' text grows
+    for _ in range(3):  # frames, a quarter of a second apart (the fit's check)
+        health._last_fit = 0.0
+        health.refresh()
+        qapp.processEvents()
+    table = health.table
+    bottom = table.mapTo(health, table.rect().bottomLeft()).y()
+    labels = [health.diag_state, health.session_label, health.bridge_label,
+              health.residual_note, health.quality_note]
+    tops = [lab.mapTo(health, lab.rect().topLeft()).y() for lab in labels if lab.isVisible()]
+    assert min(tops) >= bottom, (tops, bottom)
+    for lab in labels:
+        if lab.isVisible():
+            assert lab.height() >= lab.heightForWidth(lab.width()), lab.text()

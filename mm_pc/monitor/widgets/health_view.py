@@ -33,7 +33,7 @@ import time
 
 import numpy as np
 import pyqtgraph as pg
-from PySide6.QtCore import Qt
+from PySide6.QtCore import Qt, QTimer
 from PySide6.QtGui import QBrush, QColor
 from PySide6.QtWidgets import (
     QHeaderView,
@@ -130,6 +130,7 @@ class HealthView(QWidget):
         self._version = -1
         self._method = ""
         self._last_plot = 0.0
+        self._last_fit = 0.0
         self._stats_key: tuple = ()
         self.bridge_stats = None
         self._caches: dict[str, PeakDecimator] = {}
@@ -303,6 +304,15 @@ class HealthView(QWidget):
         super().resizeEvent(event)
         self._fit_table()  # the labels wrap to another height at another width
 
+    def _needs_fit(self) -> bool:
+        """A wrapped label under the table lower than its text needs at its width, or the
+        table's pane lower than its least height (the splitter kept an old size)."""
+        if self._split.isVisible() and self._split.sizes()[0] < self._top.minimumHeight():
+            return True
+        return any(lab.isVisible() and lab.height() < lab.heightForWidth(lab.width())
+                   for lab in (self.session_label, self.bridge_label, self.residual_note,
+                               self.quality_note))
+
     def _fit_table(self) -> None:
         """The table as high as all its rows and its header (px)."""
         rows = self.table.verticalHeader()
@@ -323,9 +333,12 @@ class HealthView(QWidget):
         need = max(lay.totalMinimumSize().height(), lay.totalHeightForWidth(top.width()))
         if top.minimumHeight() != need:
             top.setMinimumHeight(need)  # the page scrolls rather than overlap the rows
+            split.updateGeometry()  # the page (scroll area) takes the new least height
+            self.updateGeometry()
+            QTimer.singleShot(0, self._fit_table)  # the pane's size once the page grew
         sizes = split.sizes()
         if sizes and sizes[0] < need:
-            split.setSizes([need, max(0, sum(sizes) - need)])
+            split.setSizes([need, max(PLOTS_MIN_HEIGHT, sum(sizes) - need)])
 
     def _fill_column(self, c: int, values: dict) -> None:
         level = _level(values.get("level"))
@@ -368,6 +381,11 @@ class HealthView(QWidget):
         """Redraw what changed (cheap when nothing did)."""
         self._show_counters()
         self._show_stale()
+        now = time.monotonic()
+        if now - self._last_fit >= 1.0 / PLOT_HZ:
+            self._last_fit = now
+            if self._needs_fit():  # a counter's text wrapped to another line
+                self._fit_table()
         if self._diag_time is not None and self.ctx.data_state != "lost":
             age = time.monotonic() - self._diag_time
             if age > STALE_S:
