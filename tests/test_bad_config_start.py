@@ -97,6 +97,13 @@ AGENT_CASES = {
         ["--listen", "tcp/127.0.0.1:{port}#iface=nope0"],
         "this machine has no network interface 'nope0'",
     ),
+    "trajectory fifo": (
+        ["--sim-trajectory", "file:{fifo}"],
+        "trajectory file {fifo}: cannot read it (not a regular file (a FIFO))",
+    ),
+    "trajectory zero": (["--sim-trajectory", "file:{zero}"], "(a character device)"),
+    "register map fifo": (["--register-map", "{fifo}"], "cannot read register map {fifo}: not a"),
+    "register map zero": (["--register-map", "{zero}"], "register map /dev/zero: not a regular"),
     "sim chips": (
         ["--sim-chips", "pmw3360,otos"],
         "'sim_chips' pmw3360,otos differ from 'chips' pln2033,pln2033",
@@ -141,6 +148,11 @@ NODE_CASES = {
         "credentials file {fifo}: not a regular file (a FIFO)",
     ),
     "agent name 300": (["backend:=remote", "agent_name:=" + "a" * 300], "(300 characters)"),
+    "register map fifo": (["register_map:={fifo}"], "cannot read register map {fifo}: not a"),
+    "trajectory fifo": (
+        ["backend:=sim", "sim_trajectory:=file:{fifo}"],
+        "trajectory file {fifo}: cannot read it (not a regular file (a FIFO))",
+    ),
     "sim chips": (
         ["backend:=sim", "sim_chips:=[pmw3360,otos]"],
         "'sim_chips' pmw3360,otos differ from 'chips' pln2033,pln2033: each device's driver",

@@ -22,6 +22,7 @@ from mm_beagle.poller.sim_backend import (
     parse_fail_windows,
     sim_chips,
 )
+from mm_pc.core.user_file import check_user_file
 
 
 @dataclass(frozen=True)
@@ -220,6 +221,13 @@ def poller_config_from(
         check_trajectory(sim.trajectory)
     chips = chip_config.split_names(values["chips"])  # a config file may write "a,b" too
     options = chip_config.parse_chip_options(list(values["chip_options"]))
+    if values["register_map"]:  # a FIFO would block the start, /dev/zero never end
+        try:
+            check_user_file(values["register_map"])
+        except OSError as exc:
+            raise ValueError(
+                f"cannot read register map {values['register_map']}: {exc.strerror or exc}"
+            ) from None
     chip_config.check_board_config(devices, chips, options, values["cpi"], values["register_map"])
     cfg = poller_config(
         {**values, "devices": devices, "chips": chips, "chip_options": options}, ring_size, sim

@@ -295,9 +295,11 @@ def load_trajectory_file(
     import csv
     from pathlib import Path
 
+    from mm_pc.core.user_file import read_user_text
+
     name = str(path)
-    try:
-        text = Path(path).read_text()
+    try:  # a regular file only (a FIFO blocked the start), <= 64 MiB (~1 h at 1 kHz)
+        text = read_user_text(Path(path), 64 << 20)
     except OSError as e:
         raise ValueError(f"trajectory file {name}: cannot read it ({e.strerror or e})") from None
     except UnicodeDecodeError:
