@@ -187,6 +187,14 @@ def test_mm_odometry_refuses_a_calibration_that_is_no_regular_file(kind, says, f
     _refused(out, "mm-odometry: ", f"calibration file {path}: not a regular file {says}")
 
 
+@pytest.mark.parametrize("kind", ["fifo", "zero"])
+def test_a_params_file_that_is_no_regular_file_is_refused(kind, files, tmp_path):
+    pytest.importorskip("rclpy")
+    path = files[kind]
+    cmd = [sys.executable, "-m", "mm_pc.ros.odometry_node", "--ros-args", "--params-file", path]
+    _refused(_run(cmd, tmp_path), "mm-odometry: ", f"--params-file {path}: cannot read it (not a")
+
+
 @pytest.mark.parametrize(
     ("value", "shown"), [("nan", "nan"), ("inf", "inf"), ("-1", "-1"), ("1e9", "1e+09")]
 )

@@ -29,6 +29,7 @@ def params_file_problems(argv: Sequence[str]) -> list[str]:
 
     rcl would report these as a multi-line RCLError (exit 1) from rclpy.init.
     """
+    from mm_pc.core.user_file import read_user_text
     from mm_pc.core.yaml_text import parse_yaml
 
     problems = []
@@ -45,8 +46,8 @@ def params_file_problems(argv: Sequence[str]) -> list[str]:
                 continue
             path = Path(args[i + 1])
             where = f"--params-file {path}"
-            try:
-                text = path.read_text(encoding="utf-8")
+            try:  # a regular file only: a FIFO blocked the start for ever
+                text = read_user_text(path)
             except UnicodeDecodeError:
                 problems.append(f"{where}: not a text file (a YAML parameter file is expected)")
                 continue
