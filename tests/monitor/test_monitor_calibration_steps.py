@@ -295,3 +295,27 @@ def test_the_drive_offer_follows_the_sim(qtbot, tmp_path):
     assert ctx.session.recording_step is None
     assert [s.kind for s, _ in ctx.session.calibration_steps()] == ["straight"]
     assert page.spin_button.isEnabled() and page.auto_button.isEnabled()
+
+
+# --- mm-monitor --sim-mounts ------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("args", "why"), [
+    (["--sim-mounts", "0.05,0,1"], "--sim-mounts goes with --sim (without --agent"),
+    (["--sim", "calibration_run", "--agent", "--sim-mounts", "0.05,0,1"],
+     "--sim-mounts goes with --sim (without --agent"),
+    (["--sim", "calibration_run", "--sim-mounts", "0.05,0"],
+     "--sim-mounts needs X,Y,YAW per sensor (m, m, degrees), sensors separated by ';'; "
+     "sensor 0 is '0.05,0'"),
+    (["--sim", "--sim-mounts", "0.05,0,999"], "--sim-mounts: sensor 0 (0.05,0,999) needs"),
+])
+def test_bad_sim_mounts_are_refused_with_exit_2_before_anything_starts(args, why, capsys,
+                                                                       tmp_path, monkeypatch):
+    from mm_pc.monitor import app
+
+    monkeypatch.chdir(tmp_path)
+    assert app.main(["--headless", *args]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"mm-monitor: {why}"] or (len(err) == 1 and err[0].startswith(
+        f"mm-monitor: {why}"))
+    assert list(tmp_path.iterdir()) == []  # nothing written, no node started
