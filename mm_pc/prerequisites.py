@@ -264,11 +264,13 @@ def _interrupted(exc: BaseException | None) -> bool:
 def _hook(previous):
     def hook(exc_type, exc, tb):
         if issubclass(exc_type, KeyboardInterrupt) or _interrupted(exc):
-            # Ctrl-C before a program installed its own handler (a node still importing
-            # rclpy): a stop like any other, no traceback; 0 as the nodes' Ctrl-C gives.
-            sys.stderr.write(f"{_program()}: stopped by Ctrl-C\n")
+            # Ctrl-C or SIGTERM that got past launch() (raised inside a Qt callback, or a
+            # program run with python -m): a stop like any other, no traceback, children
+            # ended; 0 as the nodes' Ctrl-C gives.
+            sys.stderr.write(stop_signals.stop_line(_program(), stop_signals.stopped_by()) + "\n")
             sys.stderr.flush()
             sys.stdout.flush()
+            stop_signals.end_children()
             os._exit(EXIT_INTERRUPTED)
         text = None
         if issubclass(exc_type, ModuleNotFoundError) and exc.name:
