@@ -309,6 +309,7 @@ def test_a_foreign_command_responder_is_not_believed(rig):
             if boot is not None:
                 msg["boot_id"] = boot
             query.reply(query.key_expr, json.dumps(msg).encode())
+        query.reply(query.key_expr, b"[" * 100_000)  # and one that used to recurse
 
     queryable = rig.router.declare_queryable(KEYS["cmd"], liar)
     time.sleep(0.3)
