@@ -25,6 +25,7 @@ from mm_pc.monitor.model.session import MonitorSession
 from mm_pc.monitor.model.sim_feed import sim_replies
 from mm_pc.monitor.model.sim_mounts import CALIBRATION_SIM_MOUNTS, parse_sim_mounts
 from mm_pc.monitor.widgets.calibration_wizard import PAGE_DRIVE, PAGE_RESULTS, CalibrationWizard
+from mm_pc.sim.robot import trajectory
 
 #: the fit's tolerance against the sim's true mounts (deg, m): the simulated counts are
 #: CPI-quantised, nothing else is wrong
@@ -278,7 +279,7 @@ def test_the_drive_offer_follows_the_sim(qtbot, tmp_path):
     assert "start mm-monitor --sim calibration_run" in page.auto_label.text()
     ctx = MonitorContext(MonitorSession(), None, MonitorConfig(
         calibration_file=tmp_path / "c", sim="calibration_run"))
-    replies = sim_replies("calibration_run", 50, mounts=CALIBRATION_SIM_MOUNTS)
+    replies = sim_replies("calibration_run", 50, seconds=60, mounts=CALIBRATION_SIM_MOUNTS)
     for _ in range(100):
         ctx.on_reply(next(replies))
     wiz = open_wizard(qtbot, ctx)
@@ -295,6 +296,17 @@ def test_the_drive_offer_follows_the_sim(qtbot, tmp_path):
     assert ctx.session.recording_step is None
     assert [s.kind for s, _ in ctx.session.calibration_steps()] == ["straight"]
     assert page.spin_button.isEnabled() and page.auto_button.isEnabled()
+    # by hand again after the driver: a spin that moves is stopped at once
+    lap_ms = len(trajectory("calibration_run")[0])
+    while ctx.session.history.last("t") * 1000 < lap_ms + 600:  # the next lap's straight
+        ctx.on_reply(next(replies))
+    assert page.start("spin")
+    for _ in range(100):
+        ctx.on_reply(next(replies))
+        if ctx.session.recording_step is None:
+            break
+    (_, check) = ctx.session.calibration_steps()[-1]
+    assert not check.ok and check.message.startswith("not a spin: it moved 5.")
 
 
 # --- mm-monitor --sim-mounts ------------------------------------------------------------------

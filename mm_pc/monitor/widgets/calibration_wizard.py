@@ -386,9 +386,8 @@ class DrivePage(QWizardPage):
         session = self.ctx.session
         run = session.calibration_run
         mounts = session.odometry_mounts[: len(session.devices)]
-        if run is not None and run.kind is not None and run.auto is None and run.live_failure(
-            mounts
-        ):
+        by_hand = run is not None and (run.auto is None or not run.auto.active)
+        if by_hand and run.kind is not None and run.live_failure(mounts):
             self.stop()
             return
         if run is not None and len(run.steps) != self.steps_table.rowCount():
