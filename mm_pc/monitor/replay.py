@@ -96,8 +96,10 @@ def reply_times(replies: list[Reply]) -> np.ndarray:
     return out
 
 
-#: replies fed together by a seek (the views are told once per chunk)
-SEEK_CHUNK = 2000
+#: replies fed together by a seek (the views are told once per chunk; ~130 us each)
+SEEK_CHUNK = 100
+#: a seek over at most this many replies is done at once (~65 ms), a longer one by the timer
+SEEK_AT_ONCE = 500
 
 
 class Replayer(QObject):
@@ -120,6 +122,8 @@ class Replayer(QObject):
         #: called before a seek backwards feeds the replies again from the first one: the
         #: session must start over (its path is integrated reply by reply)
         self.on_rewind = None
+        self._seek_to: int | None = None  # the reply index a seek feeds up to
+        self._resume = False  # the replay ran when the seek began
         self._elapsed = 0.0  # recorded seconds already played before the last (re)start
         self._started: float | None = None
         self._done = False
@@ -130,6 +134,9 @@ class Replayer(QObject):
 
     @property
     def running(self) -> bool:
+        """Feeding at its pace (during a seek: whether it will once the seek is done)."""
+        if self._seek_to is not None:
+            return self._resume
         return self.timer.isActive()
 
     @property
@@ -150,6 +157,9 @@ class Replayer(QObject):
         """Go on at ``speed`` from the current position (running or paused); ValueError
         for a bad speed (nothing changes)."""
         new = parse_speed(speed)
+        if self._seek_to is not None:  # the seek's target time stays; its end sets the timer
+            self.speed = new
+            return
         if math.isinf(self.speed):
             self._elapsed = self.played_s
         else:
@@ -162,10 +172,16 @@ class Replayer(QObject):
         """Start, or resume after :meth:`pause`."""
         if self._done:
             return
+        if self._seek_to is not None:
+            self._resume = True  # once the seek is done
+            return
         self._started = time.perf_counter()
         self.timer.start()
 
     def pause(self) -> None:
+        if self._seek_to is not None:
+            self._resume = False  # stays paused once the seek is done
+            return
         if self.timer.isActive():
             self.timer.stop()
             self._elapsed = self._played()
@@ -176,29 +192,61 @@ class Replayer(QObject):
         self.timer.stop()
         self._finish()
 
+    @property
+    def seeking(self) -> bool:
+        """A seek is feeding the replies up to its target (the window stays responsive)."""
+        return self._seek_to is not None
+
     def seek(self, target_s: float) -> None:
         """Go to recorded time ``target_s`` (s from the first reply; clamped), running or
-        paused as before. Forward, the replies up to it are fed at once; backward, the
-        path starts over (:attr:`on_rewind`) and the replies up to it are fed again (the
-        pose is integrated reply by reply: there is no other way back). Ignored once the
-        replay ended or was stopped."""
+        paused as before. Forward, the replies up to it are fed; backward, the path starts
+        over (:attr:`on_rewind`) and the replies up to it are fed again (the pose is
+        integrated reply by reply: there is no other way back). Up to SEEK_AT_ONCE replies
+        are fed at once; more are fed by the timer in slices of BATCH_S (a minute at
+        500 Hz took ~4 s: the window would have frozen), :attr:`seeking` meanwhile.
+        Ignored once the replay ended or was stopped."""
         if self._done or not len(self.replies):
             return
         target = min(max(float(target_s), 0.0), self.total_s)
         i = int(np.searchsorted(self.times, target, side="right"))
+        if self._seek_to is None:
+            self._resume = self.running
         if i < self.position:
             if self.on_rewind is not None:
                 self.on_rewind()
             self.position = 0
-        for start in range(self.position, i, SEEK_CHUNK):
-            self.ctx.on_replies(self.replies[start:min(start + SEEK_CHUNK, i)])
-        self.position = i
         self._elapsed = target
-        if self._started is not None:
-            self._started = time.perf_counter()
+        self._started = None
+        if i - self.position <= SEEK_AT_ONCE:
+            self._feed_to(i, None)
+            self._seek_to = None
+            self._after_seek()
+            return
+        self._seek_to = i
+        self.timer.setInterval(0)
+        self.timer.start()
+
+    def _feed_to(self, i: int, deadline: float | None) -> None:
+        """Feed the replies up to index ``i`` (or until ``deadline``, perf_counter s)."""
+        while self.position < i:
+            end = min(self.position + SEEK_CHUNK, i)
+            self.ctx.on_replies(self.replies[self.position:end])
+            self.position = end
+            if deadline is not None and time.perf_counter() > deadline:
+                break
+
+    def _after_seek(self) -> None:
+        """Back to what the replay did before the seek (or the end reached)."""
         if self.position >= len(self.replies):
             self.timer.stop()
             self._finish()
+            return
+        self.timer.setInterval(0 if math.isinf(self.speed) else 5)
+        if self._resume:
+            self._started = time.perf_counter()
+            self.timer.start()
+        else:
+            self.timer.stop()
 
     def _played(self) -> float:
         if math.isinf(self.speed):
@@ -209,6 +257,12 @@ class Replayer(QObject):
 
     def _tick(self) -> None:
         deadline = time.perf_counter() + BATCH_S
+        if self._seek_to is not None:
+            self._feed_to(self._seek_to, deadline)
+            if self.position >= self._seek_to:
+                self._seek_to = None
+                self._after_seek()
+            return
         target = self._played()
         n = len(self.replies)
         while self.position < n and self.times[self.position] <= target:

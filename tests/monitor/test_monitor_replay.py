@@ -12,6 +12,7 @@ import pytest
 pytest.importorskip("rclpy")
 pytest.importorskip("PySide6")
 
+from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import QMessageBox
 
 from mm_pc.monitor.context import MonitorConfig, MonitorContext
@@ -377,3 +378,41 @@ def test_the_progress_bar_seeks_by_click_drag_and_keys(qtbot, tmp_path, run4):
     QTest.keyClick(progress, Qt.Key.Key_Right)
     assert replayer.done and replayer.position == len(replayer.replies)
     assert window.ctx.session.pose.x == pytest.approx(0.8, abs=1e-4)  # as a whole replay
+
+
+def test_a_long_seek_keeps_the_window_responsive_and_gives_the_same_path(qtbot, tmp_path):
+    """1501 replies: a seek over more than SEEK_AT_ONCE is fed by the timer in slices (the
+    window's events go on meanwhile); the path is the one a replay to there draws."""
+    from mm_pc.monitor.replay import SEEK_AT_ONCE
+
+    path = tmp_path / "run30.mcap"
+    rec = McapRecorder(path)
+    replies = list(sim_replies("straight", 50.0, 30.0))
+    for r in replies:
+        rec.write_reply(r)
+    rec.close()
+    window = make_window(qtbot, tmp_path)
+    replayer = start_replay(window, path, 1.0)
+    bar = window.replay_bar
+    bar.toggle_pause()
+    assert len(replies) - 1 > SEEK_AT_ONCE
+    bar.seek(27.0)
+    assert replayer.seeking and replayer.position < len(replies) - 1  # not all at once
+    assert bar.state() == "seeking" and not replayer.running  # paused before: stays so
+    ticks = []
+    timer = QTimer()
+    timer.timeout.connect(lambda: ticks.append(1))
+    timer.start(10)
+    qtbot.waitUntil(lambda: not replayer.seeking, timeout=20_000)
+    timer.stop()
+    assert len(ticks) >= 2  # other timers ran during the seek: no frozen window
+    assert replayer.played_s == pytest.approx(27.0, abs=0.03) and not replayer.running
+    fresh = MonitorSession()
+    for r in replies[:replayer.position]:
+        fresh.process(r)
+    assert window.ctx.session.pose == pytest.approx(fresh.pose)
+    np.testing.assert_array_equal(window.ctx.session.history.column("t"),
+                                  fresh.history.column("t"))
+    bar.seek(2.0)  # back: short, done at once, the path starts over
+    assert not replayer.seeking and replayer.played_s == pytest.approx(2.0, abs=0.03)
+    assert window.ctx.session.pose.x == pytest.approx(0.4, abs=0.005)

@@ -190,6 +190,8 @@ class ReplayBar(QToolBar):
             return ""
         if r.done:
             return "ended" if r.position >= len(r.replies) else "stopped"
+        if getattr(r, "seeking", False):
+            return "seeking"
         return "" if r.running else "paused"
 
     def update_view(self) -> None:
