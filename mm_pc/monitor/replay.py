@@ -122,6 +122,8 @@ class Replayer(QObject):
         #: called before a seek backwards feeds the replies again from the first one: the
         #: session must start over (its path is integrated reply by reply)
         self.on_rewind = None
+        #: called when a seek takes up a replay that had ended or was stopped
+        self.on_reopen = None
         self._seek_to: int | None = None  # the reply index a seek feeds up to
         self._resume = False  # the replay ran when the seek began
         self._elapsed = 0.0  # recorded seconds already played before the last (re)start
@@ -204,9 +206,15 @@ class Replayer(QObject):
         integrated reply by reply: there is no other way back). Up to SEEK_AT_ONCE replies
         are fed at once; more are fed by the timer in slices of BATCH_S (a minute at
         500 Hz took ~4 s: the window would have frozen), :attr:`seeking` meanwhile.
-        Ignored once the replay ended or was stopped."""
-        if self._done or not len(self.replies):
+        A replay that ended or was stopped is taken up again, paused (:attr:`on_reopen`)."""
+        if not len(self.replies):
             return
+        if self._done:
+            self._done = False
+            self._seek_to = None
+            self._resume = False
+            if self.on_reopen is not None:
+                self.on_reopen()
         target = min(max(float(target_s), 0.0), self.total_s)
         i = int(np.searchsorted(self.times, target, side="right"))
         if self._seek_to is None:
@@ -521,6 +529,7 @@ def begin_replay(
 
     replayer.on_end = ended
     replayer.on_rewind = rewind
+    replayer.on_reopen = lambda: _set_mode_controls(window, True)
     window.replayer = replayer
     bar.attach(replayer, path.name, ctx.bridge is not None, SPEEDS, speed_name(speed))
     window._on_state("replay")

@@ -378,6 +378,18 @@ def test_the_progress_bar_seeks_by_click_drag_and_keys(qtbot, tmp_path, run4):
     QTest.keyClick(progress, Qt.Key.Key_Right)
     assert replayer.done and replayer.position == len(replayer.replies)
     assert window.ctx.session.pose.x == pytest.approx(0.8, abs=1e-4)  # as a whole replay
+    assert bar.state() == "ended" and not window.stop_replay_action.isEnabled()
+
+    # after the end: a seek takes the replay up again, paused there
+    QTest.mouseClick(progress, Qt.MouseButton.LeftButton, pos=QPoint(_fraction_x(bar, 0.5), y))
+    assert not replayer.done and not replayer.running
+    assert replayer.played_s == pytest.approx(2.0, abs=0.03)
+    assert window.ctx.session.pose.x == pytest.approx(0.4, abs=0.005)
+    assert bar.state() == "paused" and window.stop_replay_action.isEnabled()
+    assert bar.pause_button.isEnabled() and bar.pause_button.text() == "Resume"
+    bar.toggle_pause()
+    qtbot.waitUntil(lambda: replayer.done, timeout=10_000)
+    assert window.ctx.session.pose.x == pytest.approx(0.8, abs=1e-4)
 
 
 def test_a_long_seek_keeps_the_window_responsive_and_gives_the_same_path(qtbot, tmp_path):

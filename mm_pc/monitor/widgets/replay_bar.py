@@ -3,7 +3,8 @@
 ``REPLAY run.mcap 12.0/16.4 s`` (recorded seconds: the last fed reply's time
 from the recording's first reply / the recording's length), a progress bar over
 the recorded time that seeks (click or drag it to a time; focused, the arrow keys
-go 5 s back or on, Home and End to the start and the end), Pause/Resume, the
+go 5 s back or on, Home and End to the start and the end; after the end too, which
+takes the replay up again, paused), Pause/Resume, the
 speed (1x .. max, changeable while it runs) and Stop. When the replay has ended
 or was stopped, the replayed path stays on screen and live data keeps waiting:
 **Back to live** starts a new path for the live data (with no node: **Close**,
@@ -224,10 +225,13 @@ class ReplayBar(QToolBar):
         self.update_view()
 
     def seek(self, seconds: float) -> None:
-        """Go to recorded time ``seconds`` of the running or paused replay."""
-        if not self.replaying:
+        """Go to recorded time ``seconds`` (a replay that ended or was stopped is taken
+        up again, paused there)."""
+        if not self.active or self.replayer is None:
             return
         self.replayer.seek(seconds)
+        if not self.timer.isActive():
+            self.timer.start()
         self.update_view()
 
     def _seek_fraction(self, fraction: float) -> None:
@@ -240,7 +244,7 @@ class ReplayBar(QToolBar):
 
     def _show_drag(self, fraction: float) -> None:
         r = self.replayer
-        if r is not None and self.replaying:
+        if r is not None and self.active:
             self.label.setText(replay_text(self.name, fraction * r.total_s, r.total_s, "seek"))
 
     def _speed_chosen(self, _index: int) -> None:
