@@ -198,6 +198,11 @@ def test_the_wizard_stops_a_bad_spin_at_once_and_discards_it(qtbot, sim_ctx):
     assert not check.ok and check.message.startswith("not a spin: it moved 5.")
     assert "a spin turns in place" in check.message
     assert page.steps_table.item(0, 4).text() == f"fail: {check.message}"
+    # the reason wraps in its row (the wizard at its 820 px), not cut off
+    table = page.steps_table
+    qtbot.wait(50)
+    assert table.rowHeight(0) >= 2 * table.fontMetrics().height()
+    assert table.columnViewportPosition(4) + table.columnWidth(4) <= table.viewport().width()
     assert page.state.text().startswith("step 1 failed: not a spin: it moved 5.")
     assert not page.straight_button.isEnabled() and not page.spin_button.isEnabled()
     assert not page.auto_button.isEnabled() or not page.start_auto()

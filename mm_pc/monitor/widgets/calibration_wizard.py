@@ -203,6 +203,12 @@ class DrivePage(QWizardPage):
         self.auto_label.setWordWrap(True)
         self.table = _table(list(self.COLUMNS))
         self.steps_table = _table(list(self.STEP_COLUMNS))
+        # the Result (a failure's reason) wraps in the room left, never cut at 1024 px
+        self.steps_table.horizontalHeader().setSectionResizeMode(
+            len(self.STEP_COLUMNS) - 1, QHeaderView.Stretch
+        )
+        self.steps_table.setWordWrap(True)
+        self.steps_table.horizontalHeader().sectionResized.connect(self._steps_resized)
         self.state = QLabel("not started")
         self.state.setWordWrap(True)
         self._complete = False
@@ -363,6 +369,10 @@ class DrivePage(QWizardPage):
         self.update_steps()
         self.update_sums()
 
+    def _steps_resized(self, section: int, _old: int, _new: int) -> None:
+        if section == len(self.STEP_COLUMNS) - 1:  # the Result column: rewrap its rows
+            self.steps_table.resizeRowsToContents()
+
     def update_steps(self) -> None:
         steps = self.ctx.session.calibration_steps()
         self.steps_table.setRowCount(len(steps))
@@ -375,6 +385,7 @@ class DrivePage(QWizardPage):
             ])
             item = self.steps_table.item(k, 4)
             item.setToolTip(item.text())
+        self.steps_table.resizeRowsToContents()
         failed = any(not c.ok for _, c in steps)
         self.discard_button.setText("Discard failed step" if failed else "Discard last step")
         self._recheck()
