@@ -371,3 +371,41 @@ def test_health_s_labels_never_overlap_the_table_at_first_start_height(qtbot, qa
     for lab in labels:
         if lab.isVisible():
             assert lab.height() >= lab.heightForWidth(lab.width()), lab.text()
+
+
+def test_hovering_a_health_plot_reads_its_value_out(qtbot, qapp, fake_bridge, feed):
+    from PySide6.QtCore import QPoint
+    from PySide6.QtTest import QTest
+
+    from mm_pc.monitor.widgets.health_view import HealthView
+
+    ctx = MonitorContext(MonitorSession(), fake_bridge)
+    ctx.session.configure_odometry(method="two-sensor")
+    feed(ctx, rate_hz=50.0, seconds=10.0)
+    view = HealthView(ctx)
+    qtbot.addWidget(view)
+    view.resize(900, 800)
+    view.show()
+    qtbot.waitExposed(view)
+    view.refresh()
+    qapp.processEvents()
+    canvas, plot = view.plots, view.residual_plot
+    box = plot.getViewBox()
+    assert not box.readout.isVisible()
+    point = _at(canvas, plot)
+    qtbot.wait(20)
+    QTest.mouseMove(canvas.viewport(), point)
+    qtbot.waitUntil(lambda: box.readout.isVisible(), timeout=2000)
+    t = box.mapSceneToView(canvas.mapToScene(point)).x()
+    x, y = view.residual_curve.getData()
+    i = int(np.argmin(np.abs(x - t)))
+    assert box.readout.textItem.toPlainText() == f"t = {x[i]:.3f} s: {y[i]:.4g} mm"
+    lift = view.lift_plot.getViewBox()
+    qtbot.wait(20)
+    QTest.mouseMove(canvas.viewport(), _at(canvas, view.lift_plot))
+    qtbot.waitUntil(lambda: lift.readout.isVisible(), timeout=2000)
+    assert lift.readout.textItem.toPlainText().endswith("s1 0, s2 0")  # no lifts in the sim
+    assert not box.readout.isVisible()  # the mouse left the residual plot
+    qtbot.wait(20)
+    QTest.mouseMove(view.table.viewport(), QPoint(5, 5))  # off the plots
+    qtbot.waitUntil(lambda: not lift.readout.isVisible(), timeout=2000)

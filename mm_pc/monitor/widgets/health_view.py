@@ -29,6 +29,7 @@ have no grid: with a grid, pyqtgraph's software paint took ~20 ms here.
 
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -49,7 +50,7 @@ from mm_pc.monitor.context import MonitorContext
 from mm_pc.monitor.model.chips import chip_key, chip_title, quality_label, quality_threshold
 from mm_pc.monitor.model.outages import OutageFinder, with_breaks
 from mm_pc.monitor.model.peak_decimator import PeakDecimator, bucket_peak
-from mm_pc.monitor.widgets.plot_habits import TimePlotBox
+from mm_pc.monitor.widgets.plot_habits import HoverText, TimePlotBox, nearest_value
 from mm_pc.monitor.widgets.style import ROBOT_COLOUR, sensor_colour
 
 __all__ = ["DIAG_COLUMNS", "LEVEL_COLOURS", "HealthView"]
@@ -238,7 +239,31 @@ class HealthView(QWidget):
     def _box(self) -> TimePlotBox:
         box = TimePlotBox(page_scroll=True)
         box.on_reset = self.reset_view
+        box.readout = HoverText(box)
+        box.on_hover = lambda t, b=box: self._hover(b, t)
         return box
+
+    def _hover(self, box: TimePlotBox, t: float | None) -> None:
+        """The values of the plot under the mouse at time ``t`` (s; None: it left)."""
+        if t is None:
+            box.readout.show_text("")
+            return
+        if box is self.residual_plot.getViewBox():
+            named = [("", self.residual_curve, "mm")]
+        elif box is self.lift_plot.getViewBox():
+            named = [(f"s{k + 1} ", c, "") for k, c in enumerate(self.lift_curves)]
+        else:
+            named = [(f"s{k + 1} ", c, "") for k, c in enumerate(self.quality_curves)]
+        parts, at = [], None
+        for name, curve, unit in named:
+            x, y = curve.getData()
+            tx, v = nearest_value(x, y, t)
+            if math.isnan(tx):
+                continue
+            at = tx
+            value = "no data" if math.isnan(v) else f"{v:.4g}"
+            parts.append(f"{name}{value}{' ' + unit if unit else ''}")
+        box.readout.show_text(f"t = {at:.3f} s: {', '.join(parts)}" if parts else "")
 
     def reset_view(self) -> None:
         """A double-click on a plot: every plot shows all its data again."""

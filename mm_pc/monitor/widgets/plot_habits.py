@@ -6,6 +6,8 @@ rqt_plot.
 * A double-click resets the view (what "reset" means is the owner's: :attr:`on_reset`).
 * A plot in a page that scrolls (the Health tab) leaves the plain wheel to the page: it
   zooms time with Ctrl held, the value axis with Ctrl+Shift.
+* Hovering reads values out: :attr:`TimePlotBox.on_hover` is told the time under the
+  mouse (None when it leaves); :class:`HoverText` shows a text in the plot's corner.
 
 The owner may take a time zoom itself (:attr:`TimePlotBox.on_time_zoom`: the live Graphs
 change their window length instead, so they stay live). Wheel steps scale a range by
@@ -14,14 +16,16 @@ change their window length instead, so they stay live). Wheel steps scale a rang
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
+import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import QPoint, QPointF, Qt
 from PySide6.QtGui import QWheelEvent
 from PySide6.QtWidgets import QAbstractScrollArea, QApplication, QGraphicsView
 
-__all__ = ["TimePlotBox", "wheel_axis", "wheel_scale"]
+__all__ = ["HoverText", "TimePlotBox", "nearest_value", "wheel_axis", "wheel_scale"]
 
 VALUE_MODIFIERS = Qt.KeyboardModifier.ControlModifier | Qt.KeyboardModifier.ShiftModifier
 
@@ -58,6 +62,16 @@ class TimePlotBox(pg.ViewBox):
         self.on_time_zoom: Callable[[float], bool] | None = None
         self.on_value_zoom: Callable[[], None] | None = None
         self.on_reset: Callable[[], None] | None = None
+        self.on_hover: Callable[[float | None], None] | None = None
+        self.setAcceptHoverEvents(True)
+
+    def hoverEvent(self, ev) -> None:  # noqa: N802 - pyqtgraph API
+        if self.on_hover is None:
+            return
+        if ev.isExit():
+            self.on_hover(None)
+        else:
+            self.on_hover(float(self.mapToView(ev.pos()).x()))
 
     def wheelEvent(self, ev, axis=None) -> None:  # noqa: N802 - Qt API
         if axis is None:
@@ -110,3 +124,29 @@ class TimePlotBox(pg.ViewBox):
                 self.enableAutoRange()
             return
         super().mouseClickEvent(ev)
+
+
+def nearest_value(x: np.ndarray | None, y: np.ndarray | None, t: float) -> tuple[float, float]:
+    """(time, value) of the point of the curve ``x, y`` nearest to ``t`` (NaN, NaN: none)."""
+    if x is None or y is None or not len(x):
+        return math.nan, math.nan
+    i = int(np.clip(np.searchsorted(x, t), 0, len(x) - 1))
+    if i > 0 and abs(x[i - 1] - t) < abs(x[i] - t):
+        i -= 1
+    return float(x[i]), float(y[i])
+
+
+class HoverText(pg.TextItem):
+    """A text in the top-left corner of a ViewBox (screen position, not data), hidden
+    while empty: what the mouse reads out of the plot."""
+
+    def __init__(self, vb: pg.ViewBox) -> None:
+        super().__init__("", color="#222222", fill=pg.mkBrush(255, 255, 255, 215), anchor=(0, 0))
+        self.setParentItem(vb)
+        self.setPos(4, 2)
+        self.setZValue(100)
+        self.hide()
+
+    def show_text(self, text: str) -> None:
+        self.setText(text)
+        self.setVisible(bool(text))
