@@ -629,8 +629,8 @@ class MonitorSession:
                 processed: list[tuple[float, float]]) -> list[tuple[float, float]]:
         """Each sensor's (vx, vy) (m/s): its displacements of the rows within
         SPEED_WINDOW_S before ``t`` (this one included) over the time its own newest-poll
-        stamps moved on over them (``dt``, the row's, where a sensor's stamp is unknown
-        or did not move)."""
+        stamps moved on over them (the rows' ``dt``, sensor 0's, when they did not move
+        at all in the window)."""
         stamps = [r.stamp_ns for r in now]
         last = self._speed_stamps if len(self._speed_stamps) == len(now) else stamps
         own = [max(s1 - s0, 0) / 1e9 for s1, s0 in zip(stamps, last, strict=True)]
