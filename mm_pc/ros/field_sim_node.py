@@ -365,6 +365,19 @@ class FieldSimNode(Node):
 
 
 def _run(node: FieldSimNode, stop) -> None:
+    # the replay paces itself on this thread; another serves the node's services meanwhile
+    # (its parameter services went unanswered: ``ros2 param get /field_sim`` waited forever)
+    served = threading.Event()
+    spinner = threading.Thread(target=ros_spin.spin_until, args=(node, served), daemon=True)
+    spinner.start()
+    try:
+        _replay(node, stop)
+    finally:
+        served.set()
+        spinner.join(5.0)
+
+
+def _replay(node: FieldSimNode, stop) -> None:
     if not node.wait_for_listeners(stop) and not stop.is_set():
         node.get_logger().warning(
             f"fewer than {node.p['wait_for_subscribers']} subscribers after "

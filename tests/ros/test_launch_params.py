@@ -93,3 +93,52 @@ def test_mm_beagle_starts_from_a_launch_ros_file_with_a_list(tmp_path):
             proc.send_signal(signal.SIGINT)
         rc = proc.wait(scaled(30))
     assert rc == 0, "".join(lines)
+
+
+@pytest.mark.ros
+def test_mm_field_sim_answers_its_parameter_services_while_it_replays(tmp_path):
+    """``ros2 param get /field_sim ...`` during fusion.launch.py field_sim:=true waited for
+    ever (found with the real ros2cli): the replay ran on the only thread and nothing served
+    the node's services. Now list/get answer, and a read-only parameter is refused."""
+    import rclpy
+    from rcl_interfaces.srv import GetParameters, ListParameters, SetParameters
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+
+    from mm_pc.ros.field_sim_node import PARAMETERS
+
+    cmd = [sys.executable, "-m", "mm_pc.ros.field_sim_node", "--ros-args",
+           "-r", "__ns:=/mm_params_fs", "-p", "seed:=7", "-p", "speed:=1.0"]  # fmt: skip
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            env=isolated_ros_env())  # fmt: skip
+    ctx = Context()
+    rclpy.init(context=ctx)
+    node = rclpy.create_node("mm_params_fs_client", context=ctx)
+    executor = SingleThreadedExecutor(context=ctx)
+    executor.add_node(node)
+
+    def ask(srv_type, service: str, request):
+        client = node.create_client(srv_type, f"/mm_params_fs/field_sim/{service}")
+        assert client.wait_for_service(timeout_sec=scaled(30)), f"{service} not offered"
+        future = client.call_async(request)
+        executor.spin_until_future_complete(future, timeout_sec=scaled(10))
+        assert future.done(), f"{service} not answered within 10 s (the replay is running)"
+        return future.result()
+
+    try:
+        listed = ask(ListParameters, "list_parameters", ListParameters.Request()).result.names
+        assert set(PARAMETERS) <= set(listed)
+        got = ask(GetParameters, "get_parameters", GetParameters.Request(names=["seed"]))
+        assert [v.integer_value for v in got.values] == [7]
+        refused = ask(SetParameters, "set_parameters", SetParameters.Request(
+            parameters=[Parameter("seed", value=8).to_parameter_msg()])).results  # fmt: skip
+        assert not refused[0].successful and "read-only" in refused[0].reason
+        assert proc.poll() is None  # still replaying
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        ctx.try_shutdown()
+        proc.send_signal(signal.SIGINT)
+        rc = proc.wait(scaled(30))
+    assert rc == 0
