@@ -29,6 +29,11 @@ class Diagnostics:
         self.errors = [(0, 0)] * n  # (spi_errors, overflows) at the last round
         self.stamps = [0] * n  # newest poll seen by the last round (ns)
         self.overruns = 0
+        # re-initialisations seen (None: not yet) and the sum of reset-loss estimates
+        self.reinits: list[int | None] = [None] * n
+        self.reset_seq = [0] * n  # a ring seq before the outage being looked for
+        self.resets = [0] * n
+        self.reset_loss = [(0.0, 0.0)] * n  # counts x, y
 
     def set_period(self, seconds: float) -> None:
         """A new ``diagnostics_period`` (live parameter)."""
@@ -78,6 +83,7 @@ class Diagnostics:
                 else float("nan")
             )
             assessed = self._assess(i, t, last, rate, overruns_grew, now_ns)
+            reset = self._reset(i, t, last)
             level, text, values = health.sensor_status(
                 r,
                 node.chips[i],
@@ -87,6 +93,7 @@ class Diagnostics:
                 assessed,
                 node.down_message(i),
                 self.errors[i],
+                reset,
             )
             self.errors[i] = (t.spi_errors, t.overflows)
             status = messages.diagnostic(self._status_name(dev), dev, LEVELS[level], text, values)
@@ -116,6 +123,42 @@ class Diagnostics:
         if t.state != ss.STATE_UP or (remote and (not len(stamps) or dropped)):
             gap = health.Gap(0.0, 0.0, 0.0)  # the link's own values say what is late there
         return health.assess(rate, cfg.poll_rate, overruns_grew, gap, t.cpi_y)
+
+    def _reset(self, i, t, last) -> tuple[str, dict[str, object]]:
+        """health.reset_report of a re-initialisation of sensor ``i`` since the previous
+        round (text ''), once OUTAGE_WINDOW good polls after it are in the ring; the running
+        count and sum of the estimates as values either way.
+
+        The first bring-up is no reset; a sensor up again after a power cycle, a glitch
+        the health check caught or lost contact is. Its outage is the longest time
+        between good polls from a little before the previous round's newest poll."""
+        seen = self.reinits[i]
+        text, values = "", {}
+        if seen is None or (seen == 0 and t.reinits):  # the first bring-up
+            self.reinits[i] = t.reinits
+        elif t.reinits > seen and t.state == ss.STATE_UP:
+            try:
+                _f, _n, _d, arr = self.node.poller.state.samples(i, self.reset_seq[i], 0)
+            except ss.PollerBusyError:
+                arr = None
+            out = None
+            if arr is not None:
+                out = health.outage_estimate(arr["stamp_ns"], arr["dx"], arr["dy"], arr["flags"])
+            if out is not None and out.n_after >= health.OUTAGE_WINDOW:
+                self.reinits[i] = t.reinits
+                self.resets[i] += t.reinits - seen
+                x, y = self.reset_loss[i]
+                self.reset_loss[i] = (x + out.x, y + out.y)
+                text, values = health.reset_report(out, t.cpi_y, self.resets[i])
+        if self.reinits[i] == t.reinits or t.state != ss.STATE_UP:
+            # the next outage is looked for from here (with the window before it)
+            self.reset_seq[i] = max(0, t.seq - health.OUTAGE_WINDOW - 8)
+        if self.resets[i]:
+            x, y = self.reset_loss[i]
+            values["sensor_resets"] = self.resets[i]
+            values["est_reset_loss_total_x_counts"] = f"{x:.0f}"
+            values["est_reset_loss_total_y_counts"] = f"{y:.0f}"
+        return text, values
 
     def publish_stuck(self) -> None:
         """ERROR per sensor when no snapshot can be had (the poller stopped mid-write)."""
