@@ -421,11 +421,17 @@ class RemoteAgent:
             (int(np.frombuffer(b.ints, np.int64)[ss.I_STAMP_NS]) for b in batch.blocks if b.count),
             default=0,
         )
+        clock = (self._offset_ns, self._offset_t)
         if newest:  # before applying: the very first polls get an offset too
             self._clock(recv_ns, newest)
-        for block in batch.blocks:
+        for k, block in enumerate(batch.blocks):
             before = self.next_agent[block.index]
-            self._apply(block, fetch_gaps=True)
+            try:
+                self._apply(block, fetch_gaps=True)
+            except Refused:
+                if k == 0:  # nothing of it applied: its stamp must not move the clock either
+                    self._offset_ns, self._offset_t = clock
+                raise
             self._seq_reference(block, before, now)
             if not self.origin_ns and np.frombuffer(block.ints, np.int64)[ss.I_STAMP_NS] > 0:
                 self.origin_ns = int(self.state.ints[block.index][ss.I_STAMP_NS])

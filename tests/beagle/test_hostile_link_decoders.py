@@ -142,16 +142,26 @@ def test_the_drop_log_says_one_line_per_kind_and_reason_per_interval():
     assert log.drop("polls", "x") is not None and log.counts["polls"] == 1 and log.total == 102
 
 
-def frame(boot: int, number: int, first: int, dy: list[int], y_before: int) -> bytes:
+def frame(
+    boot: int, number: int, first: int, dy: list[int], y_before: int, ahead_ns: int = 0
+) -> bytes:
     blocks = []
     for i in (0, 1):
         ints = np.zeros(ss.N_INT, np.int64)
         ints[ss.I_SEQ] = first + len(dy)
         ints[ss.I_Y_TOTAL] = y_before + sum(dy)
         ints[ss.I_STATE] = ss.STATE_UP
-        ints[ss.I_STAMP_NS] = time.time_ns()
+        ints[ss.I_STAMP_NS] = time.time_ns() + ahead_ns
         k = len(dy)
-        fields = ([time.time_ns()] * k, [0] * k, dy, [0] * k, [1600] * k, [0] * k, [100] * k)
+        fields = (
+            [time.time_ns() + ahead_ns] * k,
+            [0] * k,
+            dy,
+            [0] * k,
+            [1600] * k,
+            [0] * k,
+            [100] * k,
+        )
         arrays = tuple(np.array(f, dt).tobytes() for f, dt in zip(fields, RING_DTYPES, strict=True))
         blocks.append(link.Block(i, first, k, ints.tobytes(), bytes(8 * ss.N_FLOAT), arrays))
     return link.encode_batch(boot, number, bytes(8 * ss.N_GLOBAL), blocks)
@@ -231,3 +241,15 @@ def test_the_depth_check_is_linear_and_needs_no_memory(payload):
     link.json_depth_ok(payload, 8)
     assert time.perf_counter() - t0 < 0.5
     assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before < 4096  # kB
+
+
+def test_a_refused_block_does_not_move_the_clock_offset():
+    """A forged block stamped an hour ahead would have set the offset estimate (the
+    smallest delay) an hour back for every later poll, even though it was refused."""
+    remote = RemoteAgent(PollerConfig(devices=[S0, S1], ring_size=4096))
+    feed(remote, "status", status(boot_id=77))
+    feed(remote, "polls", frame(77, 1, 0, [1, 2, 3], 0))
+    feed(remote, "polls", frame(77, 2, 3, [4, 5], 6))
+    offset = remote._offset_ns
+    feed(remote, "polls", frame(77, 3, 5, [1], 15 + 10**6, ahead_ns=3600 * 10**9))
+    assert remote.refused == 1 and abs(remote._offset_ns - offset) < 50_000_000
