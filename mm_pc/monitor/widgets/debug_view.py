@@ -42,13 +42,17 @@ from mm_pc.core.frames import counts_to_m
 from mm_pc.core.polls import FLAG_LIFT, FLAG_LOW_QUALITY
 from mm_pc.core.sensor_data import Reply
 from mm_pc.monitor.context import MonitorContext
-from mm_pc.monitor.widgets.style import ERROR_STYLE
+from mm_pc.monitor.widgets.style import ERROR_STYLE, sensor_axis_colour
 
 __all__ = ["MAX_POLLS_PER_FETCH", "DebugView", "ManualSample"]
 
 MAX_POLLS_PER_FETCH = 2000
 SENSOR_FIELDS = ("dX (counts)", "dY (counts)", "dX (mm)", "dY (mm)", "polls", "interval (ms)")
-PENS = (("#1f77b4", "#aec7e8"), ("#d62728", "#ff9896"), ("#2ca02c", "#98df8a"))
+
+
+def _pen(k: int, axis: str) -> str:
+    """Sensor ``k``'s colour (as on every other tab) for its "dX" or "dY" curve."""
+    return sensor_axis_colour(k, "x" if axis == "dX" else "y")
 
 
 @dataclass(frozen=True)
@@ -106,14 +110,15 @@ class DebugView(QWidget):
 
         self.plots = pg.GraphicsLayoutWidget()
         self.plots.setBackground("w")
-        self.request_plot = self.plots.addPlot(row=0, col=0, title="Manual requests")
+        # each legend in its own row above its plot: inside the plot it covered the data
+        self.request_legend = self._legend_row(0)
+        self.request_plot = self.plots.addPlot(row=1, col=0, title="Manual requests")
         self.request_plot.setLabel("left", "counts")
         self.request_plot.setLabel("bottom", "request #")
-        self.request_plot.addLegend(offset=(10, 5))
-        self.poll_plot = self.plots.addPlot(row=1, col=0, title="Single 1 kHz polls")
+        self.poll_legend = self._legend_row(2)
+        self.poll_plot = self.plots.addPlot(row=3, col=0, title="Single 1 kHz polls")
         self.poll_plot.setLabel("left", "counts per poll")
         self.poll_plot.setLabel("bottom", "time since first poll", units="s")
-        self.poll_plot.addLegend(offset=(10, 5))
         self.request_curves: dict[tuple[str, str], pg.PlotDataItem] = {}
         self.poll_curves: dict[tuple[str, str], pg.PlotDataItem] = {}
 
@@ -297,12 +302,19 @@ class DebugView(QWidget):
 
     # -- drawing ------------------------------------------------------------------------------
 
+    def _legend_row(self, row: int) -> pg.LegendItem:
+        """A legend laid out in ``row`` of the plots (one line, as many columns as curves)."""
+        legend = pg.LegendItem(colCount=4, labelTextColor="#222222")
+        self.plots.addItem(legend, row=row, col=0)
+        return legend
+
     def _curve(self, plot, curves, key, pen) -> pg.PlotDataItem:
         curve = curves.get(key)
         if curve is None:
             short = key[0].rsplit("/", 1)[-1]
-            curve = plot.plot(pen=pg.mkPen(pen, width=1), name=f"{short} {key[1]}",
-                              symbol="o", symbolSize=5, symbolBrush=pen, symbolPen=None)
+            curve = plot.plot(pen=pg.mkPen(pen, width=1), symbol="o", symbolSize=5,
+                              symbolBrush=pen, symbolPen=None)
+            self.request_legend.addItem(curve, f"{short} {key[1]}")
             curves[key] = curve
         return curve
 
@@ -313,15 +325,13 @@ class DebugView(QWidget):
         t0 = min(stamps)
         for k, (dev, res) in enumerate(self.polls.items()):
             t = (np.asarray(res.stamp_ns, dtype=np.int64) - t0) / 1e9
-            for axis, values, pen in zip(
-                ("dX", "dY"), (res.dx, res.dy), PENS[k % len(PENS)], strict=True
-            ):
+            for axis, values in (("dX", res.dx), ("dY", res.dy)):
                 curve = self.poll_curves.get((dev, axis))
                 if curve is None:
                     short = dev.rsplit("/", 1)[-1]
-                    curve = self.poll_plot.plot(
-                        pen=pg.mkPen(pen, width=1), name=f"{short} {axis}", stepMode="right"
-                    )
+                    curve = self.poll_plot.plot(pen=pg.mkPen(_pen(k, axis), width=1),
+                                                stepMode="right")
+                    self.poll_legend.addItem(curve, f"{short} {axis}")
                     self.poll_curves[(dev, axis)] = curve
                 curve.setData(t, np.asarray(values, dtype=float))
 
@@ -339,10 +349,9 @@ class DebugView(QWidget):
         self._drawn = len(self.samples)
         x = np.arange(1, len(self.samples) + 1)
         for k, dev in enumerate(self.devices):
-            pens = PENS[k % len(PENS)]
             for i, axis in enumerate(("dX", "dY")):
                 y = [s.sensors.get(dev, (0, 0))[i] for s in self.samples]
-                self._curve(self.request_plot, self.request_curves, (dev, axis), pens[i]) \
+                self._curve(self.request_plot, self.request_curves, (dev, axis), _pen(k, axis)) \
                     .setData(x, np.asarray(y, dtype=float))
 
     def request_data(self, device: str, axis: str) -> tuple[np.ndarray, np.ndarray]:
