@@ -89,6 +89,252 @@ def cpu_figures(cpu_s: float, wall_s: float, replies: int) -> dict:
     }
 
 
+#: the heartbeat's period (ms) and the gap that counts as a stall (ms): a GUI thread busy
+#: for longer than this is a freeze the user sees (issue 29 item 6)
+HEARTBEAT_MS = 10
+STALL_MS = 100.0
+#: the actions of the stall phase, in order (see :func:`_stalls`)
+STALL_ACTIONS = ("tabs_500hz", "simulate_mowing_run", "csv_export", "png_export", "replay")
+
+
+class _Heartbeat:
+    """A 10 ms QTimer on the GUI thread: the gap between two ticks is how long the thread
+    could not run it (a stall). ``gaps_ms``: every gap since :meth:`start`."""
+
+    def __init__(self) -> None:
+        from PySide6.QtCore import Qt, QTimer
+
+        self.timer = QTimer()
+        self.timer.setTimerType(Qt.PreciseTimer)
+        self.timer.setInterval(HEARTBEAT_MS)
+        self.timer.timeout.connect(self._tick)
+        self.gaps_ms: list[float] = []
+        self._last = 0.0
+
+    def start(self) -> None:
+        self.gaps_ms = []
+        self._last = time.perf_counter()
+        self.timer.start()
+
+    def _tick(self) -> None:
+        now = time.perf_counter()
+        self.gaps_ms.append((now - self._last) * 1e3)
+        self._last = now
+
+    def stop(self) -> dict:
+        """Stop; {"longest_ms", "count_over_100ms", "ticks"} of the gaps since start."""
+        self.timer.stop()
+        self._tick()  # the time since the last tick counts as well
+        return stall_figures(self.gaps_ms)
+
+
+def stall_figures(gaps_ms) -> dict:
+    """The longest gap (ms) and how many gaps exceed :data:`STALL_MS`."""
+    gaps = list(gaps_ms)
+    return {
+        "longest_ms": round(max(gaps), 1) if gaps else 0.0,
+        "count_over_100ms": sum(1 for g in gaps if g > STALL_MS),
+        "ticks": len(gaps),
+    }
+
+
+def _run_loop(app, seconds: float, done=None) -> bool:
+    """The real Qt event loop for at most ``seconds`` (ends early once ``done()`` holds);
+    True if ``done`` held (or there is none)."""
+    from PySide6.QtCore import QEventLoop, QTimer
+
+    loop = QEventLoop()
+    deadline = time.perf_counter() + seconds
+    check = QTimer()
+    check.setInterval(20)
+
+    def poll() -> None:
+        if (done is not None and done()) or time.perf_counter() >= deadline:
+            loop.quit()
+
+    check.timeout.connect(poll)
+    check.start()
+    loop.exec()
+    check.stop()
+    return done is None or bool(done())
+
+
+def _stalls(window, bridge, app, tmp: Path, actions=STALL_ACTIONS, sim_timeout_s=180.0) -> dict:
+    """The longest GUI-thread stall during each action, as a user does them.
+
+    The window runs its real event loop with its 30 Hz frame timer (the bridge at 500 Hz
+    when there is one) and a :class:`_Heartbeat`; each action is started from the event
+    loop and the loop runs until it is over:
+
+    * ``tabs_500hz``: every tab in turn, 0.3 s each, twice;
+    * ``simulate_mowing_run``: Maps tab, "Simulate mowing run" clicked, until the run is
+      shown (``sim_build_s``: how long the user waits);
+    * ``csv_export``: the Data tab's Export CSV of the first sensor (every row);
+    * ``png_export``: File > Export view as PNG of every tab;
+    * ``replay``: a 30 s recording at 100 Hz read in the background and replayed at 10x,
+      then Back to live.
+
+    Returns {"longest_ms", "count_over_100ms", "by_action": {action: figures}, ...}.
+    """
+    from PySide6.QtCore import QTimer
+
+    heart = _Heartbeat()
+    by_action: dict[str, dict] = {}
+    extra: dict = {}
+    if bridge is not None:
+        bridge.set_rate(500.0)
+    window.frame_timer.start()
+    _run_loop(app, 1.0)  # settle at the new rate
+
+    def measure(name: str, start, done, timeout_s: float) -> None:
+        heart.start()
+        t0 = time.perf_counter()
+        QTimer.singleShot(0, start)
+        ok = _run_loop(app, timeout_s, done)
+        _run_loop(app, 0.3)  # what the action leaves behind (a last repaint)
+        by_action[name] = {**heart.stop(), "seconds": round(time.perf_counter() - t0, 2)}
+        if not ok:
+            by_action[name]["error"] = f"not done within {timeout_s:g} s"
+
+    for name in actions:
+        prepare = _ACTIONS.get(name)
+        if prepare is None:
+            raise ValueError(f"unknown stall action {name!r}")
+        start, done, timeout_s, after = prepare(window, app, tmp, extra)
+        if start is None:
+            by_action[name] = {"error": "nothing to do"}
+            continue
+        measure(name, start, done, timeout_s)
+        after()
+    window.frame_timer.stop()
+    every = [a for a in by_action.values() if "longest_ms" in a]
+    return {
+        "longest_ms": max((a["longest_ms"] for a in every), default=0.0),
+        "count_over_100ms": sum(a["count_over_100ms"] for a in every),
+        "heartbeat_ms": HEARTBEAT_MS,
+        "stall_ms": STALL_MS,
+        "by_action": by_action,
+        **extra,
+        "load_avg_1min": round(os.getloadavg()[0], 2),
+    }
+
+
+def _tab_switches(window, app, tmp, extra):
+    """Every tab in turn, 0.3 s each, twice."""
+    from PySide6.QtCore import QTimer
+
+    tabs, n, total = window.tabs, [0], 2 * window.tabs.count()
+    timer = QTimer()
+    timer.setInterval(300)
+
+    def switch() -> None:
+        tabs.setCurrentIndex(n[0] % tabs.count())
+        n[0] += 1
+        if n[0] >= total:
+            timer.stop()
+
+    timer.timeout.connect(switch)
+    return timer.start, lambda: n[0] >= total, 0.3 * total + 5, lambda: extra.update(
+        tab_switches=n[0]
+    )
+
+
+def _show_tab(window, app, title: str):
+    view = window.views[title]
+    window.tabs.setCurrentIndex(window.tabs.indexOf(view.parentWidget().parentWidget()))
+    _run_loop(app, 0.3)
+    return view
+
+
+def _simulate(window, app, tmp, extra):
+    """Maps tab, "Simulate mowing run" clicked, until the run is shown."""
+    maps = _show_tab(window, app, "Maps")
+    t0 = [0.0]
+
+    def start() -> None:
+        t0[0] = time.perf_counter()
+        maps.sim_button.click()
+
+    def after() -> None:
+        extra["sim_build_s"] = round(time.perf_counter() - t0[0] - 0.3, 1)
+
+    return start, lambda: maps._job is None and maps.run is not None, 180.0, after
+
+
+def _csv_export(window, app, tmp, extra):
+    """The Data tab's Export CSV of the first sensor (every row)."""
+    data = _show_tab(window, app, "Data")
+    if not data.tables:
+        return None, None, 0.0, None
+    table, out, started = data.tables[0], tmp / "export.csv", [False]
+
+    def start() -> None:
+        table.export_to(out)
+        started[0] = True
+
+    return (start, lambda: started[0] and _export_done(table), 120.0,
+            lambda: extra.update(csv_rows=_csv_rows(out)))  # fmt: skip
+
+
+def _png_export(window, app, tmp, extra):
+    """File > Export view as PNG of every tab, each looked at first."""
+    from mm_pc.monitor.export import export_current_view
+
+    tabs, n = window.tabs, [0]
+
+    def start() -> None:
+        for i in range(tabs.count()):
+            tabs.setCurrentIndex(i)
+            app.processEvents()
+            export_current_view(window, str(tmp / f"tab{i}.png"))
+            n[0] += 1
+
+    return start, lambda: n[0] >= tabs.count(), 60.0, lambda: None
+
+
+def _replay(window, app, tmp, extra):
+    """A 30 s recording at 100 Hz read in the background, replayed at 10x, Back to live."""
+    from mm_pc.monitor.io.mcap_writer import McapRecorder
+    from mm_pc.monitor.model.sim_feed import sim_replies
+    from mm_pc.monitor.replay import leave_replay, load_in_background
+
+    path = tmp / "replay.mcap"
+    recorder = McapRecorder(path, rate_hz=100.0)
+    for r in sim_replies("figure_eight", 100.0, 30.0):
+        recorder.write_reply(r)
+    recorder.close()
+    window.tabs.setCurrentIndex(0)
+
+    def over() -> bool:
+        rep = getattr(window, "replayer", None)
+        return rep is not None and rep.done
+
+    return (lambda: load_in_background(window, path, 10.0, dialog=False), over, 60.0,
+            lambda: leave_replay(window))  # fmt: skip
+
+
+_ACTIONS = {
+    "tabs_500hz": _tab_switches,
+    "simulate_mowing_run": _simulate,
+    "csv_export": _csv_export,
+    "png_export": _png_export,
+    "replay": _replay,
+}
+
+
+def _export_done(table) -> bool:
+    """The export said its result beside the button (a background export when it is done)."""
+    return bool(table.message.text()) and "writing" not in table.message.text()
+
+
+def _csv_rows(path: Path) -> int:
+    try:
+        with open(path, "rb") as f:
+            return sum(1 for _ in f) - 1
+    except OSError:
+        return -1
+
+
 def _rss_mb() -> float:
     import psutil
 
@@ -189,6 +435,7 @@ def bench_gui(
     live_seconds: float = 10.0,
     polls: str = "reply",
     executor: str = "events",
+    stalls: bool = True,
 ) -> dict:
     """Run the GUI benchmark (see the module doc); a JSON-ready dict.
 
@@ -201,7 +448,9 @@ def bench_gui(
     (:data:`LIVE_RATES_HZ`, with the node; 0 = none); ``polls``: how the bridge gets
     the single polls, ``reply`` (inside the get_sensor_data reply, one round trip) or
     ``get_samples`` (one more call per sensor, the fallback for an older node);
-    ``executor``: the bridge's rclpy executor (:data:`~mm_pc.monitor.ros_bridge.EXECUTORS`).
+    ``executor``: the bridge's rclpy executor (:data:`~mm_pc.monitor.ros_bridge.EXECUTORS`);
+    ``stalls``: then the longest GUI-thread stalls during the user's heavy actions
+    (:func:`_stalls`, ``stalls`` in the JSON).
     """
     from mm_pc.monitor.ros_bridge import EXECUTORS, validate_rate
 
@@ -249,6 +498,8 @@ def bench_gui(
             result["live_executor"] = bridge.executor
             result["live_poll_fetches"] = bridge.poll_fetches  # get_samples calls, whole run
             result["goal_live_cpu_percent"] = GOAL_LIVE_CPU_PERCENT
+        if stalls:
+            result["stalls"] = _stalls(window, bridge, app, tmp)
     return result
 
 
