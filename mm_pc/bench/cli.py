@@ -33,6 +33,12 @@ mm-bench chips [--polls N] --json
     process: with a constant-reply stub (driver + poller only) and with the
     chip's emulator. See mm_beagle.tools.bench_chips.
 
+mm-bench soak [--minutes N] [--sample-seconds S] --json
+    The board chain for N minutes (30): agent on emulated sensors, node in backend:=remote,
+    one 100 Hz client; RSS of agent and node every S s (10), their least-squares slope
+    after the warm-up (MB/min; flat: |slope| < 0.05), counts served vs generated.
+    See mm_pc.bench.soak.
+
 mm-bench poll --seconds S [--clients N] [--rate HZ] [--cursor ack|shared] --json
     mm-beagle on emulated sensors (separate process) while N (2) client
     processes call get_sensor_data at HZ (100; 0 = flat out) each. Reports the
@@ -410,6 +416,10 @@ def main(argv: list[str] | None = None) -> int:
     chips = sub.add_parser("chips", help="CPU per poll of each chip's driver in the poller")
     chips.add_argument("--polls", type=int, default=20000)
     chips.add_argument("--json", action="store_true", help="print JSON only (the default)")
+    soak = sub.add_parser("soak", help="agent + remote node + a 100 Hz client: RSS slope")
+    soak.add_argument("--minutes", type=float, default=30.0, help="length of the run (min)")
+    soak.add_argument("--sample-seconds", type=float, default=10.0, help="RSS sample period")
+    soak.add_argument("--json", action="store_true", help="print JSON only (the default)")
     args = parser.parse_args(argv)
     if args.what == "chips":
         from mm_beagle.tools.bench_chips import bench_chips
@@ -423,6 +433,12 @@ def main(argv: list[str] | None = None) -> int:
         if not args.seconds >= 1 or args.drops < 0 or not args.drop_seconds > 0:
             parser.error("need --seconds >= 1, --drops >= 0, --drop-seconds > 0")
         result = bench_agent(args.seconds, args.drops, args.drop_seconds)
+    elif args.what == "soak":
+        from mm_pc.bench.soak import bench_soak
+
+        if not 0.1 <= args.minutes <= 1440 or not 0.5 <= args.sample_seconds <= 600:
+            parser.error("need 0.1 <= --minutes <= 1440 and 0.5 <= --sample-seconds <= 600")
+        result = bench_soak(args.minutes, args.sample_seconds)
     elif args.what == "gui":
         from mm_pc.bench.gui import bench_gui
 
