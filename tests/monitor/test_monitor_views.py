@@ -460,7 +460,7 @@ def test_registers_and_resolution_disabled_offline(qtbot, make_ctx):
     ("text", "message"),
     [
         ("junk", r"whole number, got 'junk' \(Philips PLN2033 allows 100\.\.6400 in steps of 100"),
-        ("", r"CPI must be a whole number, got ''"),
+        ("", r"the CPI field is empty: type a whole number \(Philips PLN2033 allows"),
         ("0", r"CPI 0 is out of range \(Philips PLN2033 allows 100\.\.6400"),
         ("50", r"CPI 50 is out of range"),
         ("6500", r"CPI 6500 is out of range"),

@@ -37,10 +37,12 @@ from mm_pc.monitor.widgets.style import ERROR_STYLE
 __all__ = ["FilterDialog", "parse_window"]
 
 
-
 def parse_window(text: str) -> int:
     """A window typed by the user -> samples (int, 1..999); ValueError with the range otherwise."""
     t = text.strip()
+    if not t:
+        raise ValueError(f"median window is empty: type an integer number of samples in "
+                         f"{MIN_WINDOW}..{MAX_WINDOW}")
     try:
         value: object = int(t)
     except ValueError:

@@ -83,6 +83,8 @@ class LogDialog(QDialog):
         clear.clicked.connect(self.clear)
         copy = QPushButton("Copy all")
         copy.clicked.connect(self.copy_all)
+        for button in (clear, copy):  # Enter must not press one (it emptied the log)
+            button.setAutoDefault(False)
         self.count = QLabel("")
         bar = QHBoxLayout()
         for w in (self.auto_scroll, self.pause_box, clear, copy):

@@ -78,6 +78,8 @@ def validate_cpi(value, allowed: CpiRange | None = None, chip: str = "") -> int:
         allowed = cpi_range(chip)
     title = chip_title(chip)
     what = f"{title} allows {allowed.describe()}" if allowed else "the node checks the range"
+    if not text:
+        raise ValueError(f"the CPI field is empty: type a whole number ({what})")
     try:
         cpi = int(text)
     except ValueError:
@@ -286,6 +288,7 @@ class ResolutionPanel(QGroupBox):
         for row in self.rows.values():
             if row.error_at is not None and now - row.error_at > ERROR_SHOW_S:
                 self._set_error(row, "")
+
     def refresh(self) -> None:
         """Show the CPI of the newest history row (cheap: only when it changed); an error
         older than ERROR_SHOW_S goes."""

@@ -121,10 +121,13 @@ class NewMapDialog(QDialog):
         form.addRow(self.fill_error)
         buttons = QDialogButtonBox(QDialogButtonBox.StandardButton.Cancel)
         self.create_button = buttons.addButton("Create", QDialogButtonBox.ButtonRole.AcceptRole)
-        self.create_button.setDefault(True)
         buttons.accepted.connect(self.apply)
         buttons.rejected.connect(self.reject)
         form.addRow(buttons)
+        # Enter = Create (a refusal keeps the dialog open); set once inside the dialog, and
+        # Cancel never default (before, Enter with a bad field closed the dialog silently)
+        buttons.button(QDialogButtonBox.StandardButton.Cancel).setAutoDefault(False)
+        self.create_button.setDefault(True)
         self._fill_changed()
 
     @property
