@@ -157,7 +157,12 @@ class FusionNode(Node):
         self.get_logger().info(
             f"fusing {', '.join(self.inputs) or 'nothing'}; start pose {x0}; publishing "
             f"{self.get_fully_qualified_name()}/odom and /path in frame {self.frame('map_frame')}"
-            + (f", TF {self.frame('map_frame')} -> odom" if p["publish_tf"] else "")
+            + (
+                f", TF {self.frame('map_frame')} -> the mouse odometry's frame"
+                f" (its header.frame_id, e.g. {prefixed(p['frame_prefix'], 'odom')})"
+                if p["publish_tf"]
+                else ""
+            )
         )
 
     def frame(self, name: str) -> str:

@@ -182,7 +182,8 @@ def test_two_robots_with_frame_prefixes_share_tf_without_colliding(tmp_path, ros
     assert odom_pose("r2") == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)
     for r in ROBOTS:
         assert f"TF {r}/odom -> {r}/base_link" in logs[f"{r} odometry"], logs[f"{r} odometry"]
-        assert f"TF {r}/map -> odom" in logs[f"{r} fusion"], logs[f"{r} fusion"]
+        assert f"TF {r}/map -> the mouse odometry's frame" in logs[f"{r} fusion"]
+        assert f"e.g. {r}/odom)" in logs[f"{r} fusion"], logs[f"{r} fusion"]
 
 
 def test_remapping_tf_per_namespace_keeps_two_robots_apart(tmp_path, ros_command):
