@@ -15,7 +15,12 @@ Two outputs:
   CPI (:data:`EFFECTIVE_CPI`). No count is lost or doubled whatever the poll rate, as
   long as the sensor moves less than 10 m (the int16 position range) between two reads.
   These counts are fused (optical + accelerometer, SparkFun's velocity lookup table), not
-  raw optical counts: docs/sensors.md (OTOS section) says so.
+  raw optical counts: docs/sensors.md (OTOS section) says so. They follow the chip's
+  own integration within a bound, not exactly: the firmware truncates position (0.305
+  mm) and heading (pi/32768 rad) to their LSB, so a total is off by < 2 position LSB (24
+  counts) plus < 9.6e-5 x the distance travelled (the heading's LSB turning every step;
+  +-45 counts after 12 m), whatever the fraction the driver keeps
+  (tests/beagle/test_power_cycle_otos.py pins the bound over 40 s).
 - :meth:`OTOS.read_pose` / :attr:`OTOS.last_pose` -- the on-chip pose and velocity, for a
   second nav_msgs/Odometry.
 

@@ -33,8 +33,8 @@ FAULT_AT, FAULT_S = 1.0, 2.5  # s after the bring-up
 #: |estimate - true loss| allowed: 0.3 % of the loss + 10 counts (measured: PLN2033 8 of
 #: 56 750, PMW3360 0 of 57 694, OTOS 87 of 42 850 y counts: the OTOS's steps of 12-36 counts)
 REL_TOL = 0.003
-#: the OTOS's counts follow its fused, quantised on-chip position (0.305 mm per LSB = 12
-#: counts, and its Kalman filter's lag): totals within this of the true motion (counts)
+#: the OTOS's counts follow its truncated position and heading registers: totals within
+#: this of the true motion (counts; the bound's terms: tests/beagle/test_power_cycle_otos.py)
 OTOS_BOUND = 30
 
 
