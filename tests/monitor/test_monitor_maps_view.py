@@ -341,8 +341,7 @@ def test_simulate_button_draws_beacons_circles_gps_and_paths(qtbot, run):
     assert float(shown[2]) < float(shown[1])
     # the grid comes from the TRUE path
     ref = mm.sim_map(view.run)
-    for x, y in sim.truth[:, :2]:
-        ref.update(float(x), float(y))
+    mm.feed_positions(ref, sim.truth[:, 0], sim.truth[:, 1], mm.SIM_CUT_WIDTH)
     np.testing.assert_array_equal(view.sim_map.codes, ref.codes)
     assert_image_shows(view, view.sim_map)
     assert np.count_nonzero(ref.codes == MOWED) > 500

@@ -24,6 +24,7 @@ __all__ = [
     "FILLS",
     "MAX_CELLS",
     "MAX_SIDE_CELLS",
+    "SIM_CUT_WIDTH",
     "MapSettings",
     "SimRun",
     "build_sim_run",
@@ -40,6 +41,10 @@ FILLS = {"lawn": "all lawn (unmowed)", "unknown": "all unknown", "rectangle": "p
 MAX_SIDE_CELLS = 4000
 MAX_CELLS = 4_000_000  # 16 MB of image, 8 MB of codes
 SIM_MARGIN_M = 1.5  # the simulated run's map reaches this far beyond the plot
+#: the simulated mower's cutting width (m): as wide as its lanes are apart
+#: (mm_pc.sim.field_run.LANE_SPACING), so a whole run mows the whole plot. Fed as its
+#: centre alone (one 0.3 m cell per 1 m lane) the map stayed two thirds unmowed.
+SIM_CUT_WIDTH = 1.0
 _CIRCLE = np.linspace(0.0, 2.0 * math.pi, 73)
 
 
@@ -86,7 +91,7 @@ def make_map(settings: MapSettings) -> CoverageMap:
 
 
 def feed_positions(
-    cmap: CoverageMap, x: np.ndarray, y: np.ndarray
+    cmap: CoverageMap, x: np.ndarray, y: np.ndarray, width: float = 0.0
 ) -> tuple[list[tuple[int, int, int]], UpdateResult | None]:
     """Feed a path (x, y m, map frame) to ``cmap``; (changed cells in order, last result).
 
@@ -94,6 +99,11 @@ def feed_positions(
     before (and the last row) are passed to :meth:`CoverageMap.update`: a row in
     the same cell changes nothing there. The cell index uses the map's own
     arithmetic, ``floor((x - x0) / s)``. The result is None when no row was finite.
+
+    ``width`` > 0 (m): a cutting deck that wide, across the direction of travel, mows
+    too: at each such row the points across it (at most half a cell apart) are fed
+    before the centre, so the cells under the deck end mowed and the mower is shown at
+    the centre.
     """
     x = np.asarray(x, dtype=float)
     y = np.asarray(y, dtype=float)
@@ -112,10 +122,30 @@ def feed_positions(
     step[-1] = True
     changed: list[tuple[int, int, int]] = []
     result = None
-    for i in np.flatnonzero(step).tolist():
+    rows = np.flatnonzero(step)
+    across = _deck_offsets(width, s)
+    for n, i in enumerate(rows.tolist()):
+        if across.size and rows.size > 1:
+            j, k = (rows[n - 1], i) if n else (i, rows[1])
+            dx, dy = x[k] - x[j], y[k] - y[j]
+            norm = math.hypot(dx, dy)
+            if norm > 0:
+                for off in across:  # the deck's points, left of travel to right
+                    r = cmap.update(float(x[i] - dy / norm * off), float(y[i] + dx / norm * off))
+                    changed.extend(r.changed)
         result = cmap.update(float(x[i]), float(y[i]))
         changed.extend(result.changed)
     return changed, result
+
+
+def _deck_offsets(width: float, cell: float) -> np.ndarray:
+    """Offsets (m, left of travel positive) across a deck of ``width``, at most half a
+    cell apart, both edges included, without the centre; empty for no width."""
+    if not width > 0:
+        return np.empty(0)
+    n = math.ceil(width / (cell / 2)) + 1
+    offsets = np.linspace(width / 2, -width / 2, n)
+    return offsets[np.abs(offsets) > 1e-9]
 
 
 # --- the simulated run ---------------------------------------------------------------------

@@ -53,6 +53,7 @@ from mm_pc.core.maps.coverage_map import (
     UpdateResult,
 )
 from mm_pc.monitor.model.maps import (
+    SIM_CUT_WIDTH,
     MapSettings,
     SimRun,
     circles,
@@ -538,7 +539,8 @@ class MapsView(QWidget):
             return
         truth = run.sim.truth
         lo = max(self.sim_k, 0)
-        changed, _ = feed_positions(self.sim_map, truth[lo : k + 1, 0], truth[lo : k + 1, 1])
+        changed, _ = feed_positions(self.sim_map, truth[lo : k + 1, 0], truth[lo : k + 1, 1],
+                                    SIM_CUT_WIDTH)
         self.sim_k = k
         self._play_t = max(self._play_t, float(run.sim.t[k]))
         if self.source == "sim":
