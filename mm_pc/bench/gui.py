@@ -262,14 +262,16 @@ def _simulate(window, app, tmp, extra):
 
 
 def _csv_export(window, app, tmp, extra):
-    """The Data tab's Export CSV of the first sensor (every row)."""
+    """The Data tab's Export CSV of the first sensor (every row), as its button does it
+    (:meth:`~mm_pc.monitor.widgets.data_list.SensorTable.export_in_background` where the
+    table has it, else at once)."""
     data = _show_tab(window, app, "Data")
     if not data.tables:
         return None, None, 0.0, None
     table, out, started = data.tables[0], tmp / "export.csv", [False]
 
     def start() -> None:
-        table.export_to(out)
+        getattr(table, "export_in_background", table.export_to)(out)
         started[0] = True
 
     return (start, lambda: started[0] and _export_done(table), 120.0,

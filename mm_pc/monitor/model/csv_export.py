@@ -16,7 +16,8 @@ import numpy as np
 from mm_pc.monitor.model.history import History
 from mm_pc.monitor.model.session import sensor_columns
 
-__all__ = ["COLUMNS", "CSV_DECIMALS", "CSV_HEADER", "column_name", "export_csv"]
+__all__ = ["COLUMNS", "CSV_DECIMALS", "CSV_HEADER", "column_name", "csv_columns", "export_csv",
+           "write_csv_columns"]
 
 #: (header with unit, field: "t" or a sensor field, scale from SI, format)
 COLUMNS: tuple[tuple[str, str, float, str], ...] = (
@@ -69,6 +70,12 @@ def export_csv(history: History | None, sensor_index: int, path: str | Path) -> 
     a sensor the history does not have (no file written), OSError when the
     file cannot be written.
     """
+    return write_csv_columns(csv_columns(history, sensor_index), path)
+
+
+def csv_columns(history: History | None, sensor_index: int) -> list[np.ndarray]:
+    """The export's columns of one sensor, copied in display units (the history may grow
+    meanwhile: the copies can be written on another thread); ValueError as :func:`export_csv`."""
     if history is None:
         raise ValueError("no data yet: nothing to export")
     names = [column_name(sensor_index, f) for _h, f, _s, _f in COLUMNS]
@@ -76,11 +83,15 @@ def export_csv(history: History | None, sensor_index: int, path: str | Path) -> 
     if sensor_index < 0 or missing:
         sensors = sum(1 for c in history.columns if c.endswith("_cpi"))
         raise ValueError(f"no sensor {sensor_index!r} in the history; sensors: 0..{sensors - 1}")
-    cols = [history.column(n) * scale for n, (_h, _f, scale, _fmt) in zip(names, COLUMNS,
-                                                                          strict=True)]
+    return [history.column(n) * scale for n, (_h, _f, scale, _fmt) in zip(names, COLUMNS,
+                                                                           strict=True)]
+
+
+def write_csv_columns(cols: list[np.ndarray], path: str | Path) -> int:
+    """Write the columns of :func:`csv_columns` as CSV (header first); returns the rows."""
     with open(path, "w", newline="") as fh:
         out = csv.writer(fh)
         out.writerow(CSV_HEADER)
         out.writerows(zip(*(_csv_values(c, d) for c, d in zip(cols, CSV_DECIMALS, strict=True)),
                           strict=True))
-    return len(history)
+    return len(cols[0])

@@ -7,18 +7,29 @@ process (no copy of the GUI's Qt or rclpy state) and hands the result back
 through a pipe, pickled (~2.8 MB for seed 1). The GUI polls :meth:`SimJob.poll`
 from its timer (never blocks) and may :meth:`SimJob.cancel` (the process is
 terminated).
+
+The child lowers its own priority (``os.nice`` by :data:`CHILD_NICE`): on a 2-core PC
+it otherwise took a core the window needed, and the window's event loop stalled up to
+1.5 s at a load of 5 while the run was built (issue 29). How long a build takes is in
+docs/user-guide.md (measured by ``mm-bench gui``, ``stalls.sim_build_s``).
 """
 
 from __future__ import annotations
 
 import multiprocessing
+import os
 import time
+from contextlib import suppress
 
-__all__ = ["SimJob", "build_in_child"]
+__all__ = ["CHILD_NICE", "SimJob", "build_in_child", "lower_priority"]
+
+#: how much the child lowers its priority (a nice increment): the window comes first
+CHILD_NICE = 10
 
 
 def build_in_child(seed: int, conn) -> None:
     """The child's work: build the run for ``seed`` and send ("ok", run) or ("error", text)."""
+    lower_priority()
     try:
         from mm_pc.monitor.model.maps import build_sim_run
 
@@ -27,6 +38,12 @@ def build_in_child(seed: int, conn) -> None:
         conn.send(("error", f"{type(e).__name__}: {e}"))
     finally:
         conn.close()
+
+
+def lower_priority() -> None:
+    """Lower this process's priority by :data:`CHILD_NICE` (nothing where there is no nice)."""
+    with suppress(OSError, AttributeError):  # no os.nice (Windows): the same run, unniced
+        os.nice(CHILD_NICE)
 
 
 class SimJob:
@@ -55,7 +72,12 @@ class SimJob:
             return None
         try:
             if not self._recv.poll():
-                return None
+                if self.process.exitcode is None:
+                    return None
+                # a child that died before taking its end of the pipe (spawn hands it over
+                # through a helper thread of this process) never closes it: no EOF comes
+                if not self._recv.poll(0.1):
+                    raise EOFError
             result = self._recv.recv()
         except (EOFError, OSError):
             self.process.join(1.0)

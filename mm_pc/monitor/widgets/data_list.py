@@ -10,9 +10,10 @@ inserted at the top, so a selection stays on the rows it was made on.
 from __future__ import annotations
 
 import math
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
-from PySide6.QtCore import QAbstractTableModel, QEvent, QModelIndex, Qt, Signal
+from PySide6.QtCore import QAbstractTableModel, QEvent, QModelIndex, Qt, QTimer, Signal
 from PySide6.QtGui import QGuiApplication, QKeySequence
 from PySide6.QtWidgets import (
     QAbstractItemView,
@@ -28,7 +29,13 @@ from PySide6.QtWidgets import (
 )
 
 from mm_pc.monitor.model.chips import chip_title
-from mm_pc.monitor.model.csv_export import COLUMNS, column_name, export_csv
+from mm_pc.monitor.model.csv_export import (
+    COLUMNS,
+    column_name,
+    csv_columns,
+    export_csv,
+    write_csv_columns,
+)
 from mm_pc.monitor.settings import last_folder, remember_folder
 from mm_pc.monitor.widgets.style import ERROR_STYLE
 
@@ -274,18 +281,58 @@ class SensorTable(QWidget):
         )  # fmt: skip
         if path:
             remember_folder("csv", path)
-            self.export_to(path)
+            self.export_in_background(path)
 
     def export_to(self, path: str | Path) -> bool:
-        """Export this sensor's rows; the result or the error is shown beside the button."""
+        """Export this sensor's rows now; the result or the error is shown beside the button."""
         try:
             n = export_csv(self.ctx.session.history, self.sensor_index, path)
         except (OSError, ValueError) as e:
+            return self._exported(path, e)
+        return self._exported(path, n)
+
+    def export_in_background(self, path: str | Path) -> Future | None:
+        """Export this sensor's rows without holding the window: the columns are copied here
+        (~10 ms for an hour), the file is written on a worker thread (an hour of 100 Hz
+        rows took ~0.6 s on the GUI thread, a freeze); the button is disabled meanwhile and
+        the result shown beside it when done. None (the error shown) when there is no data."""
+        try:
+            cols = csv_columns(self.ctx.session.history, self.sensor_index)
+        except ValueError as e:
+            self._exported(path, e)
+            return None
+        pool = ThreadPoolExecutor(1, thread_name_prefix="mm-csv-export")
+        future = pool.submit(write_csv_columns, cols, path)
+        pool.shutdown(wait=False)
+        self.export_button.setEnabled(False)
+        self.message.setStyleSheet("")
+        self.message.setText(f"writing {len(cols[0])} rows to {path} …")
+        timer = QTimer(self)
+
+        def check() -> None:
+            if not future.done():
+                return
+            timer.stop()
+            timer.deleteLater()
+            self.export_button.setEnabled(True)
+            try:
+                self._exported(path, future.result())
+            except OSError as e:
+                self._exported(path, e)
+
+        timer.timeout.connect(check)
+        timer.start(50)
+        self.export_future = future
+        return future
+
+    def _exported(self, path, result: int | Exception) -> bool:
+        """Show the export's row count or error beside the button; True if written."""
+        if isinstance(result, Exception):
             self.message.setStyleSheet(ERROR_STYLE)
-            self.message.setText(f"export failed: {e}")
+            self.message.setText(f"export failed: {result}")
             return False
         self.message.setStyleSheet("")
-        self.message.setText(f"{n} rows written to {path}")
+        self.message.setText(f"{result} rows written to {path}")
         return True
 
 

@@ -1,0 +1,15 @@
+"""Child functions for the SimJob priority test (importable by a spawn-started process)."""
+
+from __future__ import annotations
+
+import os
+
+from mm_pc.monitor.model import sim_process
+
+
+def report_niceness(seed: int, conn) -> None:
+    """What build_in_child does first (lower its priority), then send the niceness."""
+    before = os.nice(0)
+    sim_process.lower_priority()
+    conn.send(("ok", (before, os.nice(0))))
+    conn.close()

@@ -1,0 +1,117 @@
+"""The fixes for GUI-thread stalls (issue 29 item 6), functional: what each one does, not how
+fast (the timing lives in ``mm-bench gui``'s ``stalls`` figure)."""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import time
+
+import pytest
+from PySide6.QtCore import QTimer
+
+from mm_pc.bench.gui import STALL_MS, _Heartbeat, stall_figures
+from mm_pc.monitor.context import MonitorContext
+from mm_pc.monitor.model import sim_process
+from mm_pc.monitor.model.csv_export import export_csv
+from mm_pc.monitor.model.session import MonitorSession
+from mm_pc.monitor.widgets.data_list import DataListView
+
+
+def test_stall_figures_count_the_gaps_over_100_ms():
+    assert stall_figures([10.0, 10.2, 150.0, 99.9, 100.1]) == {
+        "longest_ms": 150.0, "count_over_100ms": 2, "ticks": 5,
+    }  # fmt: skip
+    assert stall_figures([]) == {"longest_ms": 0.0, "count_over_100ms": 0, "ticks": 0}
+    assert STALL_MS == 100.0
+
+
+def test_the_heartbeat_sees_a_blocked_gui_thread(qtbot):
+    beat = _Heartbeat()
+    beat.start()
+    QTimer.singleShot(50, lambda: time.sleep(0.25))  # the GUI thread busy for 250 ms
+    qtbot.wait(500)
+    figures = beat.stop()
+    assert figures["count_over_100ms"] == 1
+    assert 250.0 <= figures["longest_ms"] < 1000.0
+    assert figures["ticks"] >= 10  # it ticked around the block
+
+
+def test_csv_export_in_background_writes_what_export_to_writes(qtbot, tmp_path, feed):
+    ctx = MonitorContext(MonitorSession())
+    feed(ctx, name="figure_eight", rate_hz=100.0, seconds=20.0)
+    view = DataListView(ctx)
+    qtbot.addWidget(view)
+    table = view.tables[0]
+    n = len(ctx.session.history)
+    out = tmp_path / "bg.csv"
+    future = table.export_in_background(out)
+    # the columns were copied at once: the window goes on and rows may arrive meanwhile
+    assert table.message.text() == f"writing {n} rows to {out} …"
+    assert not table.export_button.isEnabled()
+    qtbot.waitUntil(lambda: table.export_button.isEnabled(), timeout=20_000)
+    assert future.result() == n
+    assert table.message.text() == f"{n} rows written to {out}"
+    assert export_csv(ctx.session.history, 0, tmp_path / "now.csv") == n
+    assert out.read_text() == (tmp_path / "now.csv").read_text()
+
+
+def test_csv_export_in_background_says_why_it_failed(qtbot, tmp_path, feed):
+    ctx = MonitorContext(MonitorSession())
+    feed(ctx, name="figure_eight", rate_hz=100.0, seconds=1.0)
+    view = DataListView(ctx)
+    qtbot.addWidget(view)
+    table = view.tables[0]
+    table.export_in_background(tmp_path / "missing_dir" / "x.csv")
+    qtbot.waitUntil(lambda: table.export_button.isEnabled(), timeout=20_000)
+    assert table.message.text().startswith("export failed:")
+    assert "No such file or directory" in table.message.text()
+    assert not (tmp_path / "missing_dir").exists()
+
+
+def test_csv_export_in_background_without_data_writes_nothing(qtbot, tmp_path):
+    ctx = MonitorContext(MonitorSession())
+    view = DataListView(ctx)
+    qtbot.addWidget(view)
+    view._build(("/a", "/b"))
+    table = view.tables[0]
+    assert table.export_in_background(tmp_path / "x.csv") is None
+    assert table.message.text() == "export failed: no data yet: nothing to export"
+    assert table.export_button.isEnabled() and not (tmp_path / "x.csv").exists()
+
+
+@pytest.mark.skipif(not hasattr(os, "nice"), reason="no os.nice here")
+def test_the_simulation_child_runs_at_a_lower_priority():
+    import stall_children
+
+    job = sim_process.SimJob(1, target=stall_children.report_niceness)
+    deadline = time.monotonic() + 30
+    result = None
+    while result is None and time.monotonic() < deadline:
+        result = job.poll()
+        time.sleep(0.02)
+    assert result is not None and result[0] == "ok"
+    before, after = result[1]
+    assert after == min(19, before + sim_process.CHILD_NICE)
+
+
+def test_a_child_that_died_without_closing_the_pipe_is_reported():
+    import sim_children
+
+    job = sim_process.SimJob(3, target=sim_children.hang)
+    # a writing end still open elsewhere (as spawn's fd hand-over keeps one when the child
+    # dies before taking it): no EOF will ever come
+    recv, keep_open = multiprocessing.Pipe(duplex=False)
+    job._recv.close()
+    job._recv = recv
+    job.process.kill()
+    job.process.join(5)
+    deadline = time.monotonic() + 10
+    result = None
+    while result is None and time.monotonic() < deadline:
+        result = job.poll()
+        time.sleep(0.02)
+    keep_open.close()
+    assert result is not None and result[0] == "error"
+    assert "ended without a result" in result[1] and "exit code -9" in result[1]
+    assert job.done and job.poll() is None
