@@ -17,10 +17,11 @@ Two outputs:
   These counts are fused (optical + accelerometer, SparkFun's velocity lookup table), not
   raw optical counts: docs/sensors.md (OTOS section) says so. They follow the chip's
   own integration within a bound, not exactly: the firmware truncates position (0.305
-  mm) and heading (pi/32768 rad) to their LSB, so a total is off by < 2 position LSB (24
-  counts) plus < 9.6e-5 x the distance travelled (the heading's LSB turning every step;
-  +-45 counts after 12 m), whatever the fraction the driver keeps
-  (tests/beagle/test_power_cycle_otos.py pins the bound over 40 s).
+  mm) and heading (pi/32768 rad) toward zero. The driver takes each register at the
+  middle of its LSB (``_centred``), so a total is off by <= 1 position LSB (12 counts)
+  plus <= 4.8e-5 x the distance travelled (half the heading's LSB turning every step);
+  taken as read, the heading's mean error was a drift across the motion (0.5 LSB x the
+  distance: 71 counts after 36 m). tests/beagle/test_power_cycle_otos.py pins the bound.
 - :meth:`OTOS.read_pose` / :attr:`OTOS.last_pose` -- the on-chip pose and velocity, for a
   second nav_msgs/Odometry.
 
@@ -128,6 +129,14 @@ def invert_pose(p: Pose) -> Pose:
     """The inverse transform of ``p`` (as the firmware's invertPose in pose2d.cpp)."""
     c, s = math.cos(p.h), math.sin(p.h)
     return Pose(-p.x * c - p.y * s, p.x * s - p.y * c, -p.h)
+
+
+def _centred(value: float, lsb: float) -> float:
+    """A register value truncated toward zero by the firmware, moved to the middle of the
+    LSB it stands for (0 stays 0: the truth is within one LSB either side). Halves the
+    worst error and removes the mean one, which the heading's would turn into a drift
+    across the motion (0.5 LSB x the distance)."""
+    return value + 0.5 * lsb if value > 0 else value - 0.5 * lsb if value < 0 else value
 
 
 class OTOS:
@@ -468,7 +477,11 @@ class OTOS:
         status = rx[0]
         reading = self._decode_pose(rx[1:], self.clock(), status)
         pose = reading.pose
-        sx, sy, sh = self._host_to_self(pose.x, pose.y, pose.h)
+        sx, sy, sh = self._host_to_self(
+            _centred(pose.x, regs.POS_M_PER_LSB),
+            _centred(pose.y, regs.POS_M_PER_LSB),
+            _centred(pose.h, regs.HEADING_RAD_PER_LSB),
+        )
         quality = (
             QUALITY_WARN
             if status & (regs.STATUS_WARN_OPTICAL | regs.STATUS_ERROR_PAA)

@@ -3,20 +3,22 @@
 The OTOS gives no counts, only its position (0.305 mm per LSB) and heading (pi/32768 rad
 per LSB) registers, both truncated toward zero by its firmware; the driver turns the change
 of position into sensor-frame counts at 1000 CPI by the heading it reads, keeping the
-fraction (:meth:`pln2033.otos.driver.OTOS.read_motion`). So the counts cannot follow the
-emulator's own counter exactly:
+fraction (:meth:`pln2033.otos.driver.OTOS.read_motion`), each register taken at the middle
+of its LSB. So the counts cannot follow the emulator's own counter exactly:
 
-* the position's truncation at the first and the newest read: < 1 LSB each, so < 2 LSB
-  (24.0 counts) per axis, not growing;
-* the heading's truncation (< 1 LSB) turns every step by up to 9.6e-5 rad: at most
-  9.6e-5 x the distance travelled (counts) across the axes, growing with the distance
-  (0.3 m/s for 40 s: 12 m = 472 000 counts, <= 45 counts);
+* the position's truncation at the first and the newest read: <= 0.5 LSB each once
+  centred, so <= 1 LSB (12.0 counts) per axis, not growing;
+* the heading's (<= 0.5 LSB once centred) turns every step by up to 4.8e-5 rad: at most
+  4.8e-5 x the distance travelled (counts) across the axes (0.3 m/s for 40 s: 12 m =
+  472 000 counts, <= 23 counts); taken as read (truncated) it was a drift of about
+  0.5 LSB x the distance: 28 counts after 40 s, 71 after 120 s;
 * one count for the fraction kept and the truth's rounding from 20 000 to 1000 CPI.
 
-:func:`otos_bound` is that sum. Measured (this file, 40 s): straight at 0.1/0.3 m/s x 28,
-y 12 counts off; figure eight 22 / 8; with 74 lifts -13 / +24 against the emulator's counts
-less those a lift cleared (the counts the issue saw "lost" with lifts: the emulator counted
-them, the lift cleared them before the 2.4 ms update; they are in ``sim_lift_lost``).
+:func:`otos_bound` is that sum. Measured (this file's runs, 40 s, max over the seconds):
+straight at 0.1/0.3 m/s x 6, y 8 counts off (120 s: 7 / 8); figure eight 7 / 8; with 74
+lifts +3 / -7 against the emulator's counts less those a lift cleared (the counts the issue
+saw "lost" with lifts: the emulated PAA counted them, the lift cleared them before the
+firmware's 2.4 ms update read them; they are in ``sim_lift_lost``, as every chip's are).
 """
 
 from __future__ import annotations
@@ -42,7 +44,7 @@ POS_LSB_COUNTS = regs.POS_M_PER_LSB * EFFECTIVE_CPI / INCH_M  # 12.01 counts
 
 def otos_bound(distance_counts: float) -> float:
     """|OTOS total - emulator counts| per axis after ``distance_counts`` of travel."""
-    return 2 * POS_LSB_COUNTS + regs.HEADING_RAD_PER_LSB * distance_counts + 1
+    return POS_LSB_COUNTS + 0.5 * regs.HEADING_RAD_PER_LSB * distance_counts + 1
 
 
 def figure_eight() -> SampledPath:
