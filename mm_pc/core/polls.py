@@ -14,8 +14,14 @@ mask, and whether it is a **gap** step. The pose is then integrated step by step
 (:meth:`mm_pc.core.odometry.Odometry.integrate`), so the request rate changes only
 how often the pose is shown, never the pose (docs/pose-math.md, "Per-poll integration").
 
-Pairing: the poller polls every sensor in one tick with the same stamp (ns, system
-clock), so the polls of one tick share ``stamp_ns``. Reads that are not polls (a
+Pairing: the poller polls the sensors of one tick one after the other, each poll stamped
+with its own read time (ns, system clock; an older poller stamped all of a tick alike).
+A poll of sensor i read at most :data:`MAX_READ_SKEW_NS` after sensor 0's belongs to
+that tick (:func:`snap_to_ticks`); the step's stamp is sensor 0's. Each later sensor's
+displacement is then moved back to sensor 0's read time by :func:`deskew` (its own
+velocity times its read delay): without it ``two-sensor`` read the heading from the two
+sensors ~0.1 ms apart, a yaw bias of delay x speed / spacing (1.3 mm per 10 m at
+0.5 m/s through the real processes, docs/pose-math.md). Reads that are not polls (a
 settings read for a command, flag 16, or the drain before a CPI change) carry a stamp
 of their own; their counts are added to the same sensor's next tick (counts are never
 dropped). Polls of one sensor in ticks the other sensor has no poll for (it was down)
@@ -106,6 +112,55 @@ LIFT_CONTEXT_POLLS = 64
 
 #: Shortest step (s) handed to the integrator (a command's read shares its tick's time).
 MIN_DT_S = 1e-6
+
+#: Longest a later sensor's read may follow sensor 0's in one poller tick (ns): the
+#: poller reads them one after the other (~0.1 ms apart in Python), longer when the
+#: loop was preempted between them; a later read is a tick of its own (a gap).
+MAX_READ_SKEW_NS = 20_000_000
+
+
+def snap_to_ticks(ticks: np.ndarray, stamps: np.ndarray, flags: np.ndarray) -> np.ndarray:
+    """``stamps`` (ns) of one sensor's polls moved onto the tick stamps ``ticks`` (sensor
+    0's polls, ascending): each poll onto the last tick at or before it, less than
+    :data:`MAX_READ_SKEW_NS` before, and only the first poll onto one tick (a second is
+    one of a tick sensor 0 missed: it keeps its stamp and is folded as before). Command
+    reads keep their own stamp."""
+    if not len(ticks) or not len(stamps):
+        return stamps
+    j = np.searchsorted(ticks, stamps, side="right") - 1
+    jj = np.maximum(j, 0)
+    ok = (j >= 0) & (stamps - ticks[jj] < MAX_READ_SKEW_NS)
+    ok &= (flags & FLAG_COMMAND_READ) == 0
+    idx = np.flatnonzero(ok)
+    if len(idx) > 1:
+        ok[idx[1:][jj[idx[1:]] == jj[idx[:-1]]]] = False
+    return np.where(ok, ticks[jj], stamps)
+
+
+def deskew(d: np.ndarray, delay_ns: np.ndarray, dt_s: np.ndarray, carry: np.ndarray,
+           prev_delay: np.ndarray) -> np.ndarray:  # fmt: skip
+    """Displacements of steps read ``delay_ns`` after their tick, moved to the tick's time.
+
+    ``d``: (k, n, 2) m; ``delay_ns``: (k, n) each sensor's read after the tick's stamp;
+    ``dt_s``: (k,) the steps' lengths; ``carry``: (n, 2) what the previous step moved and
+    ``prev_delay``: (n,) its delays (both updated in place). The cumulative displacement
+    at a tick is the one read less delay x velocity (the step's own: its ``d`` over the
+    sensor's own read interval), so each step gives back the previous step's share:
+    nothing is lost and the error stays bounded.
+    """
+    if not delay_ns.any() and not carry.any():
+        prev_delay[:] = 0
+        return d
+    before = np.concatenate([prev_delay[None, :], delay_ns[:-1]])
+    own = np.maximum(dt_s[:, None] * 1e9 + delay_ns - before, 1.0)
+    r = np.clip(delay_ns / own, 0.0, 1.0)
+    moved = d * r[:, :, None]
+    out = d - moved
+    out[0] += carry
+    out[1:] += moved[:-1]
+    carry[:] = moved[-1]
+    prev_delay[:] = delay_ns[-1]
+    return out
 
 
 class SensorTotals(NamedTuple):
@@ -267,28 +322,34 @@ _FIELDS = ("stamp_ns", "dt", "d", "counts", "lifted", "gap")
 class _Pending:
     """One sensor's polls received but not yet turned into steps."""
 
-    stamp: np.ndarray
+    stamp: np.ndarray  # the tick's stamp (after :func:`snap_to_ticks`)
     dx: np.ndarray
     dy: np.ndarray
     flags: np.ndarray
     cpi: int = 0
+    raw: np.ndarray | None = None  # the stamps as read (this sensor's own read time)
 
     @classmethod
     def empty(cls) -> _Pending:
         z = np.empty(0, np.int64)
-        return cls(z, z, z, z)
+        return cls(z, z, z, z, 0, z)
 
     def add(self, b: PollBatch) -> None:
         self.stamp = np.concatenate([self.stamp, b.stamp_ns])
+        self.raw = np.concatenate([self.raw_stamps, b.stamp_ns])
         self.dx = np.concatenate([self.dx, b.dx])
         self.dy = np.concatenate([self.dy, b.dy])
         self.flags = np.concatenate([self.flags, b.flags])
         if len(b):
             self.cpi = b.cpi
 
+    @property
+    def raw_stamps(self) -> np.ndarray:
+        return self.stamp if self.raw is None else self.raw
+
     def drop(self, k: int) -> None:
-        self.stamp, self.dx, self.dy, self.flags = (
-            a[k:] for a in (self.stamp, self.dx, self.dy, self.flags)
+        self.stamp, self.dx, self.dy, self.flags, self.raw = (
+            a[k:] for a in (self.stamp, self.dx, self.dy, self.flags, self.raw_stamps)
         )
 
 
@@ -341,6 +402,8 @@ class PollTracker:
         self._pending = [_Pending.empty() for _ in range(self.n)]
         self._ctx_counts = np.zeros((0, self.n, 2), np.int64)
         self._ctx_lifted = np.zeros((0, self.n), bool)
+        self._carry = np.zeros((self.n, 2))  # :func:`deskew`'s share not yet given back
+        self._delay = np.zeros(self.n)  # the read delays (ns) of the last step
 
     def _check_totals(self, totals: Sequence[SensorTotals]) -> None:
         if len(totals) != self.n:
@@ -459,11 +522,14 @@ class PollTracker:
             return None
         kk = len(first)
         counts = np.empty((kk, n, 2), np.int64)
+        delay = np.zeros((kk, n), np.int64)
         for i, c in enumerate(cols):
-            if i and not np.array_equal(stamps[i], first):
+            flags = np.concatenate([b.flags for b in c])
+            if (flags & (self._unseen[i] | FLAG_COMMAND_READ)).any():
                 return None
-            if (np.concatenate([b.flags for b in c]) & (self._unseen[i] | FLAG_COMMAND_READ)).any():
+            if i and not np.array_equal(snap_to_ticks(first, stamps[i], flags), first):
                 return None
+            delay[:, i] = stamps[i] - first
             counts[:, i, 0] = np.concatenate([b.dx for b in c])
             counts[:, i, 1] = np.concatenate([b.dy for b in c])
         ends = list(itertools.accumulate(lens))
@@ -502,7 +568,7 @@ class PollTracker:
         lifted = np.zeros((kk, n), bool)
         self._ctx_counts = np.concatenate([self._ctx_counts, counts])[-LIFT_CONTEXT_POLLS:]
         self._ctx_lifted = np.concatenate([self._ctx_lifted, lifted])[-LIFT_CONTEXT_POLLS:]
-        d = counts.astype(float) * scale
+        d = deskew(counts.astype(float) * scale, delay, dt, self._carry, self._delay)
         return PollSteps(first, dt, d, counts, lifted, np.zeros(kk, bool)), ends
 
     def _why_not_usable(self, totals, polls) -> str:
@@ -551,6 +617,8 @@ class PollTracker:
                 gx += t.x_est_m - self._est_ref[i][0]
                 gy += t.y_est_m - self._est_ref[i][1]
             d[0, i] = gx, gy
+        d[0] += self._carry  # the read-delay share held back by the last steps
+        self._carry[:], self._delay[:] = 0.0, 0.0
         stamp = max(t.stamp_ns for t in totals)
         dt = max((stamp - self._last_stamp) / 1e9, MIN_DT_S)
         self.gaps += 1
@@ -620,6 +688,10 @@ class PollTracker:
         pend = self._pending
         if any(len(p.stamp) == 0 for p in pend):
             return PollSteps.empty(self.n)
+        p0 = pend[0]
+        ticks0 = p0.raw_stamps[(p0.flags & FLAG_COMMAND_READ) == 0]
+        for p in pend[1:]:  # each later sensor's polls onto sensor 0's ticks
+            p.stamp = snap_to_ticks(ticks0, p.raw_stamps, p.flags)
         same = self._same_ticks(pend)
         if same is not None:
             ticks, counts, lifted, folded, used = same
@@ -631,6 +703,12 @@ class PollTracker:
         cut = self._ready(lifted)
         if cut == 0:
             return PollSteps.empty(self.n)
+        delay = np.zeros((cut, self.n), np.int64)
+        for i, p in enumerate(pend):  # read delays: taken before they leave the pending lists
+            if i:
+                pos = np.minimum(np.searchsorted(p.stamp, ticks[:cut]), len(p.stamp) - 1)
+                own = p.stamp[pos] == ticks[:cut]
+                delay[:, i] = np.where(own, p.raw_stamps[pos] - ticks[:cut], 0)
         # polls up to the last tick taken leave the pending lists
         for i, p in enumerate(pend):
             m = int(np.searchsorted(p.stamp, ticks[cut - 1], side="right")) if cut < k else used[i]
@@ -644,10 +722,10 @@ class PollTracker:
             ]
         filled = self._fill(counts, lifted, cut)
         scale = np.array([INCH_M / max(p.cpi, 1) for p in pend])
-        d = filled * scale[None, :, None]
         stamps = ticks[:cut]
         prev = np.concatenate([[self._last_stamp], stamps[:-1]])
         dt = np.maximum((stamps - prev) / 1e9, MIN_DT_S)
+        d = deskew(filled * scale[None, :, None], delay, dt, self._carry, self._delay)
         self._last_stamp = int(stamps[-1])
         for i in range(self.n):
             self._emitted_m[i][0] += float(counts[:cut, i, 0].sum() * scale[i])
