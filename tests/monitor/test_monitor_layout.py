@@ -122,7 +122,12 @@ def _combo_problem(box: QComboBox) -> str | None:
 
 
 def _line_edit_problem(edit: QLineEdit) -> str | None:
+    """A placeholder (it cannot be scrolled) or the text of a read-only field must fit;
+    what the user typed (or may edit, a file path) scrolls with the cursor, as in every
+    Qt field."""
     if isinstance(edit.parent(), QComboBox):
+        return None
+    if edit.text() and not edit.isReadOnly():
         return None
     text = edit.text() or edit.placeholderText()
     if not text:
@@ -229,7 +234,9 @@ def clipped_texts(window: QWidget) -> list[str]:
         if problem:
             found.append(f"{type(w.window()).__name__}/{_path(w)}: {problem}")
         found += _overlaps(w)
-    bar = window.statusBar()
+    bar = window.statusBar() if hasattr(window, "statusBar") else None  # a dialog has none
+    if bar is None:
+        return found
     shown = QStatusBar.currentMessage(bar)  # what is drawn (the bar may elide it)
     if shown and not _elided_ok(shown, bar.toolTip()):
         room = bar.width() - sum(

@@ -123,3 +123,124 @@ def test_geometry_load_names_a_calibration_file(qtbot, ctx, tmp_path):
     assert text.startswith("not loaded: calibration.yaml: this is a calibration file")
     assert "load it with Load… under Calibration in the Pose panel" in text
     assert "unsupported version" not in text
+
+
+# -- every dialog the monitor opens, at the two small screens ---------------------------------
+
+#: (width, height) of the small screens; a window manager's title bar takes TITLE_BAR px
+SCREENS = ((1024, 700), (800, 600))
+TITLE_BAR = 30
+
+
+def _on_screen(qapp, dialog, screen) -> list[str]:
+    """Show ``dialog`` as a window manager would on ``screen`` (its own size, cut to the
+    screen's) and list what does not fit: a minimum size larger than the screen, and
+    every clipped text (test_monitor_layout.clipped_texts)."""
+    from test_monitor_layout import clipped_texts
+
+    w, h = screen[0], screen[1] - TITLE_BAR
+    dialog.show()
+    qapp.processEvents()
+    dialog.resize(min(dialog.width(), w), min(dialog.height(), h))
+    for _ in range(3):
+        qapp.processEvents()
+    problems = []
+    least = dialog.minimumSizeHint().expandedTo(dialog.minimumSize())
+    if least.width() > w or least.height() > h:
+        problems.append(f"needs at least {least.width()}x{least.height()} px, the screen "
+                        f"has {w}x{h}")
+    if dialog.width() > w or dialog.height() > h:
+        problems.append(f"is {dialog.width()}x{dialog.height()} px on a {w}x{h} screen")
+    return problems + clipped_texts(dialog)
+
+
+def _walk_dialogs(qtbot, qapp, window, screen) -> dict[str, list[str]]:
+    """Open every dialog of the window (with its refusals shown) and measure each."""
+    from test_monitor_dialogs import guided_replies, record_guided
+
+    from mm_pc.monitor.replay import refuse
+    from mm_pc.monitor.widgets.calibration_wizard import CalibrationWizard
+    from mm_pc.monitor.widgets.log_dialog import LogDialog
+
+    ctx = window.ctx
+    found: dict[str, list[str]] = {}
+
+    def measure(name, dialog):
+        found[name] = _on_screen(qapp, dialog, screen)
+        dialog.close()
+
+    window.open_filter_dialog()
+    dlg = window.findChild(FilterDialog)
+    for row in dlg.rows.values():
+        row.window.setText("1000")
+        dlg.apply_sensor(row.device)
+    measure("median filters, both refused", dlg)
+    window.open_geometry_dialog()
+    dlg = window.findChild(GeometryDialog)
+    dlg.rows[0].x.setText("far")
+    dlg.apply()
+    measure("robot geometry, refused", dlg)
+    window.open_log_dialog()
+    log = window.findChild(LogDialog)
+    log.poll()
+    measure("log", log)
+    maps = window.views["Maps"]
+    new_map = maps.open_new_map_dialog()
+    for key in ("cell", "nx"):
+        new_map.fields[key].edit.setText("wide")
+    new_map.apply()
+    measure("new map, refused", new_map)
+    measure("keyboard shortcuts", window.show_shortcuts())
+    measure("about", window.show_about())
+    refuse(window, "run.mcap: not an MCAP file (its first bytes are b'junk')", dialog=True)
+    measure("replay refused", window.replay_error)
+
+    wiz = CalibrationWizard(ctx, window)
+    measure("wizard intro", wiz)
+    wiz = CalibrationWizard(ctx, window)
+    wiz.show()
+    wiz.next()
+    replies = guided_replies()
+    ctx.session.forget_baselines()
+    ctx.on_reply(replies[0])
+    record_guided(qtbot, ctx, _feed_all, wiz, replies)
+    found["wizard drive, six steps"] = _on_screen(qapp, wiz, screen)
+    wiz.next()
+    wiz.distance_page.edit.setText("far")
+    wiz.next()  # refused: the distance page with its error
+    found["wizard distance, refused"] = _on_screen(qapp, wiz, screen)
+    wiz.distance_page.edit.setText("")
+    wiz.next()
+    found["wizard results"] = _on_screen(qapp, wiz, screen)
+    wiz.next()
+    found["wizard save"] = _on_screen(qapp, wiz, screen)
+    wiz.reject()
+    return found
+
+
+def _feed_all(ctx, replies):
+    for r in replies:
+        ctx.on_reply(r)
+
+
+@pytest.fixture
+def main_window(qapp, feed, tmp_path, monkeypatch):
+    from mm_pc.monitor.main_window import MainWindow
+
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "config"))
+    config = MonitorConfig(rate_hz=15.0, calibration_file=tmp_path / "cfg" / "cal.yaml")
+    w = MainWindow(MonitorContext(MonitorSession(), None, config), None)
+    feed(w.ctx, rate_hz=50.0, seconds=1.0)
+    w.show()
+    yield w
+    w.close()
+
+
+@pytest.mark.parametrize("screen", SCREENS, ids=lambda s: f"{s[0]}x{s[1]}")
+def test_every_dialog_fits_a_small_screen_and_cuts_no_text(qtbot, qapp, main_window, screen):
+    main_window.resize(screen[0], screen[1] - TITLE_BAR)
+    found = _walk_dialogs(qtbot, qapp, main_window, screen)
+    assert len(found) == 12  # every dialog above was measured
+    report = [f"{name}: {p}" for name, problems in found.items() for p in problems]
+    print(f"{screen}: {len(report)} problems in {len(found)} dialogs")
+    assert not report, "\n".join(report)

@@ -15,10 +15,12 @@ from PySide6.QtGui import QFont, QGuiApplication, QTextCursor
 from PySide6.QtWidgets import (
     QCheckBox,
     QDialog,
+    QFrame,
     QHBoxLayout,
     QLabel,
     QPlainTextEdit,
     QPushButton,
+    QScrollArea,
     QVBoxLayout,
 )
 
@@ -73,6 +75,17 @@ class LogDialog(QDialog):
         self.text.setUndoRedoEnabled(False)
         # line the header up with the text: frame plus document margin
         self.header.setIndent(self.text.frameWidth() + int(self.text.document().documentMargin()))
+        # the header scrolls sideways with the lines (its own width set the dialog's least
+        # width, 926 px: more than an 800 px screen)
+        self.header_area = QScrollArea()
+        self.header_area.setWidget(self.header)
+        self.header_area.setFrameShape(QFrame.NoFrame)
+        self.header_area.setHorizontalScrollBarPolicy(Qt.ScrollBarAlwaysOff)
+        self.header_area.setVerticalScrollBarPolicy(Qt.ScrollBarAlwaysOff)
+        self.header_area.setFixedHeight(self.header.sizeHint().height())
+        self.header.adjustSize()
+        self.text.horizontalScrollBar().valueChanged.connect(
+            self.header_area.horizontalScrollBar().setValue)
 
         self.auto_scroll = QCheckBox("Auto-scroll")
         self.auto_scroll.setChecked(True)
@@ -93,7 +106,7 @@ class LogDialog(QDialog):
         bar.addWidget(self.count)
         lay = QVBoxLayout(self)
         lay.addLayout(bar)
-        lay.addWidget(self.header)
+        lay.addWidget(self.header_area)
         lay.addWidget(self.text, 1)
 
         self.timer = QTimer(self)

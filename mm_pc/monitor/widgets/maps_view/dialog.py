@@ -10,9 +10,9 @@ from PySide6.QtWidgets import (
     QDialog,
     QDialogButtonBox,
     QFormLayout,
-    QHBoxLayout,
     QLabel,
     QLineEdit,
+    QVBoxLayout,
     QWidget,
 )
 
@@ -46,7 +46,8 @@ def _parse_cells(text: str, what: str) -> int:
 
 
 class _Field(QWidget):
-    """A line edit with a red error label beside it."""
+    """A line edit with a red error label under it (beside it, a long reason was squeezed
+    into a sliver of the dialog's width)."""
 
     def __init__(self, text: str, tip: str) -> None:
         super().__init__()
@@ -57,10 +58,11 @@ class _Field(QWidget):
         self.error.setStyleSheet(ERROR_STYLE)
         self.error.setWordWrap(True)
         self.error.hide()
-        lay = QHBoxLayout(self)
+        lay = QVBoxLayout(self)
         lay.setContentsMargins(0, 0, 0, 0)
+        lay.setSpacing(2)
         lay.addWidget(self.edit)
-        lay.addWidget(self.error, 1)
+        lay.addWidget(self.error)
 
     def set_error(self, message: str) -> None:
         self.error.setText(message)
@@ -130,6 +132,13 @@ class NewMapDialog(QDialog):
         self.create_button.setDefault(True)
         self._fill_changed()
 
+    def _fit_height(self) -> None:
+        """Grow so that every wrapped refusal shows whole."""
+        self.layout().activate()
+        need = self.layout().totalHeightForWidth(self.width())
+        if need > self.height():
+            self.resize(self.width(), need)
+
     @property
     def fill(self) -> str:
         return self.fill_box.currentData()
@@ -184,12 +193,14 @@ class NewMapDialog(QDialog):
         self.fill_error.hide()
         settings = self._read()
         if settings is None:
+            self._fit_height()
             return False
         try:
             cmap = make_map(settings)
         except ValueError as e:
             self.fill_error.setText(f"map not created: {e}")
             self.fill_error.show()
+            self._fit_height()
             return False
         self.map, self.settings = cmap, settings
         self.view.set_live_map(cmap, settings)
