@@ -33,6 +33,12 @@ mm-bench chips [--polls N] --json
     process: with a constant-reply stub (driver + poller only) and with the
     chip's emulator. See mm_beagle.tools.bench_chips.
 
+mm-bench pipeline [--rates 15,100] [--cpi 1600] [--speed 0.5] [--duration 20] --json
+    One s-curves path (CSV) integrated in-process and through the real processes
+    (mm-beagle sim on the file, one mm-odometry per method and rate): final error per
+    10 m and yaw error side by side, against the file's ground truth.
+    See mm_pc.bench.pipeline.
+
 mm-bench soak [--minutes N] [--sample-seconds S] --json
     The board chain for N minutes (30): agent on emulated sensors, node in backend:=remote,
     one 100 Hz client; RSS of agent and node every S s (10), their least-squares slope
@@ -420,6 +426,9 @@ def main(argv: list[str] | None = None) -> int:
     soak.add_argument("--minutes", type=float, default=30.0, help="length of the run (min)")
     soak.add_argument("--sample-seconds", type=float, default=10.0, help="RSS sample period")
     soak.add_argument("--json", action="store_true", help="print JSON only (the default)")
+    from mm_pc.bench.pipeline import main_args as pipeline_args
+
+    pipeline_args(sub.add_parser("pipeline", help="one path in-process and through the nodes"))
     args = parser.parse_args(argv)
     if args.what == "chips":
         from mm_beagle.tools.bench_chips import bench_chips
@@ -455,6 +464,13 @@ def main(argv: list[str] | None = None) -> int:
 
         try:
             result = bench_executors(args.rate, args.seconds, args.rounds)
+        except ValueError as e:
+            parser.error(str(e))
+    elif args.what == "pipeline":
+        from mm_pc.bench.pipeline import run as bench_pipeline
+
+        try:
+            result = bench_pipeline(args)
         except ValueError as e:
             parser.error(str(e))
     elif args.what == "maps":

@@ -21,7 +21,6 @@ default 0.5 m/s keeps the run at ~20 s of motion for ~10 m.
 from __future__ import annotations
 
 import math
-import os
 import tempfile
 import threading
 import time
@@ -271,6 +270,11 @@ def pipeline(
                 "load_trajectory_file then integrate_pose (exact per 1 ms step)",
             },
             "in_process": in_process(path, rates, cpi),
+            # the poller's read order in-process: sensor 1 read 20 us after sensor 0
+            "in_process_read_delay_20us": {
+                "own_stamps_deskewed": read_delay_in_process(path, 20.0, cpi),
+                "one_stamp_per_tick": read_delay_in_process(path, 20.0, cpi, equal_stamps=True),
+            },
         }
         if processes:
             res["processes"] = through_processes(path, rates, cpi)
@@ -278,7 +282,6 @@ def pipeline(
                 k: [v["error_mm_per_10m"], res["processes"][k].get("error_mm_per_10m")]
                 for k, v in res["in_process"].items()
             }
-        res["pid"] = os.getpid()
         return res
 
 
@@ -290,6 +293,7 @@ def main_args(parser) -> None:
     parser.add_argument("--duration", type=float, default=20.0, help="seconds of motion")
     parser.add_argument("--path-file", default="", help="a t,v,w CSV instead of the s-curves")
     parser.add_argument("--in-process-only", action="store_true", help="skip the processes")
+    parser.add_argument("--json", action="store_true", help="print JSON only (the default)")
 
 
 def run(args) -> dict:
@@ -300,6 +304,8 @@ def run(args) -> dict:
         raise ValueError(f"--rates '{args.rates}' is not a list of numbers (Hz)") from None
     if not all(0 < r <= 500 for r in rates):
         raise ValueError(f"--rates '{args.rates}': each in (0, 500] Hz")
+    if not 100 <= args.cpi <= 25600:
+        raise ValueError(f"--cpi {args.cpi}: the sim's CPI, 100..25600")
     if not (args.speed > 0 and args.duration > 0):
         raise ValueError("--speed and --duration must be > 0")
     if args.path_file:
