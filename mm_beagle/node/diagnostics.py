@@ -82,8 +82,10 @@ class Diagnostics:
                 if last and wall > last[0]
                 else float("nan")
             )
-            assessed = self._assess(i, t, last, rate, overruns_grew, now_ns)
             reset = self._reset(i, t, last)
+            seen = self.reinits[i]
+            outage = bool(reset[0]) or (seen is not None and t.reinits > seen)
+            assessed = self._assess(i, t, last, rate, overruns_grew, now_ns, outage)
             level, text, values = health.sensor_status(
                 r,
                 node.chips[i],
@@ -101,8 +103,10 @@ class Diagnostics:
         self.pub.publish(arr)
         node.stuck = ""  # reported (the restart's own round and this one)
 
-    def _assess(self, i, t, last, rate, overruns_grew, now_ns):
-        """health.assess for sensor ``i`` over the polls since the previous round."""
+    def _assess(self, i, t, last, rate, overruns_grew, now_ns, outage=False):
+        """health.assess for sensor ``i`` over the polls since the previous round
+        (``outage``: a reset's outage is in them; its report says what was lost, not the
+        wrap estimate of a gap that long)."""
         node = self.node
         prev_seq = last[1][i] if last else t.seq
         dropped = 0
@@ -120,7 +124,7 @@ class Diagnostics:
             gap = health.longest_gap(stamps, arr["dx"], arr["dy"], prev_ns, end_ns)
         else:
             gap = health.longest_gap([], [], [], self.stamps[i] or t.stamp_ns, now_ns)
-        if t.state != ss.STATE_UP or (remote and (not len(stamps) or dropped)):
+        if outage or t.state != ss.STATE_UP or (remote and (not len(stamps) or dropped)):
             gap = health.Gap(0.0, 0.0, 0.0)  # the link's own values say what is late there
         return health.assess(rate, cfg.poll_rate, overruns_grew, gap, t.cpi_y)
 

@@ -184,9 +184,9 @@ def reset_report(outage: Outage, cpi: int, resets: int) -> tuple[str, dict[str, 
         "est_reset_loss_m": f"{metres:.3f}",
     }
     text = (
-        f"sensor reset (power cycle or lost contact, re-initialised, {resets} so far): "
-        f"no good poll for {outage.seconds:.2f} s, about {loss:.0f} counts "
-        f"({metres:.2f} m) lost, estimated from the speed before and after"
+        f"sensor reset: re-initialised after {outage.seconds:.2f} s without a good poll "
+        f"(power cycle, lost contact or poller restart; {resets} so far), about {loss:.0f} "
+        f"counts ({metres:.2f} m) lost, estimated from the speed before and after"
     )
     return text, values
 

@@ -133,7 +133,7 @@ def test_power_cycle_is_reported_with_the_counts_lost_estimated(chip):
         r, chip, t, 1000.0, "", ("OK", "up", {}), "", (t.spi_errors, t.overflows), (text, values)
     )
     assert level == "ERROR" and message == text
-    assert message.startswith("sensor reset (power cycle or lost contact, re-initialised")
+    assert message.startswith(f"sensor reset: re-initialised after {out.seconds:.2f} s without")
     assert f"about {max(abs(out.x), abs(out.y)):.0f} counts" in message
     assert shown["est_reset_loss_y_counts"] == f"{out.y:.0f}"
     assert float(shown["reset_outage_s"]) == pytest.approx(out.seconds, abs=1e-3)
