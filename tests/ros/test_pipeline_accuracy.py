@@ -1,0 +1,38 @@
+"""The pose the nodes publish, as exact as the in-process integration: mm-beagle (sim,
+a CSV s-curves path, 1600 CPI) and one mm-odometry per method at 15 and 100 Hz
+(``mm-bench pipeline``'s run, ~35 s)."""
+
+from __future__ import annotations
+
+import pytest
+
+pytest.importorskip("rclpy")
+
+from mm_pc.bench.pipeline import in_process, through_processes, write_path
+
+pytestmark = pytest.mark.ros
+
+#: The goal is 0.2 mm per 10 m (measured 0.14-0.23 on a machine shared by six builds);
+#: the margin covers a loaded machine, where the ~2 us the first sensor's read path takes
+#: longer after the poller's sleep (not in its stamp) is 0.06 mm per 10 m per us.
+#: Before the fix (one stamp per tick) it was 1.29.
+TWO_SENSOR_MAX_MM_PER_10M = 0.4
+
+
+def test_both_methods_through_the_processes_at_1600_cpi(tmp_path):
+    path = tmp_path / "s_curves.csv"
+    write_path(path, speed=0.5, duration=20.0)
+    rates = (15.0, 100.0)
+    ref = in_process(path, rates, 1600)
+    got = through_processes(path, rates, 1600, start_delay=8.0, timeout=40.0,
+                            log_dir=tmp_path)  # fmt: skip
+    for hz in ("15", "100"):
+        ex, ts = got[f"exact@{hz}Hz"], got[f"two-sensor@{hz}Hz"]
+        assert "error" not in ex and "error" not in ts, got
+        assert ts["error_mm_per_10m"] <= TWO_SENSOR_MAX_MM_PER_10M, got
+        assert ex["error_mm_per_10m"] <= 1.2 * ref[f"exact@{hz}Hz"]["error_mm_per_10m"], got
+        # the final heading is the counts' own (linear in them): as in-process
+        for m in ("exact", "two-sensor"):
+            want = ref[f"{m}@{hz}Hz"]["yaw_error_rad"]
+            assert got[f"{m}@{hz}Hz"]["yaw_error_rad"] == pytest.approx(want, abs=2e-5), got
+            assert got[f"{m}@{hz}Hz"]["polls_integrated"] > 2 * 18_000, got
