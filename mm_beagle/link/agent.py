@@ -36,12 +36,11 @@ import time
 import zlib
 from collections.abc import Callable, Generator
 
-from mm_beagle.link import link
+from mm_beagle.link import link, link_auth
 from mm_beagle.link.agent_requests import (
     COMMAND_KEYS,
     HISTORY_KEYS,
     MAX_REQUEST_BYTES,
-    RX_MAX_MESSAGE_BYTES,
     Refusals,
     TokenBucket,
     parse_request,
@@ -60,41 +59,6 @@ COMMAND_RATE = (50.0, 50)  # commands per second and burst, all peers together (
 HISTORY_RATE = (100.0, 50)  # history requests per second and burst, all peers together
 QUERY_QUEUE = 16  # requests received and waiting for their worker, per key
 OUTBOX_SIZE = 300  # messages waiting for the sender thread (3 s of batches)
-# zenoh's log on the agent: only its lines about peers accepted or refused (credentials)
-ZENOH_LOG = "off,zenoh_transport::unicast::establishment::accept=debug"
-
-
-def agent_zenoh_config(listen: list[str], credentials: str = ""):
-    """The agent's zenoh.Config: :func:`link.zenoh_config` and limits a peer cannot push
-    past. Messages over :data:`RX_MAX_MESSAGE_BYTES` are dropped by zenoh before Python
-    sees them (a 200 MB command once cost 490 MB of RSS); no shared-memory transport; a
-    full transmission queue drops a message after at most 2 ms, fragments included
-    (zenoh's default waits 50 ms), and a peer that reads no reply for 1 s is
-    disconnected (command replies keep the congestion control of their query). Unless
-    ``RUST_LOG`` says otherwise, zenoh logs one line per peer link accepted and per peer
-    refused ("UsrPwd extension - Recv OpenSyn. Invalid password."): who was refused is
-    known only inside zenoh, before any of the agent's code runs."""
-    import zenoh
-
-    if "RUST_LOG" not in os.environ:  # (RUST_LOG: zenoh's own log as asked, link.zenoh_config)
-        zenoh.init_log_from_env_or(ZENOH_LOG)
-    cfg = link.zenoh_config(listen=listen, credentials=credentials)
-    cfg.insert_json5("transport/link/rx/max_message_size", str(RX_MAX_MESSAGE_BYTES))
-    # No shared memory: a local peer's messages over 3 kB came in its 16 MB zenoh segment,
-    # mapped into the agent (+16 MB RSS per peer, and past max_message_size).
-    cfg.insert_json5("transport/shared_memory/enabled", "false")
-    cfg.insert_json5(
-        "transport/link/tx/queue/congestion_control",
-        json.dumps(
-            {
-                "drop": {"wait_before_drop": 1000, "max_wait_before_drop_fragments": 2000},
-                # a reply that cannot be queued for 1 s (its peer reads nothing) closes
-                # that peer's session: the command worker is free again (zenoh: 5 s)
-                "block": {"wait_before_close": 1_000_000},
-            }
-        ),
-    )
-    return cfg
 
 
 class Job:
@@ -216,7 +180,7 @@ class AgentLink:
         import zenoh
 
         self.keys = link.keys(name)
-        self.auth = link.FrameAuth.from_credentials(credentials, name)  # a MAC per message
+        self.auth = link_auth.FrameAuth.from_credentials(credentials, name)  # a MAC per message
         self.session = session
         self.poller = poller
         self.boot_id = random.getrandbits(63) | 1

@@ -16,12 +16,11 @@ import sys
 import time
 from dataclasses import dataclass, field
 
-from mm_beagle.link import link, link_checks
+from mm_beagle.link import link, link_auth, link_checks, zenoh_config
 from mm_beagle.link.agent import (
     AgentLink,
     AgentPoller,
     StubMotionBus,
-    agent_zenoh_config,
     make_state,
     rss_mb,
 )
@@ -240,14 +239,14 @@ def config_from_args(args: argparse.Namespace) -> AgentConfig:
     cfg = poller_config_from(values, ring)
     link.keys(values["name"])
     for ep in values["listen"]:
-        if not link.is_loopback(ep) and not values["credentials"]:
+        if not zenoh_config.is_loopback(ep) and not values["credentials"]:
             raise ValueError(
                 f"listening on {ep} (not loopback) needs credentials: make them with "
                 "mm-beagle-agent --make-credentials FILE and pass --credentials FILE "
-                f"({link.CREDENTIALS_HELP})"
+                f"({link_auth.CREDENTIALS_HELP})"
             )
     if values["credentials"]:
-        link.load_credentials(values["credentials"])
+        link_auth.load_credentials(values["credentials"])
     return AgentConfig(cfg, values["name"], values["listen"], values["credentials"])
 
 
@@ -286,7 +285,7 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_CONFIG
     if args.make_credentials:
         try:
-            path = link.make_credentials(args.make_credentials)
+            path = link_auth.make_credentials(args.make_credentials)
         except (link.LinkError, OSError) as exc:
             print(f"mm-beagle-agent: error: {exc}", file=sys.stderr)
             return EXIT_CONFIG
@@ -302,7 +301,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         import zenoh
 
-        session = zenoh.open(agent_zenoh_config(cfg.listen, cfg.credentials))
+        session = zenoh.open(zenoh_config.agent_zenoh_config(cfg.listen, cfg.credentials))
     except ImportError:
         print(
             "mm-beagle-agent: error: the eclipse-zenoh package is missing; "

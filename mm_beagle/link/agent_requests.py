@@ -3,8 +3,8 @@
 Any process that reaches the agent's zenoh session can send anything on the command and
 history-request keys, so a request is checked here before any of it is decoded: its size
 first (:data:`MAX_REQUEST_BYTES`; zenoh itself refuses messages over
-:data:`RX_MAX_MESSAGE_BYTES`, see :func:`mm_beagle.link.agent.agent_zenoh_config`), then
-its nesting (on the raw bytes, :func:`mm_beagle.link.link.decode_json_bounded`: ``json``
+:data:`RX_MAX_MESSAGE_BYTES`, see :func:`mm_beagle.link.zenoh_config.agent_zenoh_config`), then
+its nesting (on the raw bytes, :func:`mm_beagle.link.link_decode.decode_json_bounded`: ``json``
 never recurses), then a JSON object of the known keys, one level deep at most; the fields
 themselves are checked by :mod:`mm_beagle.poller.commands`. A refused request is counted
 (:class:`Refusals`, in the agent's status) and logged, one line per key at most every
@@ -21,7 +21,7 @@ import sys
 import threading
 import time
 
-from mm_beagle.link import link
+from mm_beagle.link import link, link_decode
 from mm_beagle.poller import commands
 
 MAX_REQUEST_BYTES = 4096  # the largest honest request (load_patch with a long name) is ~300
@@ -43,10 +43,12 @@ HISTORY_KEYS = frozenset({"id", "sensor", "since", "max"})
 def parse_request(payload: bytes, what: str, allowed: frozenset[str]) -> dict:
     """A flat JSON object of at most :data:`MAX_REQUEST_BYTES` with keys from ``allowed``
     and values checked next by :mod:`~mm_beagle.poller.commands`; LinkError says what is
-    wrong. Decoded by :func:`link.decode_json_bounded` (size, then nesting on the raw
+    wrong. Decoded by :func:`link_decode.decode_json_bounded` (size, then nesting on the raw
     bytes: ``json`` never recurses), at most :data:`MAX_DEPTH` deep (an array in a value
     is refused by the field checks, with its own message: load_patch's 'words')."""
-    msg = link.decode_json_bounded(payload, MAX_REQUEST_BYTES, MAX_DEPTH, what=f"{what} request")
+    msg = link_decode.decode_json_bounded(
+        payload, MAX_REQUEST_BYTES, MAX_DEPTH, what=f"{what} request"
+    )
     if not isinstance(msg, dict):
         raise link.LinkError(f"{what} request must be a JSON object")
     unknown = sorted(k for k in msg if k not in allowed)

@@ -15,7 +15,8 @@ from __future__ import annotations
 import re
 import socket
 
-from mm_beagle.link.link import LinkError, endpoint_host
+from mm_beagle.link.link import LinkError
+from mm_beagle.link.zenoh_config import endpoint_host
 from mm_pc.core.user_file import check_user_file
 
 MAX_NAME = 64

@@ -29,7 +29,7 @@ import time
 
 import numpy as np
 
-from mm_beagle.link import link
+from mm_beagle.link import link, link_auth, link_decode, zenoh_config
 from mm_beagle.poller import chip_config, commands, ring_layout
 from mm_beagle.poller import shared_state as ss
 from mm_beagle.poller.options import OPTIONS
@@ -82,8 +82,8 @@ class RemoteAgent:
         self.keys = link.keys(name)
         self.credentials = credentials
         self.clock_sync = clock_sync
-        link.endpoint_host(endpoint)  # LinkError now, not in the thread
-        self.auth = link.FrameAuth.from_credentials(credentials, name)
+        zenoh_config.endpoint_host(endpoint)  # LinkError now, not in the thread
+        self.auth = link_auth.FrameAuth.from_credentials(credentials, name)
         n = len(cfg.devices)
         self.n = n
         self.state = ss.SharedState(
@@ -108,7 +108,7 @@ class RemoteAgent:
         self.link_drops = 0
         self.polls_lost = 0
         self.bad_frames = 0  # every input dropped (undecodable, forged or implausible)
-        self.drops = link.DropLog()  # ... per kind, and the rate-limited log line
+        self.drops = link_decode.DropLog()  # ... per kind, and the rate-limited log line
         self.refused = 0  # of those: well-formed but refused (auth, boot id, seq, totals)
         self.unannounced = 0  # batches of a boot whose status has not come yet (not counted)
         self.restarts = 0
@@ -253,7 +253,7 @@ class RemoteAgent:
 
         try:
             session = zenoh.open(
-                link.zenoh_config(connect=[self.endpoint], credentials=self.credentials)
+                zenoh_config.zenoh_config(connect=[self.endpoint], credentials=self.credentials)
             )
         except Exception as exc:
             self._emit("log", f"cannot open the link to {self.endpoint}: {exc}")
@@ -269,8 +269,8 @@ class RemoteAgent:
 
         limits = {
             "polls": min(link.max_batch_bytes(self.n), link.NODE_RX_MAX_BYTES),
-            "status": link.MAX_STATUS_BYTES,
-            "events": link.MAX_EVENT_BYTES,
+            "status": link_decode.MAX_STATUS_BYTES,
+            "events": link_decode.MAX_EVENT_BYTES,
         }
 
         def put(kind: str):
@@ -284,7 +284,7 @@ class RemoteAgent:
                     if kind == "polls":  # the link carries frames (a gap fetch waits for it)
                         self.last_rx = time.monotonic()
                     data = sample.payload.to_bytes()
-                    item = (kind, data, item[2], link.attachment_bytes(sample), size)
+                    item = (kind, data, item[2], link_auth.attachment_bytes(sample), size)
                 # a full queue: the feeder is behind; the seq gap is fetched from the agent's ring
                 with contextlib.suppress(queue.Full):
                     q.put_nowait(item)
@@ -298,7 +298,7 @@ class RemoteAgent:
         def history(sample) -> None:
             if len(sample.payload) > limits["polls"]:
                 return  # counted when nothing answers the request
-            item = (sample.payload.to_bytes(), link.attachment_bytes(sample))
+            item = (sample.payload.to_bytes(), link_auth.attachment_bytes(sample))
             with contextlib.suppress(queue.Full):
                 self._history_q.put_nowait(item)
 
@@ -357,7 +357,7 @@ class RemoteAgent:
         if self.ever_up or now - self._tcp_probe_t < 1.0 or not self.endpoint.startswith("tcp/"):
             return
         self._tcp_probe_t = now
-        host = link.endpoint_host(self.endpoint)
+        host = zenoh_config.endpoint_host(self.endpoint)
         port = int(self.endpoint.rpartition(":")[2].split("#", 1)[0])
         try:
             with socket.create_connection((host, port), timeout=0.5):
@@ -374,7 +374,7 @@ class RemoteAgent:
             self.refused_credentials = (
                 f"agent at {self.endpoint} refused {what}: it listens but the zenoh "
                 f"session does not open (agent_credentials must be the agent's "
-                f"--credentials file; {link.CREDENTIALS_HELP})"
+                f"--credentials file; {link_auth.CREDENTIALS_HELP})"
             )
             self._emit("log", self.refused_credentials)
 
@@ -718,7 +718,7 @@ class RemoteAgent:
                     return data
             else:
                 try:
-                    answer_id, why = link.decode_history_answer(data)
+                    answer_id, why = link_decode.decode_history_answer(data)
                 except link.LinkError as exc:
                     self._dropped("history", str(exc))
                     continue
@@ -777,14 +777,14 @@ class RemoteAgent:
     def _reply(self, sample) -> tuple | str:
         """One command reply checked (tuple), or why it was refused (str, counted)."""
         try:
-            if len(sample.payload) > link.MAX_REPLY_BYTES:
+            if len(sample.payload) > link_decode.MAX_REPLY_BYTES:
                 raise link.LinkError(f"a command reply of {len(sample.payload)} bytes")
             data = sample.payload.to_bytes()
             try:
-                self.auth.check("reply", data, link.attachment_bytes(sample))
+                self.auth.check("reply", data, link_auth.attachment_bytes(sample))
             except link.LinkError as exc:
                 raise Refused(str(exc)) from None
-            reply = link.decode_command_reply(data, self.n)
+            reply = link_decode.decode_command_reply(data, self.n)
             if reply[3] != self.boot:
                 raise Refused(
                     f"a command reply from boot {reply[3]}, not the agent's boot {self.boot}"
@@ -844,7 +844,7 @@ class RemoteAgent:
         the current boot fell silent for BOOT_SILENCE_S and the id was never seen before.
         Devices and chips never change within a boot: a status that says otherwise is
         refused, so a forged one cannot make the services fail."""
-        status = link.decode_status(data, self.n, ss.HIST_BINS)
+        status = link_decode.decode_status(data, self.n, ss.HIST_BINS)
         boot = status["boot_id"]
         if boot != self.boot:
             if boot in self.boots_seen:
@@ -896,7 +896,7 @@ class RemoteAgent:
             self._emit("log", self.mismatch)
 
     def _on_event(self, data: bytes) -> None:
-        kind, device, text = link.decode_event(data)
+        kind, device, text = link_decode.decode_event(data)
         if kind in ("up", "down"):
             if device not in self.cfg.devices:
                 raise link.LinkError(f"an event for unknown device {device[:80]!r}")

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 
-from mm_beagle.link import link, link_checks
+from mm_beagle.link import link, link_auth, link_checks, zenoh_config
 from mm_beagle.node.otos_calibration import otos_options
 from mm_beagle.poller import chip_config
 from mm_beagle.poller.options import OPTIONS, poller_config_from
@@ -230,10 +230,10 @@ def declare(node: Node) -> NodeSettings:
             link_checks.check_link_settings(
                 remote.name, [remote.agent], "connect", remote.credentials
             )
-            link.endpoint_host(remote.agent)
+            zenoh_config.endpoint_host(remote.agent)
             link.keys(remote.name)
             if remote.credentials:
-                link.load_credentials(remote.credentials)
+                link_auth.load_credentials(remote.credentials)
         except link.LinkError as exc:
             raise ValueError(str(exc)) from None
     return NodeSettings(cfg, p["publish_rate"], p["diagnostics_period"], odometry, remote)

@@ -21,7 +21,7 @@ import time
 
 import numpy as np
 
-from mm_beagle.link import link
+from mm_beagle.link import link, zenoh_config
 from mm_beagle.poller import shared_state as ss
 
 
@@ -34,7 +34,7 @@ class PollWatch:
         self.zenoh = zenoh
         self.keys = link.keys(name)
         self.n = n
-        self.session = zenoh.open(link.zenoh_config(connect=[endpoint]))
+        self.session = zenoh.open(zenoh_config.zenoh_config(connect=[endpoint]))
         self.ints = [np.zeros(ss.N_INT, np.int64) for _ in range(n)]
         self.status: dict = {}
         self._answers: list[bytes] = []
@@ -179,7 +179,7 @@ def _stuck_main(endpoint: str, name: str, seconds: float) -> None:
     import zenoh
 
     keys = link.keys(name)
-    s = zenoh.open(link.zenoh_config(connect=[endpoint]))
+    s = zenoh.open(zenoh_config.zenoh_config(connect=[endpoint]))
     fifo = zenoh.handlers.FifoChannel
     subs = [s.declare_subscriber(keys[k], handler=fifo(1)) for k in ("history", "polls")]
     time.sleep(0.5)

@@ -19,7 +19,7 @@ from fakes import scaled, wait_until
 
 zenoh = pytest.importorskip("zenoh")
 
-from mm_beagle.link import link  # noqa: E402
+from mm_beagle.link import link, link_auth, zenoh_config  # noqa: E402
 from mm_beagle.tools.harness import (  # noqa: E402
     BeagleClient,
     agent_command,
@@ -53,11 +53,11 @@ def creds(tmp_path):
 
 def test_make_credentials_writes_a_private_file_and_never_overwrites(creds):
     assert oct(os.stat(creds).st_mode & 0o777) == "0o600"
-    user, password = link.load_credentials(creds)
+    user, password = link_auth.load_credentials(creds)
     assert user == "mm" and len(password) >= 24
     again = run_agent("--make-credentials", creds)
     assert again.returncode == 2 and "exists" in again.stderr
-    assert link.load_credentials(creds) == (user, password)
+    assert link_auth.load_credentials(creds) == (user, password)
 
 
 @pytest.mark.parametrize(
@@ -135,7 +135,7 @@ def test_self_test_prints_one_json_line_and_loses_nothing():
 
 
 def session_to(endpoint: str, credentials: str = ""):
-    return zenoh.open(link.zenoh_config(connect=[endpoint], credentials=credentials))
+    return zenoh.open(zenoh_config.zenoh_config(connect=[endpoint], credentials=credentials))
 
 
 def ask(session, key: str, payload: bytes, timeout: float | None = None) -> bytes | None:
@@ -457,9 +457,9 @@ def test_bad_frames_on_the_polls_key_are_dropped_and_counted(tmp_path):
         ):
             assert client.wait(scaled(60))
             wait_link(client, up=True)
-            # the agent's access control (link.agent_acl) drops a peer's puts on its keys: the
-            # node never sees them (tests/beagle/test_hostile_link.py feeds the node bad frames
-            # past the agent, through a router of its own, and finds them counted)
+            # the agent's access control (zenoh_config.agent_acl) drops a peer's puts on its
+            # keys: the node never sees them (tests/beagle/test_hostile_link.py feeds the node
+            # bad frames past the agent, through a router of its own, and finds them counted)
             rogue = session_to(endpoint)
             for junk in (b"", b"MMB1", b"\x00" * 200, b"MMB1\x01\x09" + b"\x00" * 100):
                 rogue.put(link.keys("mm_beagle")["polls"], junk)

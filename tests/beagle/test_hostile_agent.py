@@ -18,7 +18,7 @@ from fakes import scaled, wait_until
 
 zenoh = pytest.importorskip("zenoh")
 
-from mm_beagle.link import link  # noqa: E402
+from mm_beagle.link import link, zenoh_config  # noqa: E402
 from mm_beagle.tools.harness import agent_process, free_port  # noqa: E402
 from mm_beagle.tools.hostile_peer import (  # noqa: E402
     PollWatch,
@@ -195,7 +195,7 @@ def test_a_peer_with_wrong_credentials_is_logged_by_the_agent(tmp_path):
         opened: list = []
 
         def connect() -> None:  # never returns: the agent refuses the session
-            opened.append(zenoh.open(link.zenoh_config(connect=[endpoint],
+            opened.append(zenoh.open(zenoh_config.zenoh_config(connect=[endpoint],
                                                        credentials=str(wrong))))  # fmt: skip
 
         threading.Thread(target=connect, daemon=True).start()

@@ -2,7 +2,7 @@
 ends it, nothing forged is integrated, what it drops is counted and logged.
 
 A real agent (emulated sensors) and a real mm-beagle (backend:=remote) on loopback. The
-agent's access control (:func:`mm_beagle.link.link.agent_acl`) refuses every peer's puts
+agent's access control (:func:`mm_beagle.link.zenoh_config.agent_acl`) refuses every peer's puts
 on its keys, so to reach the node at all the forged frames come from a zenoh router of
 the test's own between the two (the node connects to it; it relays the agent): what a
 peer on the path, or one holding the credentials on a multi-hop network, could send.
@@ -24,7 +24,7 @@ from fakes import scaled, wait_until
 
 zenoh = pytest.importorskip("zenoh")
 
-from mm_beagle.link import link  # noqa: E402
+from mm_beagle.link import link, link_auth, zenoh_config  # noqa: E402
 from mm_beagle.poller import shared_state as ss  # noqa: E402
 from mm_beagle.tools.harness import (  # noqa: E402
     BeagleClient,
@@ -331,7 +331,7 @@ def test_a_foreign_command_responder_is_not_believed(rig):
 def test_the_agents_access_control_keeps_a_peers_frames_and_replies_from_the_node(rig):
     """A peer on the agent's own session (every local process, by default): its puts on
     the agent's keys and its queryable on cmd never reach the node."""
-    rogue = zenoh.open(link.zenoh_config(connect=[rig.agent_ep]))
+    rogue = zenoh.open(zenoh_config.zenoh_config(connect=[rig.agent_ep]))
     try:
         answered = []
         q = rogue.declare_queryable(KEYS["cmd"], lambda query: answered.append(1))
@@ -410,7 +410,7 @@ def test_the_first_read_and_clear_covers_only_the_interval_it_claims(tmp_path):
 
 
 def test_wrong_credentials_are_named_on_the_node(tmp_path):
-    creds = link.make_credentials(str(tmp_path / "agent.credentials"))
+    creds = link_auth.make_credentials(str(tmp_path / "agent.credentials"))
     wrong = tmp_path / "wrong.credentials"
     wrong.write_text("mm:not-the-password-at-all\n")
     wrong.chmod(0o600)
@@ -446,7 +446,7 @@ def test_wrong_credentials_are_named_on_the_node(tmp_path):
 def test_with_credentials_every_message_is_tagged_and_the_node_follows(tmp_path):
     """The agent tags every message (polls, status, replies) and the node, holding the
     same credentials, accepts them all: link up, totals exact, a command answered."""
-    creds = link.make_credentials(str(tmp_path / "agent.credentials"))
+    creds = link_auth.make_credentials(str(tmp_path / "agent.credentials"))
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     client = BeagleClient("mm_hostile_tagged", namespace="/tagged/mm_beagle")
     log = tmp_path / "node.log"

@@ -12,7 +12,7 @@ import zlib
 import numpy as np
 import pytest
 
-from mm_beagle.link import link
+from mm_beagle.link import link, link_auth, link_decode
 from mm_beagle.link.remote import RING_DTYPES, RemoteAgent
 from mm_beagle.poller import shared_state as ss
 from mm_beagle.poller.poller import PollerConfig
@@ -53,24 +53,24 @@ def status(**changes) -> bytes:
 def test_json_is_decoded_only_when_small_and_shallow(payload, why):
     t0 = time.perf_counter()
     with pytest.raises(link.LinkError, match=why):
-        link.decode_json_bounded(payload, 200_000, 8)
+        link_decode.decode_json_bounded(payload, 200_000, 8)
     assert time.perf_counter() - t0 < 0.05
 
 
 def test_brackets_inside_strings_are_no_nesting():
-    assert link.decode_json_bounded(b'{"a": "[[[[[[[[[[[[[[[["}', 100, 2) == {"a": "[" * 16}
+    assert link_decode.decode_json_bounded(b'{"a": "[[[[[[[[[[[[[[[["}', 100, 2) == {"a": "[" * 16}
 
 
 def test_a_zlib_bomb_stops_at_the_output_limit_and_junk_is_no_zlib():
     bomb = zlib.compress(b"\0" * 300_000_000, 9)  # 291 kB
     with pytest.raises(link.LinkError, match="inflates beyond 160000"):
-        link.decompress_bounded(bomb, 160_000)
+        link_decode.decompress_bounded(bomb, 160_000)
     with pytest.raises(link.LinkError, match="not zlib"):
-        link.decompress_bounded(b"this is not zlib", 160_000)
+        link_decode.decompress_bounded(b"this is not zlib", 160_000)
     good = zlib.compress(b"x" * 1000)
-    assert link.decompress_bounded(good, 1000) == b"x" * 1000
+    assert link_decode.decompress_bounded(good, 1000) == b"x" * 1000
     with pytest.raises(link.LinkError, match="after its zlib stream"):
-        link.decompress_bounded(good + b"tail", 2000)
+        link_decode.decompress_bounded(good + b"tail", 2000)
 
 
 @pytest.mark.parametrize(
@@ -91,18 +91,19 @@ def test_a_zlib_bomb_stops_at_the_output_limit_and_junk_is_no_zlib():
     ],
 )
 def test_a_status_is_checked_field_by_field(changes, why):
-    assert link.decode_status(status(), 2, HIST)["hist"] == bytes(8 * HIST)
+    assert link_decode.decode_status(status(), 2, HIST)["hist"] == bytes(8 * HIST)
     with pytest.raises(link.LinkError, match=why):
-        link.decode_status(status(**changes), 2, HIST)
+        link_decode.decode_status(status(**changes), 2, HIST)
 
 
 def test_events_and_replies_are_checked():
-    assert link.decode_event(b'{"kind": "up", "device": "d", "text": "t"}') == ("up", "d", "t")
+    up = b'{"kind": "up", "device": "d", "text": "t"}'
+    assert link_decode.decode_event(up) == ("up", "d", "t")
     for bad in (b'{"kind": "up"}', b'{"kind": 1, "device": "", "text": ""}', b"[" * 100):
         with pytest.raises(link.LinkError):
-            link.decode_event(bad)
+            link_decode.decode_event(bad)
     ok = json.dumps({"status": "ok", "payload": 800, "seq": [1, 2], "boot_id": 5}).encode()
-    assert link.decode_command_reply(ok, 2) == ("ok", 800, [1, 2], 5)
+    assert link_decode.decode_command_reply(ok, 2) == ("ok", 800, [1, 2], 5)
     for bad in (
         {"status": "fine", "payload": 1},
         {"status": "ok"},
@@ -111,17 +112,17 @@ def test_events_and_replies_are_checked():
         {"status": "ok", "payload": 1, "boot_id": "5"},
     ):
         with pytest.raises(link.LinkError):
-            link.decode_command_reply(json.dumps(bad).encode(), 2)
+            link_decode.decode_command_reply(json.dumps(bad).encode(), 2)
 
 
 def test_the_frame_mac_needs_the_credentials_and_the_kind(tmp_path):
-    creds = link.make_credentials(str(tmp_path / "c"))
-    auth = link.FrameAuth.from_credentials(creds, "mm_beagle")
-    other = link.FrameAuth.from_credentials(creds, "other_agent")
-    none = link.FrameAuth.from_credentials("", "mm_beagle")
+    creds = link_auth.make_credentials(str(tmp_path / "c"))
+    auth = link_auth.FrameAuth.from_credentials(creds, "mm_beagle")
+    other = link_auth.FrameAuth.from_credentials(creds, "other_agent")
+    none = link_auth.FrameAuth.from_credentials("", "mm_beagle")
     body = b"MMB1 a frame"
     tag = auth.tag("polls", body)
-    assert tag is not None and len(tag) == link.TAG_BYTES and none.tag("polls", body) is None
+    assert tag is not None and len(tag) == link_auth.TAG_BYTES and none.tag("polls", body) is None
     auth.check("polls", body, tag)
     none.check("polls", body, None)  # no credentials: nothing to check
     for kind, b, t, why in (
@@ -135,7 +136,7 @@ def test_the_frame_mac_needs_the_credentials_and_the_kind(tmp_path):
 
 
 def test_the_drop_log_says_one_line_per_kind_and_reason_per_interval():
-    log = link.DropLog(interval=5.0)
+    log = link_decode.DropLog(interval=5.0)
     lines = [log.drop("status", f"status of {n} bytes is too large") for n in range(100)]
     assert sum(line is not None for line in lines) == 1 and log.counts == {"status": 100}
     assert log.drop("status", "status hist_z is not zlib data") is not None  # another reason
@@ -173,8 +174,8 @@ def feed(remote: RemoteAgent, kind: str, data: bytes, tag: bytes | None = None) 
 
 
 def test_the_feeder_refuses_forged_frames_and_keeps_the_real_totals(tmp_path):
-    creds = link.make_credentials(str(tmp_path / "c"))
-    auth = link.FrameAuth.from_credentials(creds, link.DEFAULT_NAME)
+    creds = link_auth.make_credentials(str(tmp_path / "c"))
+    auth = link_auth.FrameAuth.from_credentials(creds, link.DEFAULT_NAME)
     remote = RemoteAgent(PollerConfig(devices=[S0, S1], ring_size=4096), credentials=creds)
 
     def real(kind: str, data: bytes) -> None:
@@ -238,7 +239,7 @@ def test_the_depth_check_is_linear_and_needs_no_memory(payload):
 
     before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     t0 = time.perf_counter()
-    link.json_depth_ok(payload, 8)
+    link_decode.json_depth_ok(payload, 8)
     assert time.perf_counter() - t0 < 0.5
     assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before < 4096  # kB
 
