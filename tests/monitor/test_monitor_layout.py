@@ -285,9 +285,55 @@ def DIAGNOSTICS(w) -> dict:  # noqa: N802 - a constant's shape, made per window
             for dev in w.ctx.session.devices}
 
 
+class _StoppedReplay:
+    """What the replay bar reads of a replayer: a 25 s recording stopped at 12.5 s."""
+
+    def __init__(self) -> None:
+        from PySide6.QtCore import QObject, Signal
+
+        class _Signals(QObject):
+            finished = Signal()
+
+        self._signals = _Signals()
+        self.finished = self._signals.finished
+        self.total_s, self.played_s, self.speed = 25.0, 12.5, 1.0
+        self.replies, self.position = [None] * 100, 50
+        self.done, self.running, self.seeking = True, False, False
+
+
+def _show_replay_bar(w) -> None:
+    """The replay bar of a stopped replay (its widest state: Back to live shown)."""
+    from mm_pc.monitor.replay import replay_bar
+
+    replay_bar(w).attach(_StoppedReplay(), "2026-12-03-figure-eight-at-500-hz.mcap", True,
+                         ("0.5x", "1x", "2x", "5x", "max"), "1x")
+
+
+def _fill_debug(w) -> None:
+    """Manual samples and fetched polls on the Debug tab (its table and legends)."""
+    import numpy as np
+
+    from mm_pc.monitor.model.sim_feed import sim_replies
+
+    debug = w.views["Debug"]
+    for r in list(sim_replies("figure_eight", 20, seconds=1))[:4]:
+        debug.add_manual_reply(r)
+
+    class Polls:
+        first_seq, next_seq, dropped, cpi = 4000, 4300, 0, 1600
+        dx = dy = np.arange(300) % 5
+        flags = np.zeros(300, dtype=np.int64)
+        stamp_ns = 1_700_000_000_000_000_000 + np.arange(300) * 1_000_000
+
+    for dev in w.ctx.session.devices:
+        debug.on_samples(dev, Polls())
+
+
 def _walk(qapp, w, size) -> dict[str, list[str]]:
     w.resize(*size)
     settle(qapp, w)
+    _show_replay_bar(w)
+    _fill_debug(w)
     w.statusBar().showMessage(REPLAY_SUMMARY)
     w.views["Health"].on_diagnostics(DIAGNOSTICS(w))
     maps = w.views["Maps"]

@@ -89,6 +89,10 @@ class SeekBar(QProgressBar):
         ev.accept()
 
 
+LABEL_TIP = ("recorded seconds replayed / length of the recording; live data is not shown "
+             "until you go back to live")
+
+
 class ReplayBar(QToolBar):
     """The window's replay controls; :meth:`attach` a Replayer, :meth:`leave` to go live.
 
@@ -111,10 +115,7 @@ class ReplayBar(QToolBar):
         self.has_live = False
         self.label = QLabel("")
         self.label.setStyleSheet("color: #6a1b9a; font-weight: bold")
-        self.label.setToolTip(
-            "recorded seconds replayed / length of the recording; live data is not shown "
-            "until you go back to live"
-        )
+        self.label.setToolTip(LABEL_TIP)
         self.progress = SeekBar()
         self.progress.setToolTip("click or drag to a time of the recording; focused: Left/Right "
                                  f"{KEY_STEP_S:g} s back/on, Home/End start/end")
@@ -175,6 +176,7 @@ class ReplayBar(QToolBar):
         total = getattr(replayer, "total_s", 0.0)
         widest = replay_text(name, total, total, "stopped")  # the label never jumps while it runs
         self.label.setMinimumWidth(min(self.label.fontMetrics().horizontalAdvance(widest) + 8, 360))
+        self.label.setToolTip(f"{name}\n{LABEL_TIP}")
         replayer.finished.connect(self.update_view)
         self.show()
         self.timer.start()
@@ -201,7 +203,7 @@ class ReplayBar(QToolBar):
         if r is None or not self.active or self.progress._drag:
             return
         played, total = r.played_s, r.total_s
-        self.label.setText(replay_text(self.name, played, total, self.state()))
+        self._say(replay_text(self.name, played, total, self.state()))
         self.progress.setValue(int(STEPS * played / total) if total > 0 else STEPS * r.done)
         running = not r.done
         self.pause_button.setEnabled(running)
@@ -245,7 +247,18 @@ class ReplayBar(QToolBar):
     def _show_drag(self, fraction: float) -> None:
         r = self.replayer
         if r is not None and self.active:
-            self.label.setText(replay_text(self.name, fraction * r.total_s, r.total_s, "seek"))
+            self._say(replay_text(self.name, fraction * r.total_s, r.total_s, "seek"))
+
+    def _say(self, text: str) -> None:
+        """The label's text, a long file name elided in the middle to the label's room
+        (the whole name is in the tooltip): at 800 px the name was cut off."""
+        room = self.label.minimumWidth() - 8
+        fm = self.label.fontMetrics()
+        if room > 0 and fm.horizontalAdvance(text) > room and self.name in text:
+            rest = fm.horizontalAdvance(text.replace(self.name, ""))
+            text = text.replace(self.name, fm.elidedText(self.name, Qt.ElideMiddle,
+                                                          max(room - rest, 40)))
+        self.label.setText(text)
 
     def _speed_chosen(self, _index: int) -> None:
         self.set_speed(self.speed_box.currentText())
