@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 from fakes import wait_until
 
@@ -68,6 +69,8 @@ def live_window(qapp, beagle_node, tmp_path_factory):
 def test_every_tab_screenshot_has_content(live_window, qapp, screenshot_dir):
     window = live_window
     session = window.ctx.session
+    # the two-sensor method: Health's residual plot has data (with 'exact' it is empty)
+    assert window.set_method("two-sensor")
     # about 8 s of the figure eight at 50 Hz
     wait_until(lambda: session.history is not None and len(session.history) > 400, 40,
                "8 s of history", pump=qapp.processEvents)
@@ -85,6 +88,8 @@ def test_every_tab_screenshot_has_content(live_window, qapp, screenshot_dir):
         colours, share = content_stats(path)
         assert colours > 20, f"{title}: only {colours} colours"
         assert share > 0.05, f"{title}: {share:.1%} of the picture is not background"
+    residual = session.history.column("residual")
+    assert np.count_nonzero(np.isfinite(residual)) > 300  # what the Health plot draws
     window.tabs.setCurrentIndex(0)
     assert session.stats.used > 400
 
