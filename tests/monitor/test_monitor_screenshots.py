@@ -78,6 +78,17 @@ def test_every_tab_screenshot_has_content(live_window, qapp, screenshot_dir):
     table = window.views["Registers"].table
     wait_until(lambda: table.item(0, 0) is not None and "0x" in table.item(0, 0).text(), 10,
                "the registers table", pump=qapp.processEvents)
+    # Debug: three manual samples and each sensor's single polls (else two empty plots)
+    debug = window.views["Debug"]
+    for n in range(1, 4):
+        debug.request_sample()
+        wait_until(lambda n=n: len(debug.samples) >= n, 10, "a manual sample",
+                   pump=qapp.processEvents)
+    for dev in session.devices:
+        debug.fetch_polls(dev)
+    wait_until(lambda: len(debug.polls) == len(session.devices), 10, "the single polls",
+               pump=qapp.processEvents)
+    debug.refresh()
     for i in range(window.tabs.count()):
         title = window.tabs.tabText(i)
         window.tabs.setCurrentIndex(i)
