@@ -148,9 +148,10 @@ def outage_estimate(stamps_ns, dx, dy, flags, window: int = OUTAGE_WINDOW) -> Ou
     """The outage among ring polls (oldest first): their longest time between good polls.
 
     Good polls are those that read the chip (no SPI error, no command's read). The poll
-    period is the median between good polls of the two windows; the speed on either
-    side is that of :func:`pln2033.lift_fill.fill_gap`, as for a lift gap. None: fewer
-    than two good polls.
+    period is the median between good polls of the two windows; each window counts as
+    the time its counts cover, in periods (a late loop's poll carries more than one), and
+    the gap as its time less the period of the poll that ends it; the estimate is
+    :func:`pln2033.lift_fill.fill_gap`'s, as for a lift gap. None: fewer than two good polls.
     """
     f = np.asarray(flags)
     idx = np.flatnonzero((f & (FLAG_SPI_ERROR | FLAG_COMMAND_READ)) == 0)
@@ -159,15 +160,22 @@ def outage_estimate(stamps_ns, dx, dy, flags, window: int = OUTAGE_WINDOW) -> Ou
     t = np.asarray(stamps_ns, dtype=np.int64)[idx]
     diffs = np.diff(t)
     k = int(np.argmax(diffs))
-    before, after = idx[max(0, k + 1 - window) : k + 1], idx[k + 1 : k + 1 + window]
-    steps = np.concatenate([np.diff(t[max(0, k + 1 - window) : k + 1]),
-                            np.diff(t[k + 1 : k + 1 + window])])  # fmt: skip
+    b0, a1 = max(0, k + 1 - window), min(len(idx), k + 1 + window)
+    before, after = idx[b0 : k + 1], idx[k + 1 : a1]
+    steps = np.concatenate([np.diff(t[b0 : k + 1]), np.diff(t[k + 1 : a1])])
     period = float(np.median(steps)) if len(steps) else float(diffs[k])
-    polls = max(0, round(float(diffs[k]) / period) - 1) if period > 0 else 0
+    if period <= 0:
+        return None
+    # the before-window's counts run from the good poll before it (or one period before
+    # its first); the after-window's from the bring-up's read, one period before its first
+    start = float(t[b0 - 1]) if b0 > 0 else float(t[b0]) - period
+    n_before = (float(t[k]) - start) / period
+    n_after = (float(t[a1 - 1]) - float(t[k + 1])) / period + 1.0
+    gap = max(0.0, float(diffs[k]) / period - 1.0)
     ax, ay = np.asarray(dx, dtype=float), np.asarray(dy, dtype=float)
-    fx = fill_gap(ax[before].sum(), len(before), polls, ax[after].sum(), len(after))
-    fy = fill_gap(ay[before].sum(), len(before), polls, ay[after].sum(), len(after))
-    return Outage(float(diffs[k]) / 1e9, polls, fx.total, fy.total, fx.sigma, fy.sigma,
+    fx = fill_gap(ax[before].sum(), n_before, gap, ax[after].sum(), n_after)
+    fy = fill_gap(ay[before].sum(), n_before, gap, ay[after].sum(), n_after)
+    return Outage(float(diffs[k]) / 1e9, round(gap), fx.total, fy.total, fx.sigma, fy.sigma,
                   len(after))  # fmt: skip
 
 

@@ -157,3 +157,17 @@ def test_outage_estimate_needs_two_good_polls_and_skips_failed_ones():
     # two good polls each side, 7 ms apart: 6 poll slots at the 10 counts per poll around them
     assert out is not None and out.seconds == pytest.approx(0.007) and out.polls == 6
     assert out.y == pytest.approx(60.0) and out.x == 0.0 and out.n_after == 2
+
+
+def test_outage_estimate_goes_by_time_when_the_loop_skipped_slots():
+    # 10 counts per ms throughout; before the gap every other slot was skipped (late
+    # loop), so each of those polls carries 20 counts: per poll the speed would double
+    before = np.arange(0, 400, 2) * 1_000_000  # 200 polls 2 ms apart
+    after = (1400 + np.arange(200)) * 1_000_000  # 1 s outage, then 1 ms polls
+    stamps = np.concatenate([before, after]).astype(np.int64)
+    dy = np.concatenate([np.full(200, 20.0), np.full(200, 10.0)])
+    flags = np.zeros(400, dtype=np.uint8)
+    out = health.outage_estimate(stamps, np.zeros(400), dy, flags)
+    assert out is not None and out.seconds == pytest.approx(1.002)
+    # the true loss: 10 counts per ms over the gap less the first poll's own ms
+    assert out.y == pytest.approx(10 * 1001, rel=0.002)
