@@ -512,7 +512,7 @@ def test_applying_a_block_never_puts_the_agents_lock_word_into_the_node_state():
     ints = np.zeros(ss.N_INT, np.int64)
     ints[ss.I_VERSION] = 12345  # odd: the agent's own lock word mid-write
     ints[ss.I_SEQ], ints[ss.I_Y_TOTAL] = 3, 7
-    from mm_beagle.link.remote import RING_DTYPES
+    from mm_beagle.link.remote_feed import RING_DTYPES
 
     arrays = [np.zeros(3, dt) for dt in RING_DTYPES]
     arrays[2][:] = (2, 2, 3)  # dy: the totals add up to the polls (or the block is refused)

@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from mm_beagle.link import link, link_auth, link_decode
-from mm_beagle.link.remote import RING_DTYPES, RemoteAgent
+from mm_beagle.link.remote import RemoteAgent
+from mm_beagle.link.remote_feed import RING_DTYPES
 from mm_beagle.poller import shared_state as ss
 from mm_beagle.poller.poller import PollerConfig
 
@@ -210,7 +211,7 @@ def test_a_consistent_forgery_holds_a_sensor_back_for_2_s_at_most(monkeypatch):
     polls passes; the agent's own blocks then fail the totals check. After RESYNC_S of
     nothing taken the node follows the agent again: its totals are the agent's (the
     forged counts gone), not frozen for good."""
-    import mm_beagle.link.remote as remote_mod
+    import mm_beagle.link.remote_feed as remote_feed
 
     remote = RemoteAgent(PollerConfig(devices=[S0, S1], ring_size=4096))
     feed(remote, "status", status(boot_id=77))
@@ -220,7 +221,7 @@ def test_a_consistent_forgery_holds_a_sensor_back_for_2_s_at_most(monkeypatch):
     assert remote.state.snapshot(0).y_total == 30009
     feed(remote, "polls", frame(77, 3, 5, [1, 1], 15))  # the agent's own: refused
     assert remote.state.snapshot(0).y_total == 30009 and remote.refused == 1
-    monkeypatch.setattr(remote_mod, "RESYNC_S", 0.0)
+    monkeypatch.setattr(remote_feed, "RESYNC_S", 0.0)
     feed(remote, "polls", frame(77, 4, 5, [1, 1], 15))  # ... until the node follows it again
     t = remote.state.snapshot(0)
     assert (t.seq, t.y_total) == (4, 11) and remote.resyncs >= 1

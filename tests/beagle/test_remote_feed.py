@@ -22,7 +22,9 @@ import pytest
 from fakes import wait_until
 
 from mm_beagle.link import link
-from mm_beagle.link.remote import CLOCK_SLEW, RING_DTYPES, RemoteAgent
+from mm_beagle.link.remote import RemoteAgent
+from mm_beagle.link.remote_clock import CLOCK_SLEW
+from mm_beagle.link.remote_feed import RING_DTYPES
 from mm_beagle.poller import shared_state as ss
 from mm_beagle.poller.poller import PollerConfig
 

@@ -79,7 +79,7 @@ def test_layout_fits_the_size_it_asks_for(n, ring):
 def test_ring_record_is_defined_once_and_every_derivation_agrees():
     """ring_layout.RING is the record; the shared state's arrays, the link's item sizes
     and the remote's dtypes are derived from it and agree field by field."""
-    from mm_beagle.link import link, remote
+    from mm_beagle.link import link, remote_feed
     from mm_beagle.poller import ring_layout
 
     state = ss.SharedState(bytearray(ss.SharedState.size(2, 8)), 2, 8)
@@ -89,7 +89,7 @@ def test_ring_record_is_defined_once_and_every_derivation_agrees():
         "ring_quality",
     )  # fmt: skip
     arrays = [getattr(state, attr) for attr in ss.SharedState.RING_FIELDS]
-    wire = [np.dtype(dt) for dt in remote.RING_DTYPES]
+    wire = [np.dtype(dt) for dt in remote_feed.RING_DTYPES]
     assert [a.dtype.itemsize for a in arrays] == list(link.ARRAY_ITEM) == [w.itemsize for w in wire]
     assert [a.dtype.kind for a in arrays] == [w.kind for w in wire] == list("iiiuuui")
     assert sum(link.ARRAY_ITEM) == link.POLL_BYTES == 19
