@@ -633,8 +633,8 @@ class PollTracker:
     # -- pairing and lift filling -------------------------------------------------------
 
     def _same_ticks(self, pend: list[_Pending]):
-        """The common case, cheaply: every sensor holds polls of the same poller ticks (the
-        poller stamps all sensors of one tick alike) and none read for a command. Returns
+        """The common case, cheaply: every sensor holds polls of the same poller ticks (their
+        stamps equal after :func:`snap_to_ticks`) and none read for a command. Returns
         (ticks, counts, lifted, folded, used) as :meth:`_match_ticks` would, or None."""
         first = pend[0].stamp
         k = len(first)
