@@ -38,7 +38,9 @@ def chip_replies(chips, seconds=3.0, cpi=(1600, 1600)):
     for k, r in enumerate(sim_replies("figure_eight", 100.0, seconds)):
         readings = tuple(
             replace(x, chip=c, cpi=cpi[i] if c else x.cpi,
-                    quality=quality_at(k) if c in ("pmw3360", "pmw3389") else -1,
+                    # the PMW3360 dips, the PMW3389 sees a good floor all along (a steady 60):
+                    # the screenshot's curves differ (alike, the second hid the first)
+                    quality={"pmw3360": quality_at(k), "pmw3389": 60}.get(c, -1),
                     low_quality_events=10 if quality_at(k) < 16 and c == "pmw3360" else 0)
             for i, (x, c) in enumerate(zip(r.readings, chips, strict=True))
         )
@@ -225,6 +227,8 @@ def test_quality_and_chip_screenshots(qtbot, screenshot, fake_bridge):
     view.refresh()
     img = screenshot(view, "health-quality.png")
     assert img.width() >= 1000 and view.quality_plot.isVisible()
+    # the two curves differ (the PMW3360 dips, the PMW3389 does not)
+    assert min(view.quality_data(0)[1]) == 5 and set(view.quality_data(1)[1]) == {60}
     regs = RegistersView(MonitorContext(MonitorSession(devices=DEFAULT_DEVICES), bridge=bridge))
     qtbot.addWidget(regs)
     regs.resize(900, 600)

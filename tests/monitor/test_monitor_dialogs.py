@@ -390,7 +390,9 @@ def test_filter_dialog_refuses_bad_windows(qtbot, ctx):
         assert not dlg.apply_all()
         assert filter_state(ctx.session) == before, bad
         assert not row.error.isHidden()
-        assert row.error.text().startswith(f"{D0}: median window must be an integer number")
+        assert row.error.text().startswith(f"{D0}: median window "
+                                           + ("is empty: type" if bad == "" else "must be"))
+        assert "an integer number of samples in 1..999" in row.error.text()
         assert row.error.text().endswith("nothing changed")
         # live apply by a check box is refused too, and the box goes back
         row.fx.setChecked(True)
