@@ -586,6 +586,10 @@ def test_health_view_shows_diagnostics_residual_and_counters(qtbot, ctx, screens
     lift_axis = view.lift_plot.getAxis("left")
     assert lift_axis.autoSIPrefixScale == 1.0 and "x0.001" not in lift_axis.labelString()
     assert view.lift_plot.viewRange()[1][0] == pytest.approx(-0.05 * 3, abs=0.2)
+    # the picture at a width the tab has (at 420 px, outside the window's scrolling page,
+    # the labels were drawn over the table)
+    view.resize(1000, 760)
+    qtbot.wait(10)
     assert_shows_content(screenshot(view, "health.png"), "health.png")
 
     ctx.session.configure_odometry(method="exact")
