@@ -20,7 +20,7 @@ from mm_beagle.poller.shared_state import SharedState
 from mm_pc.core.calibration import Calibration
 from mm_pc.core.geometry import SensorMount
 from mm_pc.core.odometry import Odometry, Pose2D
-from mm_pc.core.polls import unseen_bits
+from mm_pc.core.polls import MAX_READ_SKEW_NS, deskew, unseen_bits
 from pln2033 import INCH_M
 
 
@@ -54,6 +54,9 @@ class OnboardOdometry:
         # start from now: the past is not integrated
         self.next_seq = [int(state.snapshot(i).seq) for i in range(len(devices))]
         self.last_stamp = [0] * len(devices)
+        # the later sensors' reads moved back to sensor 0's (mm_pc.core.polls.deskew)
+        self._carry = np.zeros((len(devices), 2))
+        self._delay = np.zeros(len(devices))
 
     def reset(self) -> None:
         """Pose back to the origin; the polls from here on are integrated (the past is not)."""
@@ -82,6 +85,10 @@ class OnboardOdometry:
         dt = np.diff(np.concatenate([[prev], stamps])) / 1e9
         dt = np.maximum(dt, 1e-6)  # a command's read shares its poll's stamp
         self.last_stamp[self.sensor] = int(stamps[-1])
+        first = batches[0][3]["stamp_ns"][:n].astype(np.int64)
+        delay = np.stack([b[3]["stamp_ns"][:n].astype(np.int64) - first for b in batches], 1)
+        delay[(delay < 0) | (delay >= MAX_READ_SKEW_NS)] = 0  # not the same tick: as read
+        d = deskew(d, delay, dt, self._carry, self._delay)
         before = self.odometry.pose
         self.odometry.integrate(dt, d, lifted=lifted)  # advances the pose
         after = self.odometry.pose

@@ -10,7 +10,8 @@ sim backend's ``file:PATH`` format). The ground truth is the file as the sim rea
   poll (what ``mm-bench pose``'s ``per_poll_15hz_*`` keys measure);
 * through the processes: ``mm-beagle`` (sim backend, the file, ``cpi``, no loop, a start
   delay so every client has its baseline before the robot moves) and one ``mm-odometry``
-  per (method, rate); the final pose each publishes once the robot stands.
+  per (method, rate), and mm-beagle's own odometry (``two-sensor``, every poll of its
+  ring, :data:`ONBOARD`); the final pose each publishes once the robot stands.
 
 Errors: final position (mm per 10 m travelled) and yaw (rad) against the ground truth,
 with each process's gap count from /diagnostics. The speed-up: the path at ``speed``
@@ -36,6 +37,8 @@ from mm_pc.sim import robot as sim
 __all__ = ["in_process", "pipeline", "through_processes", "write_path"]
 
 METHODS = ("exact", "two-sensor")
+#: mm-beagle's onboard odometry's key in the results (two-sensor, published at 15 Hz)
+ONBOARD = "mm-beagle onboard two-sensor@15Hz"
 ROW_S = 0.01  # CSV row interval (s): 100 Hz, the file format's slowest
 
 
@@ -162,8 +165,12 @@ def through_processes(
     beagle = {
         "backend": "sim", "sim_trajectory": f"file:{path}", "sim_loop": False,
         "sim_start_delay": start_delay, "cpi": cpi,
+        # mm-beagle's own odometry too (every poll of the ring, on the board)
+        "odometry_rate": 15.0, "odometry_method": "two-sensor",
     }  # fmt: skip
-    got: dict[str, list] = {k: [] for k in nodes}
+    topics = {k: f"{ns[k]}/mm_odometry/odom" for k in nodes}
+    topics[ONBOARD] = "/mm_beagle/odom"
+    got: dict[str, list] = {k: [] for k in topics}
     diags: dict[str, dict] = {}
     lock = threading.Lock()
     with _Stack() as stack:
@@ -185,8 +192,8 @@ def through_processes(
 
             return on
 
-        for k in nodes:
-            client.node.create_subscription(OdometryMsg, f"{ns[k]}/mm_odometry/odom", keep(k), 10)
+        for k, topic in topics.items():
+            client.node.create_subscription(OdometryMsg, topic, keep(k), 10)
 
         def on_diag(msg):
             for s in msg.status:
@@ -197,12 +204,12 @@ def through_processes(
         client.node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 50)
         deadline = t_start + start_delay + motion_s + timeout
         finals: dict[str, object] = {}
-        while time.monotonic() < deadline and len(finals) < len(nodes):
+        while time.monotonic() < deadline and len(finals) < len(topics):
             time.sleep(0.5)
             if time.monotonic() < t_start + start_delay + motion_s:
                 continue
             with lock:
-                for k in nodes:
+                for k in topics:
                     recent = got[k][-10:]
                     still = len(recent) == 10 and all(
                         r.twist.twist.linear.x == 0 and r.twist.twist.angular.z == 0
@@ -212,7 +219,7 @@ def through_processes(
                         finals[k] = recent[-1]
         time.sleep(1.5)  # one more /diagnostics round after the last polls
     out: dict = {}
-    for k in nodes:
+    for k in topics:
         msg = finals.get(k)
         if msg is None:
             out[k] = {"error": f"no final pose within the time allowed (logs: {log_dir})"}
@@ -220,9 +227,10 @@ def through_processes(
         p = msg.pose.pose
         yaw = 2 * math.atan2(p.orientation.z, p.orientation.w)
         row = _row((p.position.x, p.position.y, yaw), truth, length)
-        d = next((d for n, d in diags.items() if n.startswith(ns[k] + "/")), {})
-        row["gaps"] = int(d.get("gaps", -1))
-        row["polls_integrated"] = int(d.get("polls_integrated", -1))
+        d = next((d for n, d in diags.items() if k in ns and n.startswith(ns[k] + "/")), {})
+        if k in ns:  # mm-odometry's /diagnostics
+            row["gaps"] = int(d.get("gaps", -1))
+            row["polls_integrated"] = int(d.get("polls_integrated", -1))
         out[k] = row
     out["logs"] = str(log_dir)
     return out

@@ -1,6 +1,6 @@
 """The pose the nodes publish, as exact as the in-process integration: mm-beagle (sim,
 a CSV s-curves path, 1600 CPI) and one mm-odometry per method at 15 and 100 Hz
-(``mm-bench pipeline``'s run, ~35 s)."""
+(``mm-bench pipeline``'s run, ~35 s), and mm-beagle's own two-sensor odometry."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import pytest
 
 pytest.importorskip("rclpy")
 
-from mm_pc.bench.pipeline import in_process, through_processes, write_path
+from mm_pc.bench.pipeline import ONBOARD, in_process, through_processes, write_path
 
 pytestmark = pytest.mark.ros
 
@@ -26,6 +26,9 @@ def test_both_methods_through_the_processes_at_1600_cpi(tmp_path):
     ref = in_process(path, rates, 1600)
     got = through_processes(path, rates, 1600, start_delay=8.0, timeout=40.0,
                             log_dir=tmp_path)  # fmt: skip
+    onboard = got[ONBOARD]
+    assert "error" not in onboard, got
+    assert onboard["error_mm_per_10m"] <= TWO_SENSOR_MAX_MM_PER_10M, got
     for hz in ("15", "100"):
         ex, ts = got[f"exact@{hz}Hz"], got[f"two-sensor@{hz}Hz"]
         assert "error" not in ex and "error" not in ts, got
