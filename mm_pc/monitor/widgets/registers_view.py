@@ -100,9 +100,9 @@ class RegistersView(QWidget):
         self.table = QTableWidget(len(FIELDS), 0)
         self.table.setVerticalHeaderLabels(list(FIELDS))
         self.table.setEditTriggers(QTableWidget.NoEditTriggers)
-        # as wide as the device's name at least (a narrow window scrolls), the rest shared
-        self.table.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeToContents)
-        self.table.horizontalHeader().setStretchLastSection(True)
+        # the sensors share the width alike, each as wide as its head at least (a narrow
+        # window scrolls; with the last column stretched alone the columns were unequal)
+        self.table.horizontalHeader().setSectionResizeMode(QHeaderView.Stretch)
         self.table.setToolTip(NO_LOSS_TIP)
         mono = QFont("monospace")
         mono.setStyleHint(QFont.Monospace)
@@ -141,6 +141,7 @@ class RegistersView(QWidget):
             label = QLabel("not read yet")
             label.setFont(self._mono)
             label.setWordWrap(True)
+            self._least_column_width()
             box = QGroupBox(device)
             QVBoxLayout(box).addWidget(label)
             self.status_layout.addWidget(box)
@@ -214,6 +215,17 @@ class RegistersView(QWidget):
             head = self.table.horizontalHeaderItem(col)
             if head is not None and dev in self.dumps:
                 head.setText(f"{dev}\n{chip_title(chip)}")
+        self._least_column_width()
+
+    def _least_column_width(self) -> None:
+        """No column narrower than its widest head line or value (plus the margins)."""
+        header = self.table.horizontalHeader()
+        fm = header.fontMetrics()
+        widest = max((fm.horizontalAdvance(line) for c in range(self.table.columnCount())
+                      if (item := self.table.horizontalHeaderItem(c)) is not None
+                      for line in item.text().split("\n")), default=0)
+        values = self.table.fontMetrics().horizontalAdvance("0x0000") if self.dumps else 0
+        header.setMinimumSectionSize(max(widest, values) + 16)
 
     def status_text(self, msg, stamp: float) -> str:
         chip = chip_key(str(getattr(msg, "chip", "") or ""))
