@@ -11,40 +11,34 @@ Debian's python3-spidev and python3-yaml and the eclipse-zenoh wheel; ``--backen
 also needs python3-numpy. The command line and configuration: :mod:`mm_beagle.link.agent_cli`.
 
 No peer can hold up the poll: the poll thread never calls zenoh. It hands its batches,
-events and status requests to a sender thread (:class:`Outbox`), and two worker threads
-take the command queries and the history requests, refuse what is too large, too
-frequent or malformed
-(:mod:`mm_beagle.link.agent_requests`), and hand the rest to the poll thread as a
-:class:`Job` in a bounded lane; the poll thread runs at most one step of each lane per
-service (a patch load goes in steps of a few register transfers), and the workers send
-the replies, so a peer that stops reading blocks at most its worker, never the poll.
-History replies are at most :data:`HISTORY_REPLY_POLLS` polls and published with
-congestion control DROP: a reader that stops reading misses them (the node asks again).
+events and status requests to a sender thread (an
+:class:`~mm_beagle.link.agent_queues.Outbox`), and two worker threads
+(:mod:`~mm_beagle.link.agent_workers`) take the command queries and the history requests,
+refuse what is too large, too frequent or malformed (:mod:`mm_beagle.link.agent_requests`),
+and hand the rest to the poll thread as a :class:`~mm_beagle.link.agent_queues.Job` in a
+bounded lane; the poll thread runs at most one step of each lane per service (a patch load
+goes in steps of a few register transfers), and the workers send the replies, so a peer
+that stops reading blocks at most its worker, never the poll. History replies are at most
+:data:`HISTORY_REPLY_POLLS` polls and published with congestion control DROP: a reader
+that stops reading misses them (the node asks again).
 """
 
 from __future__ import annotations
 
 import base64
-import collections
 import json
 import os
-import queue
 import random
 import sys
 import threading
 import time
 import zlib
-from collections.abc import Callable, Generator
+from collections.abc import Generator
 
 from mm_beagle.link import link, link_auth
-from mm_beagle.link.agent_requests import (
-    COMMAND_KEYS,
-    HISTORY_KEYS,
-    MAX_REQUEST_BYTES,
-    Refusals,
-    TokenBucket,
-    parse_request,
-)
+from mm_beagle.link.agent_queues import Inbox, Lane, Outbox
+from mm_beagle.link.agent_requests import Refusals, TokenBucket
+from mm_beagle.link.agent_workers import COMMAND_RATE, HISTORY_RATE, RequestWorkers
 from mm_beagle.poller import commands
 from mm_beagle.poller import shared_state as ss
 from mm_beagle.poller.poller import Poller, PollerConfig
@@ -53,126 +47,9 @@ HEARTBEAT_S = 0.1  # an empty batch at least this often: the node's link watchdo
 STATUS_S = 1.0
 HISTORY_REPLY_POLLS = 4096  # polls per history reply (~94 kB); the node asks on for the rest
 JOB_BUDGET_S = 0.003  # the longest the poll thread spends on one lane's job per service
-JOB_TIMEOUT_S = 10.0  # a worker gives up on a job the poll thread has not finished by then
-LANE_SIZE = 2  # jobs waiting per lane (each worker waits for its own: at most one)
-COMMAND_RATE = (50.0, 50)  # commands per second and burst, all peers together (<= 100/s run)
-HISTORY_RATE = (100.0, 50)  # history requests per second and burst, all peers together
-QUERY_QUEUE = 16  # requests received and waiting for their worker, per key
-OUTBOX_SIZE = 300  # messages waiting for the sender thread (3 s of batches)
 
 
-class Job:
-    """Work for the poll thread: a generator run in steps between polls (its return value is
-    the answer), and the event its worker thread waits on."""
-
-    __slots__ = ("cancelled", "done", "gen", "result")
-
-    def __init__(self, gen: Generator[None, None, object]) -> None:
-        self.gen = gen
-        self.done = threading.Event()
-        self.result: object = None
-        self.cancelled = False
-
-    def step(self, deadline: float) -> bool:
-        """Run until the generator ends (True) or ``deadline`` (perf_counter s) passes."""
-        try:
-            while True:
-                next(self.gen)
-                if time.perf_counter() >= deadline:
-                    return False
-        except StopIteration as stop:
-            self.result = stop.value
-        except Exception as exc:  # never let one request stop the polls
-            self.result = exc
-        self.done.set()
-        return True
-
-
-def once(fn: Callable[..., object], *args: object) -> Generator[None, None, object]:
-    """A job of one step: ``fn(*args)``."""
-    return fn(*args)
-    yield  # a generator, run by Job.step
-
-
-class Lane:
-    """Jobs of one kind waiting for the poll thread (appended by one worker thread)."""
-
-    def __init__(self, size: int = LANE_SIZE) -> None:
-        self.jobs: collections.deque[Job] = collections.deque()
-        self.size = size
-        self.current: Job | None = None
-
-    def submit(self, job: Job) -> bool:
-        if len(self.jobs) >= self.size:
-            return False
-        self.jobs.append(job)
-        return True
-
-    def step(self, budget_s: float) -> None:
-        """The poll thread: one bounded step of the current job (or the next one)."""
-        job = self.current
-        while job is None:
-            if not self.jobs:
-                return
-            job = self.jobs.popleft()
-            if job.cancelled:  # its worker gave up before it started
-                job = None
-        self.current = None if job.step(time.perf_counter() + budget_s) else job
-
-
-class Outbox:
-    """Messages from the poll thread to the sender thread, (kind, bytes); at most
-    :data:`OUTBOX_SIZE` wait, the oldest dropped beyond (the node fetches missed polls)."""
-
-    def __init__(self, size: int = 0) -> None:
-        self.items: collections.deque[tuple[str, bytes]] = collections.deque(
-            maxlen=size or OUTBOX_SIZE
-        )
-        self.ready = threading.Event()
-        self.closed = False
-        self.dropped = 0
-
-    def put(self, item: tuple[str, bytes]) -> None:
-        if len(self.items) == self.items.maxlen:
-            self.dropped += 1
-        self.items.append(item)
-        self.ready.set()
-
-    def close(self) -> None:
-        self.closed = True
-        self.ready.set()
-
-
-class Inbox:
-    """Requests received on one key, waiting for its worker: zenoh's callback puts them
-    here (on a zenoh thread, briefly); one that finds :data:`QUERY_QUEUE` waiting is
-    dropped and counted (a dropped query ends at once for its sender, with no reply)."""
-
-    def __init__(self, key: str, refusals: Refusals) -> None:
-        self.key, self.refusals = key, refusals
-        self.queue: queue.Queue = queue.Queue(QUERY_QUEUE)
-        self.closed = False
-
-    def put(self, request: object) -> None:
-        try:
-            self.queue.put_nowait(request)
-        except queue.Full:
-            self.refusals.refuse(self.key, "queue full", f"{QUERY_QUEUE} requests already wait")
-
-    def get(self) -> object | None:
-        """The next request, or None once closed."""
-        while not self.closed:
-            try:
-                return self.queue.get(timeout=0.2)
-            except queue.Empty:
-                continue
-        return None
-
-    def close(self) -> None:
-        self.closed = True
-
-
-class AgentLink:
+class AgentLink(RequestWorkers):
     """The agent's zenoh side: publishers on the poll thread, a worker thread each for the
     command queryable and the history-request subscriber, and their job lanes."""
 
@@ -286,142 +163,6 @@ class AgentLink:
         return link.encode_batch(self.boot_id, rid, self.poller.state.glob_view.tobytes(), [block])
 
     # --- the worker threads ---
-
-    def _worker(self, inbox: Inbox, answer: Callable[[object], None]) -> None:
-        """Take requests from ``inbox`` until it is closed; never raise."""
-        while (request := inbox.get()) is not None:
-            try:
-                answer(request)
-            except Exception as exc:  # a reply that could not be sent (peer gone)
-                self.refusals.refuse("reply", "reply failed", f"{exc!r}")
-
-    def _job(self, lane: Lane, gen: Generator[None, None, object]) -> object:
-        """Run ``gen`` on the poll thread and wait for its answer (exceptions returned)."""
-        job = Job(gen)
-        if not lane.submit(job):
-            gen.close()
-            raise commands.CommandRefusedError("the agent is busy with other requests; try again")
-        if not job.done.wait(JOB_TIMEOUT_S):
-            job.cancelled = True
-            return RuntimeError(f"the poll thread did not answer within {JOB_TIMEOUT_S:g} s")
-        return job.result
-
-    def _command_query(self, query) -> None:
-        """One command query: checked here, run on the poll thread, answered from here."""
-        try:
-            try:
-                reply = self.answer_command(query.payload)
-            except Exception as exc:  # a bug: still an answer, and the worker goes on
-                self.refusals.refuse("command", "failed", repr(exc))
-                reply = self._reply(commands.ERROR, f"agent failed: {exc!r}", [])
-            query.reply(query.key_expr, reply, attachment=self.auth.tag("reply", reply))
-        finally:
-            query.drop()
-
-    def answer_command(self, payload) -> bytes:
-        """A command (ZBytes or bytes of JSON) -> reply JSON {"status", "payload", "seq"}."""
-        try:
-            if not self.command_rate.allow():
-                raise _RefusedError("rate", f"more than {COMMAND_RATE[0]:g} commands/s; try again")
-            msg = parse_request(_bounded_bytes(payload, "command"), "command", COMMAND_KEYS)
-            cmd, i, args = commands.from_link(msg, self.poller.cfg.devices)
-            if cmd.name == "info":  # the agent's own configuration: nothing on the poll thread
-                seqs = [ch.seq for ch in self.poller.channels]
-                return self._reply(commands.OK, self.info(), seqs)
-            if cmd.name == "load_patch":
-                gen = self.load_patch(i, self._patch_words(*args))
-            else:
-                gen = once(self.run_command, cmd.name, i, args)
-            result = self._job(self.command_lane, gen)
-        except (
-            _RefusedError,
-            link.LinkError,
-            commands.CommandRefusedError,
-        ) as exc:  # nothing changed
-            reason = exc.reason if isinstance(exc, _RefusedError) else type(exc).__name__
-            self.refusals.refuse("command", reason, str(exc))
-            return self._reply(commands.INVALID, str(exc), [])
-        if isinstance(result, Exception):
-            self.refusals.refuse("command", "failed", repr(result))
-            return self._reply(commands.ERROR, f"agent failed: {result!r}", [])
-        status, body, seqs = result  # type: ignore[misc]
-        return self._reply(status, body, seqs)
-
-    def _reply(self, status: str, body: object, seqs: list) -> bytes:
-        """A command reply: its status, payload, the seq after it, the boot that answers."""
-        msg = {"status": status, "payload": body, "seq": seqs, "boot_id": self.boot_id}
-        return json.dumps(msg).encode()
-
-    def _patch_words(self, name: str) -> list[int]:
-        """The words of patch file ``name`` in this agent's patch_dir, read on the worker
-        thread: a file the chip's patch RAM cannot hold is refused unread.
-
-        A peer names a file; it never sends a path elsewhere or the code itself."""
-        from mm_beagle.poller.patches import (
-            PatchPathError,
-            check_patch_file_size,
-            resolve_patch_file,
-        )
-        from pln2033.errors import PatchError
-        from pln2033.pln2033 import read_patch_file
-
-        try:
-            path = resolve_patch_file(self.poller.cfg.patch_dir, name)
-            check_patch_file_size(
-                path, self.poller.regmap.memory_words - self.poller.regmap.patch_start
-            )
-            return read_patch_file(path)
-        except (PatchPathError, PatchError) as exc:
-            raise commands.CommandRefusedError(str(exc)) from None
-
-    def _history_request(self, sample) -> None:
-        reply = self.answer_history(sample.payload)
-        if reply is not None:
-            self.history_pub.put(reply, attachment=self.auth.tag("history", reply))
-
-    def answer_history(self, payload) -> bytes | None:
-        """Polls ``since`` onwards of one sensor (at most ``max``): a batch frame numbered
-        by the request's ``id``, JSON saying why not, or None (rate limited: no answer)."""
-        if not self.history_rate.allow():
-            self.refusals.refuse(
-                "history", "rate", f"more than {HISTORY_RATE[0]:g} history requests/s"
-            )
-            return None
-        rid = None
-        try:
-            msg = parse_request(_bounded_bytes(payload, "history"), "history", HISTORY_KEYS)
-            rid = msg.get("id")
-            n = len(self.poller.channels)
-            rid, i, since, most = commands.history_request(msg, n, link.MAX_HISTORY)
-            result = self._job(self.history_lane, once(self.history_frame, rid, i, since, most))
-            if isinstance(result, commands.CommandRefusedError):
-                raise result
-        except (_RefusedError, link.LinkError, commands.CommandRefusedError) as exc:
-            self.refusals.refuse("history", type(exc).__name__, str(exc))
-            rid = rid if isinstance(rid, int) and not isinstance(rid, bool) else None
-            return json.dumps({"id": rid, "status": "invalid", "payload": str(exc)}).encode()
-        if isinstance(result, Exception):
-            self.refusals.refuse("history", "failed", repr(result))
-            return json.dumps({"id": rid, "status": "error", "payload": repr(result)}).encode()
-        return result  # type: ignore[return-value]
-
-    def info(self) -> dict:
-        cfg = self.poller.cfg
-        return {
-            "devices": cfg.devices,
-            "backend": cfg.backend,
-            "boot_id": self.boot_id,
-            "ring_size": cfg.ring_size,
-            "poll_rate": cfg.poll_rate,
-            "cpi": cfg.cpi,
-            "cpi_range": [self.poller.regmap.cpi_min, self.poller.regmap.cpi_max],
-            "cpi_step": self.poller.regmap.cpi_step,
-            "chips": self.poller.chips,
-            "chip_cpi": [
-                [ch.info.cpi.min, ch.info.cpi.max, ch.info.cpi.step] for ch in self.poller.channels
-            ],
-        }
-
     # --- status and events ---
 
     def _send(self) -> None:
@@ -486,27 +227,6 @@ class AgentLink:
             t.join(1.0)
         for entity in (self.history_pub, self.pub, self.status_pub, self.events_pub):
             entity.undeclare()
-
-
-class _RefusedError(Exception):
-    """A request refused before it was parsed (``reason``: rate, size)."""
-
-    def __init__(self, reason: str, text: str) -> None:
-        super().__init__(text)
-        self.reason = reason
-
-
-def _bounded_bytes(payload, what: str) -> bytes:
-    """A request's bytes (ZBytes or bytes), its size checked before it is copied."""
-    if payload is None:
-        return b""
-    size = len(payload)
-    if size > MAX_REQUEST_BYTES:
-        raise _RefusedError(
-            "size", f"{what} request of {size} bytes is larger than {MAX_REQUEST_BYTES}"
-        )
-    return payload if isinstance(payload, bytes) else payload.to_bytes()
-
 
 class AgentPoller(Poller):
     """The poller with its link served every 10 ms instead of a pipe to a node."""
