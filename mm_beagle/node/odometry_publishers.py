@@ -15,7 +15,7 @@ from nav_msgs.msg import Odometry as OdometryMsg
 
 from mm_beagle.node.onboard_odometry import OnboardOdometry
 from mm_beagle.poller import shared_state as ss
-from mm_pc.core.uncertainty import PoseUncertainty
+from mm_pc.core.uncertainty import PoseUncertainty, calibration_se
 from mm_pc.ros.clock import node_stamp
 from mm_pc.ros.odometry_msgs import chip_odometry, odometry_message
 from mm_pc.ros.reset import create_reset_service
@@ -30,7 +30,7 @@ class OnboardOdometryPublisher:
         o = node.settings.odometry
         self.onboard = OnboardOdometry(o, node.devices, node.poller.state, node.chips)
         self.sensor_frames = sensor_frame_names(node.devices, o.sensor_frames, o.frame_prefix)
-        self.uncertainty = PoseUncertainty()
+        self.uncertainty = PoseUncertainty(**calibration_se(self.onboard.calibration, node.devices))
         self.tf = TfPublisher(node, o.publish_tf)
         self.send_static_frames()
         self.pub = node.create_publisher(OdometryMsg, "~/odom", 10)

@@ -263,3 +263,17 @@ def planar_covariance_6x6(p3) -> list[float]:
     c[np.ix_(idx, idx)] = p
     c[2, 2] = c[3, 3] = c[4, 4] = UNOBSERVED_VARIANCE
     return c.reshape(-1).tolist()
+
+
+def calibration_se(calibration, devices: Sequence[str]) -> dict[str, float]:
+    """``cal_yaw_se`` (rad) and ``cal_scale_se`` (relative) for :class:`PoseUncertainty`
+    from a loaded :class:`~mm_pc.core.calibration.Calibration`: the largest standard
+    error of the mounting angle and of the X/Y scales over the sensors ``devices`` the
+    pose uses (conservative: the random-walk model carries one of each); 0 where the
+    file has none (a version-1 file, a straight-run calibration)."""
+    yaw, scale = [0.0], [0.0]
+    for dev in devices:
+        c = calibration.get(dev)
+        yaw.append(c.angle_offset_se or 0.0)
+        scale += [c.scale_x_se or 0.0, c.scale_y_se or 0.0]
+    return {"cal_yaw_se": max(yaw), "cal_scale_se": max(scale)}

@@ -50,7 +50,7 @@ from mm_pc.core.calibration import Calibration
 from mm_pc.core.geometry import DEFAULT_MOUNTS, SensorMount
 from mm_pc.core.odometry import METHODS, Odometry, Pose2D, Sample
 from mm_pc.core.polls import PollBatch, PollTracker, SensorTotals, integrate_steps
-from mm_pc.core.uncertainty import PoseUncertainty
+from mm_pc.core.uncertainty import PoseUncertainty, calibration_se
 from mm_pc.ros import spin as ros_spin
 from mm_pc.ros.clock import ClockWatch, node_stamp
 from mm_pc.ros.deadline_client import DeadlineClient
@@ -173,7 +173,9 @@ class OdometryNode(Node):
         mounts = self.calibration.mounts(devices, mounts)
         self.mounts = mounts
         self.odometry = Odometry(mounts, method=p["method"], sensor=p["sensor"])
-        self.uncertainty = PoseUncertainty()
+        # the calibration's own standard errors: its term of the covariance (0 without;
+        # the largest over the sensors, so a live method change keeps it honest)
+        self.uncertainty = PoseUncertainty(**calibration_se(self.calibration, devices))
         if problem := frame_ids_problem(p, ("odom_frame", "base_frame")) or frame_prefix_problem(
             p["frame_prefix"]
         ):
