@@ -23,6 +23,7 @@ import time
 
 from mm_beagle.link import link, link_decode
 from mm_beagle.poller import commands
+from mm_pc.ros.throttle import WarnThrottle
 
 MAX_REQUEST_BYTES = 4096  # the largest honest request (load_patch with a long name) is ~300
 MAX_TEXT = 1024  # characters of one string value
@@ -90,8 +91,7 @@ class Refusals:
         self.by_key: dict[str, int] = {}
         self.by_reason: dict[str, int] = {}
         self._lock = threading.Lock()
-        self._next_log: dict[str, float] = {}  # per key
-        self._quiet: dict[str, int] = {}  # refused on a key since its last line
+        self._gate = WarnThrottle(LOG_EVERY_S)  # per key; counts those refused quietly
 
     def refuse(self, key: str, reason: str, detail: str) -> None:
         """Count one refusal on ``key`` (``reason``: a short category); log ``detail``."""
@@ -99,12 +99,9 @@ class Refusals:
             self.total += 1
             self.by_key[key] = self.by_key.get(key, 0) + 1
             self.by_reason[reason] = self.by_reason.get(reason, 0) + 1
-            now = time.monotonic()
-            if now < self._next_log.get(key, 0.0):
-                self._quiet[key] = self._quiet.get(key, 0) + 1
+            quiet = self._gate(key)
+            if quiet is None:
                 return
-            quiet = self._quiet.pop(key, 0)
-            self._next_log[key] = now + LOG_EVERY_S
         more = f" ({quiet} more refused since the last line)" if quiet else ""
         detail = detail.replace("\n", " ")[:300]  # one line, whatever a peer put in it
         print(

@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 from collections.abc import Callable, Generator
 
-from mm_beagle.link import link
+from mm_beagle.link import link, link_decode
 from mm_beagle.link.agent_queues import Inbox, Job, Lane, once
 from mm_beagle.link.agent_requests import (
     COMMAND_KEYS,
@@ -179,9 +179,7 @@ def _bounded_bytes(payload, what: str) -> bytes:
     """A request's bytes (ZBytes or bytes), its size checked before it is copied."""
     if payload is None:
         return b""
-    size = len(payload)
-    if size > MAX_REQUEST_BYTES:
-        raise _RefusedError(
-            "size", f"{what} request of {size} bytes is larger than {MAX_REQUEST_BYTES}"
-        )
-    return payload if isinstance(payload, bytes) else payload.to_bytes()
+    try:
+        return link_decode.payload_bytes(payload, MAX_REQUEST_BYTES, f"{what} request")
+    except link.LinkError as exc:
+        raise _RefusedError("size", str(exc)) from None

@@ -15,10 +15,10 @@ import base64
 import binascii
 import json
 import re
-import time
 import zlib
 
 from mm_beagle.link.link import LinkError
+from mm_pc.ros.throttle import WarnThrottle
 
 MAX_STATUS_BYTES = 256 * 1024  # a status (~1-3 kB: hist_z holds a compressed 160 kB array)
 MAX_EVENT_BYTES = 16 * 1024
@@ -26,6 +26,16 @@ MAX_REPLY_BYTES = 256 * 1024  # a command reply (settings: a few kB)
 MAX_TEXT = 4096  # characters of one text field (an error, an event's text)
 MAX_DEPTH = 8  # nesting of JSON arrays/objects (ours use at most 3)
 _TOKENS = re.compile(rb'["\\\[\]{}]')  # the characters that matter to nesting
+
+
+def payload_bytes(payload, max_bytes: int, what: str = "message") -> bytes:
+    """A payload (zenoh ZBytes, bytes) as bytes, its size checked before it is copied:
+    LinkError if it is longer than ``max_bytes``."""
+    if len(payload) > max_bytes:
+        raise LinkError(f"{what} of {len(payload)} bytes is too large (limit {max_bytes})")
+    if isinstance(payload, (bytes, bytearray, memoryview)):
+        return bytes(payload)
+    return payload.to_bytes()
 
 
 def json_depth_ok(data: bytes, max_depth: int) -> bool:
@@ -63,9 +73,7 @@ def decode_json_bounded(
 ) -> object:
     """JSON ``payload`` decoded only if it is at most ``max_bytes`` long, nests at most
     ``max_depth`` deep and is UTF-8; LinkError (one line) otherwise. No NaN/Infinity."""
-    if len(payload) > max_bytes:
-        raise LinkError(f"{what} of {len(payload)} bytes is too large (limit {max_bytes})")
-    data = bytes(payload)
+    data = payload_bytes(payload, max_bytes, what)
     if not json_depth_ok(data, max_depth):
         raise LinkError(f"{what} nests deeper than {max_depth} levels")
     try:
@@ -230,18 +238,19 @@ class DropLog:
         self.interval = interval
         self.counts: dict[str, int] = {}
         self.total = 0
-        self._last: dict[tuple[str, str], tuple[float, int]] = {}
+        self._gate = WarnThrottle(interval)
+        self._reasons: set[str] = set()
 
     def drop(self, kind: str, why: str) -> str | None:
         """Count one dropped ``kind`` input; the line to log now, or None (rate-limited)."""
         self.total += 1
         n = self.counts[kind] = self.counts.get(kind, 0) + 1
-        now = time.monotonic()
-        key = (kind, " ".join(re.sub(r"[0-9]", "", why).split()[:3]))
-        last = self._last.get(key, (-1e9, 0))[0]
-        if now - last < self.interval:
+        key = kind + "|" + " ".join(re.sub(r"[0-9]", "", why).split()[:3])
+        if self._gate(key) is None:
             return None
-        if len(self._last) > 256:  # bounded: forget the reasons seen
-            self._last.clear()
-        self._last[key] = (now, n)
+        self._reasons.add(key)
+        if len(self._reasons) > 256:  # bounded: forget the reasons seen
+            self._reasons = {key}
+            self._gate = WarnThrottle(self.interval)
+            self._gate(key)
         return f"dropped a {kind} input from the link: {why[:300]} ({n} so far)"

@@ -88,9 +88,9 @@ class CommandClient:
     def _reply(self, sample) -> tuple | str:
         """One command reply checked (tuple), or why it was refused (str, counted)."""
         try:
-            if len(sample.payload) > link_decode.MAX_REPLY_BYTES:
-                raise link.LinkError(f"a command reply of {len(sample.payload)} bytes")
-            data = sample.payload.to_bytes()
+            data = link_decode.payload_bytes(
+                sample.payload, link_decode.MAX_REPLY_BYTES, "command reply"
+            )
             try:
                 self.auth.check("reply", data, link_auth.attachment_bytes(sample))
             except link.LinkError as exc:
