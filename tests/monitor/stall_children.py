@@ -13,3 +13,9 @@ def report_niceness(seed: int, conn) -> None:
     sim_process.lower_priority()
     conn.send(("ok", (before, os.nice(0))))
     conn.close()
+
+
+def send_big(seed: int, conn) -> None:
+    """A result of 3 MB (a simulated run is 2.8 MB), numbered bytes."""
+    conn.send(("ok", bytes(range(256)) * (3_000_000 // 256)))
+    conn.close()

@@ -13,7 +13,7 @@ from PySide6.QtCore import QTimer
 from mm_pc.bench.gui import STALL_MS, _Heartbeat, stall_figures
 from mm_pc.monitor.context import MonitorContext
 from mm_pc.monitor.model import sim_process
-from mm_pc.monitor.model.csv_export import export_csv
+from mm_pc.monitor.model.csv_export import csv_chunks, csv_columns, export_csv
 from mm_pc.monitor.model.session import MonitorSession
 from mm_pc.monitor.widgets.data_list import DataListView
 
@@ -39,21 +39,32 @@ def test_the_heartbeat_sees_a_blocked_gui_thread(qtbot):
 
 def test_csv_export_in_background_writes_what_export_to_writes(qtbot, tmp_path, feed):
     ctx = MonitorContext(MonitorSession())
-    feed(ctx, name="figure_eight", rate_hz=100.0, seconds=20.0)
+    feed(ctx, name="figure_eight", rate_hz=100.0, seconds=60.0)  # 6000 rows: 3 steps
     view = DataListView(ctx)
     qtbot.addWidget(view)
     table = view.tables[0]
     n = len(ctx.session.history)
     out = tmp_path / "bg.csv"
-    future = table.export_in_background(out)
-    # the columns were copied at once: the window goes on and rows may arrive meanwhile
+    assert table.export_in_background(out)
+    # the columns were copied at once: rows arriving meanwhile are not in this file
     assert table.message.text() == f"writing {n} rows to {out} …"
     assert not table.export_button.isEnabled()
     qtbot.waitUntil(lambda: table.export_button.isEnabled(), timeout=20_000)
-    assert future.result() == n
+    assert table.export_done is True
     assert table.message.text() == f"{n} rows written to {out}"
     assert export_csv(ctx.session.history, 0, tmp_path / "now.csv") == n
     assert out.read_text() == (tmp_path / "now.csv").read_text()
+
+
+def test_csv_chunks_write_the_file_of_one_go(tmp_path, feed):
+    ctx = MonitorContext(MonitorSession())
+    feed(ctx, name="figure_eight", rate_hz=100.0, seconds=10.0)
+    cols = csv_columns(ctx.session.history, 1)
+    n = len(cols[0])
+    steps = list(csv_chunks(cols, tmp_path / "steps.csv", rows=300))
+    assert steps == [0, *range(300, n, 300), n]
+    assert export_csv(ctx.session.history, 1, tmp_path / "once.csv") == n
+    assert (tmp_path / "steps.csv").read_text() == (tmp_path / "once.csv").read_text()
 
 
 def test_csv_export_in_background_says_why_it_failed(qtbot, tmp_path, feed):
@@ -66,7 +77,7 @@ def test_csv_export_in_background_says_why_it_failed(qtbot, tmp_path, feed):
     qtbot.waitUntil(lambda: table.export_button.isEnabled(), timeout=20_000)
     assert table.message.text().startswith("export failed:")
     assert "No such file or directory" in table.message.text()
-    assert not (tmp_path / "missing_dir").exists()
+    assert not (tmp_path / "missing_dir").exists() and table.export_done is False
 
 
 def test_csv_export_in_background_without_data_writes_nothing(qtbot, tmp_path):
@@ -75,7 +86,7 @@ def test_csv_export_in_background_without_data_writes_nothing(qtbot, tmp_path):
     qtbot.addWidget(view)
     view._build(("/a", "/b"))
     table = view.tables[0]
-    assert table.export_in_background(tmp_path / "x.csv") is None
+    assert table.export_in_background(tmp_path / "x.csv") is False
     assert table.message.text() == "export failed: no data yet: nothing to export"
     assert table.export_button.isEnabled() and not (tmp_path / "x.csv").exists()
 
@@ -93,6 +104,22 @@ def test_the_simulation_child_runs_at_a_lower_priority():
     assert result is not None and result[0] == "ok"
     before, after = result[1]
     assert after == min(19, before + sim_process.CHILD_NICE)
+
+
+def test_a_big_result_is_read_in_slices_one_per_poll():
+    import stall_children
+
+    job = sim_process.SimJob(2, target=stall_children.send_big)
+    deadline = time.monotonic() + 30
+    result, polls = None, 0
+    while result is None and time.monotonic() < deadline:
+        result = job.poll()
+        polls += 1
+        time.sleep(0.005)
+    assert result == ("ok", bytes(range(256)) * (3_000_000 // 256))
+    # never more than READ_SLICE bytes in one poll: the GUI thread never waits for the child
+    assert job.slices >= 3_000_000 // sim_process.READ_SLICE and polls > job.slices
+    assert job.done and job.poll() is None
 
 
 def test_a_child_that_died_without_closing_the_pipe_is_reported():

@@ -16,8 +16,8 @@ import numpy as np
 from mm_pc.monitor.model.history import History
 from mm_pc.monitor.model.session import sensor_columns
 
-__all__ = ["COLUMNS", "CSV_DECIMALS", "CSV_HEADER", "column_name", "csv_columns", "export_csv",
-           "write_csv_columns"]
+__all__ = ["COLUMNS", "CSV_DECIMALS", "CSV_HEADER", "column_name", "csv_chunks", "csv_columns",
+           "export_csv", "write_csv_columns"]
 
 #: (header with unit, field: "t" or a sensor field, scale from SI, format)
 COLUMNS: tuple[tuple[str, str, float, str], ...] = (
@@ -89,9 +89,26 @@ def csv_columns(history: History | None, sensor_index: int) -> list[np.ndarray]:
 
 def write_csv_columns(cols: list[np.ndarray], path: str | Path) -> int:
     """Write the columns of :func:`csv_columns` as CSV (header first); returns the rows."""
+    *_, written = csv_chunks(cols, path)
+    return written
+
+
+#: rows written per :func:`csv_chunks` step (~15 ms on a quiet 2-core PC)
+CSV_CHUNK_ROWS = 2500
+
+
+def csv_chunks(cols: list[np.ndarray], path: str | Path, rows: int = CSV_CHUNK_ROWS):
+    """Write the columns of :func:`csv_columns` as CSV ``rows`` rows a step (a generator: it
+    yields the rows written so far after the header and after each step; the file is closed
+    when it is exhausted or closed). The same file as one go: a GUI writes it a step per
+    timer tick instead of holding its thread (an hour of rows took ~0.6 s in one go)."""
     with open(path, "w", newline="") as fh:
         out = csv.writer(fh)
         out.writerow(CSV_HEADER)
-        out.writerows(zip(*(_csv_values(c, d) for c, d in zip(cols, CSV_DECIMALS, strict=True)),
-                          strict=True))
-    return len(cols[0])
+        yield 0
+        n = len(cols[0])
+        for i in range(0, n, rows):
+            part = [c[i : i + rows] for c in cols]
+            out.writerows(zip(*(_csv_values(c, d) for c, d in zip(part, CSV_DECIMALS,
+                                                                   strict=True)), strict=True))
+            yield min(n, i + rows)
