@@ -23,8 +23,11 @@ import struct
 import time
 from contextlib import suppress
 
-__all__ = ["CHILD_NICE", "SimJob", "build_in_child", "lower_priority"]
+__all__ = ["CHILD_NICE", "SIM_TYPICAL", "SimJob", "build_in_child", "lower_priority"]
 
+#: how long a build takes, as the view says it (``mm-bench gui``'s ``stalls.sim_build_s``:
+#: 5.6-7.4 s on a 2-core PC at a load of 3-7; issue 29 saw ~40 s at a load of 5)
+SIM_TYPICAL = "usually 5-15 s; longer while other programs keep the processor busy"
 #: bytes of the result read per poll (the view polls every 33 ms; 2.8 MB take ~6 polls)
 READ_SLICE = 1 << 19
 #: how much the child lowers its priority (a nice increment): the window comes first

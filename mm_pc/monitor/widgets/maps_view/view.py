@@ -15,8 +15,9 @@ Two sources, chosen in the "Source" box:
   afresh.
 * **Simulated run** -- "Simulate mowing run" builds
   :func:`mm_pc.sim.field_run.simulate_field_run` and :func:`~mm_pc.sim.field_run.run_fusion`
-  in a process of its own (:class:`~mm_pc.monitor.model.sim_process.SimJob`, 2.5-7 s:
-  on a thread it held the interpreter lock and the window stuttered), with a busy bar,
+  in a process of its own (:class:`~mm_pc.monitor.model.sim_process.SimJob`, how long
+  in :data:`~mm_pc.monitor.model.sim_process.SIM_TYPICAL`: on a thread it held the
+  interpreter lock and the window stuttered), with a busy bar,
   the seconds so far and a Cancel; the result of a seed is kept; then plays
   it with a timer at 1x..100x or all at once: the coverage grid from the TRUE
   path, the four beacons (names) and the range circles of the newest range
@@ -62,7 +63,7 @@ from mm_pc.monitor.model.maps import (
     make_map,
     sim_map,
 )
-from mm_pc.monitor.model.sim_process import SimJob, build_in_child
+from mm_pc.monitor.model.sim_process import SIM_TYPICAL, SimJob, build_in_child
 from mm_pc.monitor.widgets.maps_view.dialog import NewMapDialog
 from mm_pc.monitor.widgets.maps_view.grid_item import GridImageItem
 from mm_pc.monitor.widgets.maps_view.palette import DISPLAY_RGB8, PATH_STYLES
@@ -443,7 +444,8 @@ class MapsView(QWidget):
         self.sim_button.setEnabled(False)
         self.progress.show()
         self.cancel_button.show()
-        self.status.setText(f"simulating the mowing run (seed {seed}) in its own process…")
+        self.status.setText(f"simulating the mowing run (seed {seed}) in its own process… "
+                            f"({SIM_TYPICAL})")
         self._job = SimJob(seed, target=self.sim_target)
         self.timer.start()
 
@@ -503,7 +505,7 @@ class MapsView(QWidget):
             result = self._job.poll()
             if result is None:
                 self.status.setText(f"simulating the mowing run (seed {self._job.seed}) in its "
-                                    f"own process… {self._job.elapsed_s:.0f} s")
+                                    f"own process… {self._job.elapsed_s:.0f} s ({SIM_TYPICAL})")
                 return
             job, self._job = self._job, None
             self._end_job()
