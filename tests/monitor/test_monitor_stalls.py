@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import sys
 import time
 
 import pytest
@@ -119,6 +120,8 @@ def test_a_big_result_is_read_in_slices_one_per_poll():
     assert result == ("ok", bytes(range(256)) * (3_000_000 // 256))
     # never more than READ_SLICE bytes in one poll: the GUI thread never waits for the child
     assert job.slices >= 3_000_000 // sim_process.READ_SLICE and polls > job.slices
+    # the result's classes were imported in a poll before the first read
+    assert job.warmed and sim_process.RESULT_MODULE in sys.modules
     assert job.done and job.poll() is None
 
 
