@@ -62,6 +62,19 @@ def test_bench_gui_reports_every_figure(qapp):
         assert 0.98 * live["replies"] - 10 <= live["rows"] <= live["replies"] + 10, live
         per_reply_ms = 10.0 * live["cpu_percent_one_core"] / live["achieved_hz"]
         assert math.isclose(live["cpu_ms_per_reply"], per_reply_ms, rel_tol=0.05), live
+    # the heartbeat during the heavy actions (issue 29 item 6): figures, not a timing gate
+    st = r["stalls"]
+    assert st["heartbeat_ms"] == 10 and st["stall_ms"] == 100.0
+    assert set(st["by_action"]) == {
+        "tabs_500hz", "simulate_mowing_run", "csv_export", "png_export", "replay",
+    }  # fmt: skip
+    for name, a in st["by_action"].items():
+        assert "error" not in a, (name, a)
+        assert a["ticks"] > 0 and a["longest_ms"] >= 10.0 * 0.5 and a["count_over_100ms"] >= 0
+    assert st["longest_ms"] == max(a["longest_ms"] for a in st["by_action"].values())
+    assert st["count_over_100ms"] == sum(a["count_over_100ms"] for a in st["by_action"].values())
+    assert st["tab_switches"] == 14 and st["sim_build_s"] > 0
+    assert st["csv_rows"] > r["rows_after_history"]  # the history and the live rows, all
 
 
 def test_bench_gui_refuses_bad_arguments(capsys):
