@@ -14,7 +14,12 @@ from PySide6.QtCore import QTimer
 from mm_pc.bench.gui import STALL_MS, _Heartbeat, stall_figures
 from mm_pc.monitor.context import MonitorContext
 from mm_pc.monitor.model import sim_process
-from mm_pc.monitor.model.csv_export import csv_chunks, csv_columns, export_csv
+from mm_pc.monitor.model.csv_export import (
+    csv_chunks,
+    csv_columns,
+    export_csv,
+    history_csv_chunks,
+)
 from mm_pc.monitor.model.session import MonitorSession
 from mm_pc.monitor.widgets.data_list import DataListView
 
@@ -66,6 +71,41 @@ def test_csv_chunks_write_the_file_of_one_go(tmp_path, feed):
     assert steps == [0, *range(300, n, 300), n]
     assert export_csv(ctx.session.history, 1, tmp_path / "once.csv") == n
     assert (tmp_path / "steps.csv").read_text() == (tmp_path / "once.csv").read_text()
+
+
+def test_history_chunks_copy_only_the_rows_held_at_the_start(tmp_path, feed):
+    ctx = MonitorContext(MonitorSession())
+    feed(ctx, name="figure_eight", rate_hz=100.0, seconds=10.0)
+    hist = ctx.session.history
+    n = len(hist)
+    assert export_csv(hist, 0, tmp_path / "once.csv") == n
+    steps = history_csv_chunks(hist, 0, tmp_path / "steps.csv", rows=300)
+    assert next(steps) == 0
+    hist.append(hist.tail(1)[0])  # a row arrives between two steps: not in this file
+    assert list(steps) == [*range(300, n, 300), n]
+    assert (tmp_path / "steps.csv").read_text() == (tmp_path / "once.csv").read_text()
+
+
+def test_history_chunks_refuse_a_history_cleared_meanwhile(qtbot, tmp_path, feed):
+    ctx = MonitorContext(MonitorSession())
+    feed(ctx, name="figure_eight", rate_hz=100.0, seconds=10.0)
+    steps = history_csv_chunks(ctx.session.history, 0, tmp_path / "x.csv", rows=300)
+    assert next(steps) == 0 and next(steps) == 300
+    ctx.session.history.clear()
+    with pytest.raises(ValueError, match="cleared or its oldest rows dropped during the export"):
+        next(steps)
+    # in the view: the reason beside the button, the button back
+    feed(ctx, name="figure_eight", rate_hz=100.0, seconds=60.0)
+    view = DataListView(ctx)
+    qtbot.addWidget(view)
+    table = view.tables[0]
+    assert table.export_in_background(tmp_path / "y.csv")
+    qtbot.wait(1)  # a step or two
+    ctx.session.history.clear()
+    qtbot.waitUntil(lambda: table.export_button.isEnabled(), timeout=20_000)
+    assert table.export_done is False
+    assert table.message.text() == ("export failed: the data was cleared or its oldest rows "
+                                    "dropped during the export: export again")
 
 
 def test_csv_export_in_background_says_why_it_failed(qtbot, tmp_path, feed):

@@ -31,9 +31,8 @@ from mm_pc.monitor.model.chips import chip_title
 from mm_pc.monitor.model.csv_export import (
     COLUMNS,
     column_name,
-    csv_chunks,
-    csv_columns,
     export_csv,
+    history_csv_chunks,
 )
 from mm_pc.monitor.settings import last_folder, remember_folder
 from mm_pc.monitor.widgets.style import ERROR_STYLE
@@ -291,35 +290,36 @@ class SensorTable(QWidget):
         return self._exported(path, n)
 
     def export_in_background(self, path: str | Path) -> bool:
-        """Export this sensor's rows without holding the window: the columns are copied here
-        (a few ms for an hour), the file is written :data:`CSV_CHUNK_ROWS` rows per timer
-        tick (an hour of 100 Hz rows took ~0.6 s in one go: a freeze). No worker thread: a
+        """Export this sensor's rows without holding the window: the rows held now are copied
+        and written 2500 a timer tick (``csv_export.history_csv_chunks``; an hour of 100 Hz
+        rows took ~0.6 s in one go: a freeze). No worker thread: a
         Python thread can run the garbage collector and destroy Qt objects off the GUI
         thread. The button is disabled meanwhile, the result shown beside it when done;
         ``export_done`` holds True/False then. False (the error shown) when there is no
         data."""
+        history = self.ctx.session.history
         try:
-            cols = csv_columns(self.ctx.session.history, self.sensor_index)
+            steps = history_csv_chunks(history, self.sensor_index, path)
         except ValueError as e:
             return self._exported(path, e)
-        steps = csv_chunks(cols, path)
+        rows = len(history)
         self.export_done = None
         self.export_button.setEnabled(False)
         self.message.setStyleSheet("")
-        self.message.setText(f"writing {len(cols[0])} rows to {path} …")
+        self.message.setText(f"writing {rows} rows to {path} …")
         timer = QTimer(self)
 
         def step() -> None:
             try:
                 written = next(steps, None)
-            except OSError as e:
+            except (OSError, ValueError) as e:
                 written = e
             if written is not None and not isinstance(written, Exception):
                 return
             timer.stop()
             timer.deleteLater()
             self.export_button.setEnabled(True)
-            self.export_done = self._exported(path, written or len(cols[0]))
+            self.export_done = self._exported(path, written or rows)
 
         timer.timeout.connect(step)
         timer.start(0)
