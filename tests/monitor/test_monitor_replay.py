@@ -327,6 +327,8 @@ def test_the_csv_dialog_starts_in_the_remembered_folder_with_the_recording_name(
 
     monkeypatch.setattr(data_list.QFileDialog, "getSaveFileName", save)
     table.choose_export()
+    qtbot.waitUntil(lambda: table.export_done is not None, timeout=10_000)  # written by a timer
+    assert table.export_done is True
     assert starts[-1].endswith("run4_dev_spidev1.1.csv")
     assert (out / "s2.csv").read_text().startswith("t_s,dx_mm")
     assert last_folder("csv") == str(out)
