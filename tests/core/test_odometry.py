@@ -138,7 +138,7 @@ def test_two_sensor_recovers_vx_vy_omega_including_lateral_slip(vx, vy, omega, d
     abc, _ = odo._impl.solve(d[None])
     assert np.allclose(abc[0], [vx * dt, vy * dt, omega * dt], atol=1e-12)
     pose = odo.update(Sample.of(dt, *d))
-    assert np.allclose(pose.as_array(), constant_twist_truth(vx, vy, omega, dt), atol=1e-12)
+    assert np.allclose(pose.as_array(), constant_twist_truth(vx, vy, omega, dt), atol=1e-9)
     assert odo.residual < 1e-12
 
 

@@ -239,7 +239,7 @@ def test_no_display_falls_back_to_headless_with_a_message(tmp_path):
 @pytest.mark.parametrize(
     ("args", "message"),
     [(["--rate", "0"], "1..500"), (["--rate", "junk"], "invalid float value"),
-     (["--duration", "-1"], "--duration must be >= 0"),
+     (["--duration", "-1"], "--duration must be 0..2000000 s"),
      (["--agent"], "--agent goes with --sim"),
      (["--executor", "multi"], "invalid choice: 'multi'")],
 )  # fmt: skip
