@@ -9,21 +9,12 @@ Importing a package of ours installs nothing.
 
 from __future__ import annotations
 
-from mm_pc import stop_signals
-
-
-def _launch(program: str, module: str) -> int:
-    """Stop cleanly on a signal from now on (:mod:`mm_pc.stop_signals`), then hand over to
-    :func:`mm_pc.prerequisites.launch` (imported after, as everything else)."""
-    stop_signals.during_import(program)
-    from mm_pc import prerequisites
-
-    return prerequisites.launch(program, module)
+from mm_pc.commands import launch_command as _launch
 
 
 def mm_beagle() -> int:
     """``mm-beagle``: the sensor node."""
-    return _launch("mm-beagle", "mm_beagle.node.node")
+    return _launch("mm-beagle", "mm_beagle.node.node", node=True)
 
 
 def mm_beagle_agent() -> int:

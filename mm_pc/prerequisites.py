@@ -25,7 +25,6 @@ import importlib
 import importlib.util
 import os
 import re
-import subprocess
 import sys
 from functools import cache
 from pathlib import Path
@@ -141,6 +140,8 @@ def unresolved(files: list[Path], ldd_output: str | None = None) -> list[str]:
     if ldd_output is None:
         if not files:
             return []
+        import subprocess  # here: every command's launcher imports this module
+
         try:
             ldd_output = subprocess.run(
                 ["ldd", *map(str, files)], capture_output=True, text=True, timeout=60
@@ -263,7 +264,7 @@ def _interrupted(exc: BaseException | None) -> bool:
 
 def _hook(previous):
     def hook(exc_type, exc, tb):
-        if issubclass(exc_type, KeyboardInterrupt) or _interrupted(exc):
+        if issubclass(exc_type, KeyboardInterrupt) or _interrupted(exc) or stop_signals.raised():
             # Ctrl-C or SIGTERM that got past launch() (raised inside a Qt callback, or a
             # program run with python -m): a stop like any other, no traceback, children
             # ended; 0 as the nodes' Ctrl-C gives.

@@ -17,6 +17,21 @@ The console-script launcher (:func:`mm_pc.prerequisites.launch`) sets three phas
    the monitor's Qt loop) replaces these when it installs them.
 3. **At the end** any child process still running is ended (SIGTERM, SIGKILL 1 s later).
 
+Before phase 1 nothing of ours runs: the interpreter starts, ``site`` runs the venv's
+``.pth`` files (the ROS wheels' bootstrapper re-executes the interpreter once to set
+LD_LIBRARY_PATH, unless ``_ROS_WHEELS_BOOTSTRAP_COMPLETE`` is set; the editable install's
+finder imports pathlib and re), then pip's script imports ``commands``. A signal then gets
+Python's defaults: SIGTERM ends the process with -15 and no line, SIGINT gives a
+KeyboardInterrupt traceback (exit 1 or -2) or exit -2, or is rarely lost. How long that
+window is (install/setup.bash presets the re-exec), measured, with the commands that
+measure it: docs/beagle-node.md "Signals during start-up". The launcher's own imports are
+~2 ms of it: no entry module can install a handler much earlier (tests/test_signals.py
+keeps those imports light).
+
+The ROS nodes' launchers end with :func:`exit_now` once the node has stopped cleanly: the
+interpreter's finalisation (rclpy's and the DDS libraries' objects torn down one by one)
+took seconds under load (docs/beagle-node.md "Signals while running").
+
 Exit status after a stop by signal: **0**, as the nodes' own handlers give: a user or a
 supervisor asked for the stop and it went cleanly. A signal that was ignored when the
 program started (``nohup``, a background job) stays ignored.
@@ -27,6 +42,7 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
+import sys
 import threading
 import time
 
@@ -67,6 +83,24 @@ def during_import(program: str) -> None:
     _install(handler)
 
 
+@contextlib.contextmanager
+def at_once(program: str):
+    """Phase 1 again inside the block: for a running program's heavy third-party imports
+    made before it has started anything (mm-monitor's PySide6 and rclpy). A
+    KeyboardInterrupt landing inside them came out as ``ImportError: libshiboken: could not
+    import module 'PySide6.QtGui'`` and a traceback, or left an import lock held (a hang
+    of over 15 s); here a signal ends the process with the one line instead. The handlers
+    before the block are put back after it."""
+    saved = {sig: signal.getsignal(sig) for sig in SIGNALS}
+    during_import(program)
+    try:
+        yield
+    finally:
+        for sig, handler in saved.items():
+            if handler is not None:
+                signal.signal(sig, handler)
+
+
 class _Running:
     """Phase 2's handler and what it remembers (the first signal, put-off ones)."""
 
@@ -75,6 +109,8 @@ class _Running:
         self.signum = 0  # the signal that started the stop (0: none yet)
         self.first = 0.0
         self.deferred_since = 0.0
+        self.seen = 0  # the first signal received, put off or not
+        self.raised = False  # a KeyboardInterrupt was raised for it
         self._again = threading.Event()
         self._again_signum = 0
         # started now, not in the handler: starting a thread takes threading's own locks
@@ -89,6 +125,7 @@ class _Running:
 
     def handler(self, signum, frame) -> None:
         now = time.monotonic()
+        self.seen = self.seen or signum
         if self.signum:  # already stopping
             if now - self.first > _SECOND_SIGNAL_S:
                 os.write(2, f"{stop_line(self.program, signum)} (again: ending now)\n".encode())
@@ -101,7 +138,7 @@ class _Running:
                 self._again_signum = signum
                 self._again.set()  # the event's own lock: the main thread never holds it
                 return
-        self.signum, self.first = signum, now
+        self.signum, self.first, self.raised = signum, now, True
         raise KeyboardInterrupt
 
 
@@ -119,6 +156,20 @@ def stopped_by() -> int:
     """The signal that stopped the program in phase 2 (SIGINT for a KeyboardInterrupt that
     came another way, e.g. Python's own Ctrl-C handler)."""
     return _running.signum if _running is not None and _running.signum else signal.SIGINT
+
+
+def seen() -> int:
+    """The first signal phase 2 received (0: none), also one still put off or one whose
+    KeyboardInterrupt a callback swallowed: a program replacing the handlers (a Qt loop
+    about to run) acts on it."""
+    return _running.seen if _running is not None else 0
+
+
+def raised() -> bool:
+    """Whether phase 2 raised a KeyboardInterrupt: an exception that ends the program after
+    it is the stop's (shiboken turned one inside a lazy enum lookup into an
+    AttributeError), not a fault."""
+    return _running is not None and _running.raised
 
 
 def ignore_more() -> None:
@@ -167,6 +218,47 @@ def end_children(grace: float = _CHILD_GRACE_S) -> list[int]:
             p.kill()
     psutil.wait_procs(alive, timeout=1.0)
     return [p.pid for p in kids]
+
+
+def exit_now(code: int) -> None:
+    """End the process with ``code`` at once, without the interpreter's finalisation
+    (never returns).
+
+    Only once the program has stopped cleanly (a node: the poller stopped, the node
+    destroyed, rclpy shut down, which also closes its log file). Flushed here: Python's
+    logging, stdout and stderr; a child still running is ended (:func:`end_children`) and
+    multiprocessing's resource tracker is let go and waited for, so nothing outlives us.
+    """
+    ignore_more()
+    end_children()
+    _end_resource_tracker()
+    logging = sys.modules.get("logging")
+    if logging is not None:
+        logging.shutdown()
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):  # closed, or a reader that went away
+            stream.flush()
+    os._exit(code)
+
+
+def _end_resource_tracker(timeout: float = 1.0) -> None:
+    """multiprocessing's resource tracker (started with a spawned child: the poller) ends
+    when the pipe we hold closes; without this it outlived an os._exit for a moment as an
+    orphan. Waits at most ``timeout`` s (psutil), the pid is reaped."""
+    module = sys.modules.get("multiprocessing.resource_tracker")
+    tracker = getattr(module, "_resource_tracker", None)
+    fd, pid = getattr(tracker, "_fd", None), getattr(tracker, "_pid", None)
+    if fd is None or pid is None:
+        return
+    with contextlib.suppress(OSError):
+        os.close(fd)
+    tracker._fd = tracker._pid = None
+    try:
+        import psutil
+
+        psutil.Process(pid).wait(timeout)
+    except Exception:  # gone already, not ours, or still busy after timeout: let it be
+        pass
 
 
 def _cmdline(p) -> list[str]:

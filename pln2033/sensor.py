@@ -7,7 +7,7 @@ docs/sensors.md says which source each chip's register facts come from.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import NamedTuple, Protocol, runtime_checkable
 
@@ -132,8 +132,10 @@ class SensorDriver(Protocol):
         """(x, y) counts per inch read back from the chip (fixed chips: the effective value)."""
         ...
 
-    def set_cpi(self, cpi: int) -> None:
-        """Set both axes; InvalidCpiError outside :attr:`ChipInfo.cpi`; verified by reading back."""
+    def set_cpi(self, cpi: int, on_drain: Callable[[Motion], None] | None = None) -> None:
+        """Set both axes; InvalidCpiError outside :attr:`ChipInfo.cpi`; verified by reading back.
+        ``on_drain`` gets the counts made at the old CPI, drained with the write (a chip whose
+        CPI cannot change calls it never: its counts keep their scale)."""
         ...
 
     def cpi_problem(self, cpi: object) -> str | None:

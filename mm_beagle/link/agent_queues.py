@@ -15,7 +15,7 @@ import threading
 import time
 from collections.abc import Callable, Generator
 
-from mm_beagle.link.agent_requests import Refusals
+from mm_beagle.link.agent_requests import MAX_REQUEST_BYTES, Refusals
 
 LANE_SIZE = 2  # jobs waiting per lane (each worker waits for its own: at most one)
 QUERY_QUEUE = 16  # requests received and waiting for their worker, per key
@@ -106,15 +106,25 @@ class Outbox:
 
 class Inbox:
     """Requests received on one key, waiting for its worker: zenoh's callback puts them
-    here (on a zenoh thread, briefly); one that finds :data:`QUERY_QUEUE` waiting is
-    dropped and counted (a dropped query ends at once for its sender, with no reply)."""
+    here (on a zenoh thread, briefly); one whose payload is over ``max_bytes`` or that
+    finds :data:`QUERY_QUEUE` waiting is dropped and counted at once (a dropped query
+    ends for its sender with no reply), so what waits holds at most ``max_bytes`` each
+    (zenoh delivers up to 64 KiB: 16 of those per key were 2 MB of the agent's RSS)."""
 
-    def __init__(self, key: str, refusals: Refusals) -> None:
-        self.key, self.refusals = key, refusals
+    def __init__(self, key: str, refusals: Refusals, max_bytes: int = MAX_REQUEST_BYTES) -> None:
+        self.key, self.refusals, self.max_bytes = key, refusals, max_bytes
         self.queue: queue.Queue = queue.Queue(QUERY_QUEUE)
         self.closed = False
 
     def put(self, request: object) -> None:
+        payload = getattr(request, "payload", None)
+        if payload is not None and (size := len(payload)) > self.max_bytes:
+            self.refusals.refuse(
+                self.key,
+                "size",
+                f"{self.key} request of {size} bytes is too large (limit {self.max_bytes})",
+            )
+            return
         try:
             self.queue.put_nowait(request)
         except queue.Full:

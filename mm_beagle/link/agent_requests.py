@@ -23,7 +23,7 @@ import time
 
 from mm_beagle.link import link, link_decode
 from mm_beagle.poller import commands
-from mm_pc.ros.throttle import WarnThrottle
+from mm_pc.core.throttle import WarnThrottle
 
 MAX_REQUEST_BYTES = 4096  # the largest honest request (load_patch with a long name) is ~300
 MAX_TEXT = 1024  # characters of one string value
@@ -104,11 +104,11 @@ class Refusals:
                 return
         more = f" ({quiet} more refused since the last line)" if quiet else ""
         detail = detail.replace("\n", " ")[:300]  # one line, whatever a peer put in it
-        print(
-            f"{self.prog}: refused a {key} request: {detail}{more}; {self.total} so far",
-            file=self.stream or sys.stderr,
-            flush=True,
-        )
+        # one write, newline included: print writes the text and its end apart, so two
+        # workers refusing at once ran their lines together ("... 38 so farmm-beagle-agent: ...")
+        stream = self.stream or sys.stderr
+        stream.write(f"{self.prog}: refused a {key} request: {detail}{more}; {self.total} so far\n")
+        stream.flush()
 
     def status(self) -> dict[str, object]:
         """The counters for the agent's status message."""

@@ -20,10 +20,11 @@ The agent (:mod:`mm_beagle.link.agent`) serves under ``mm/<name>/``:
 Batch frame, little-endian: header ``<4sBBHQQ`` (magic, version, sensor blocks,
 reserved, boot id, batch number), the poller-wide counters (N_GLOBAL int64), then
 per block ``<BxxxIQ`` (sensor index, poll count, first seq), the sensor's int64
-and float64 fields and its polls as one array per ring field
-(:data:`mm_beagle.poller.ring_layout.RING`: stamp q, dx h, dy h, status H, cpi H,
-flags B, quality h). The arrays are the shared-state ring's own bytes, so neither
-side touches single polls in Python. No numpy here: the agent runs without it.
+and float64 fields and its polls, one packed record each
+(:data:`mm_beagle.poller.ring_layout.RECORD` ``<qhhHHBh``: stamp, dx, dy, status, cpi,
+flags, quality; 19 bytes). The records are the shared-state ring's own bytes
+(:func:`ring_block`), so neither side touches single polls in Python. No numpy here: the
+agent runs without it.
 
 Around the frames: what a peer sends is decoded bounded in :mod:`~mm_beagle.link.link_decode`,
 the credentials and the MAC on each message are in :mod:`~mm_beagle.link.link_auth`, and the
@@ -32,22 +33,24 @@ zenoh sessions' configuration (endpoints, access control) in :mod:`~mm_beagle.li
 
 from __future__ import annotations
 
+import array
 import struct
+import sys
 from dataclasses import dataclass
 
 from mm_beagle.poller import ring_layout
 from mm_beagle.poller import shared_state as ss
 
 MAGIC = b"MMB1"
-VERSION = 3  # 2: four lift-estimate variances (N_FLOAT 10); 3: quality per poll, N_INT 20,
-# N_FLOAT 16 (the chip's own pose)
+VERSION = 4  # 2: four lift-estimate variances (N_FLOAT 10); 3: quality per poll, N_INT 20,
+# N_FLOAT 16 (the chip's own pose); 4: the polls as records (ring_layout.RECORD), not arrays
 HEADER = struct.Struct("<4sBBHQQ")
 BLOCK = struct.Struct("<BxxxIQ")
 GLOB_BYTES = 8 * ss.N_GLOBAL
 INTS_BYTES = 8 * ss.N_INT
 FLOATS_BYTES = 8 * ss.N_FLOAT
-POLL_BYTES = ring_layout.POLL_BYTES  # one poll across the ring fields
-ARRAY_ITEM = ring_layout.ITEM_BYTES  # bytes per poll, in SharedState.RING_FIELDS order
+POLL_BYTES = ring_layout.POLL_BYTES  # one poll: a ring record
+ARRAY_ITEM = ring_layout.ITEM_BYTES  # bytes of each field of a record, in RING order
 
 DEFAULT_PORT = 7447
 DEFAULT_ENDPOINT = f"tcp/127.0.0.1:{DEFAULT_PORT}"
@@ -82,7 +85,22 @@ class Block:
     count: int
     ints: bytes  # N_INT int64: the sensor's totals after these polls
     floats: bytes  # N_FLOAT float64
-    arrays: tuple[bytes, ...]  # the ring fields, ``count`` items each
+    records: bytes | list  # ``count`` ring records (or byte pieces of them: a wrapped ring)
+
+    @property
+    def arrays(self) -> tuple[bytes, ...]:
+        """The polls as one little-endian array per ring field (RING order), for tools and
+        tests: pure Python, a loop per poll (the node decodes ``records`` with numpy)."""
+        pieces = self.records if isinstance(self.records, (list, tuple)) else [self.records]
+        data = b"".join(pieces)
+        rows = list(ring_layout.RECORD.iter_unpack(data))
+        out = []
+        for k, f in enumerate(ring_layout.RING):
+            column = array.array(f.code, [r[k] for r in rows])
+            if sys.byteorder != "little":
+                column.byteswap()
+            out.append(column.tobytes())
+        return tuple(out)
 
 
 @dataclass
@@ -93,16 +111,45 @@ class Batch:
     blocks: list[Block]
 
 
+def records_of(arrays: tuple[bytes, ...] | list[bytes]) -> bytes:
+    """Per-field little-endian arrays (RING order, as :attr:`Block.arrays` gives them) as
+    ring records: what a block carries. Pure Python, a loop per poll (tests and tools)."""
+    columns = []
+    for f, data in zip(ring_layout.RING, arrays, strict=True):
+        column = array.array(f.code, bytes(data))
+        if sys.byteorder != "little":
+            column.byteswap()
+        columns.append(column)
+    if len({len(c) for c in columns}) > 1:
+        raise LinkError("the fields' arrays differ in length")
+    return b"".join(ring_layout.RECORD.pack(*row) for row in zip(*columns, strict=True))
+
+
+def ring_block(
+    index: int, ring: memoryview, first: int, end: int, ints: bytes, floats: bytes
+) -> Block:
+    """Sensor ``index``'s polls ``first`` .. ``end`` from its ring's bytes
+    (:meth:`~mm_beagle.poller.shared_state.SharedState.ring_bytes`), as the newest ring
+    slots hold them (older polls were overwritten: the block starts later); no copy
+    until the frame is joined."""
+    n = len(ring) // POLL_BYTES
+    first = max(first, end - n, 0)
+    count = end - first
+    a = first % n * POLL_BYTES
+    b = a + count * POLL_BYTES
+    records: bytes | list = ring[a:b] if b <= len(ring) else [ring[a:], ring[: b - len(ring)]]
+    return Block(index, first, count, ints, floats, records)
+
+
 def encode_batch(boot_id: int, number: int, glob: bytes, blocks: list[Block]) -> bytes:
-    """One frame; ``blocks[i].arrays`` may be lists of byte pieces (a wrapped ring)."""
+    """One frame; ``blocks[i].records`` may be a list of byte pieces (a wrapped ring)."""
     parts = [HEADER.pack(MAGIC, VERSION, len(blocks), 0, boot_id, number), glob]
     for b in blocks:
         parts += [BLOCK.pack(b.index, b.count, b.first_seq), b.ints, b.floats]
-        for a in b.arrays:
-            if isinstance(a, (list, tuple)):
-                parts.extend(a)
-            else:
-                parts.append(a)
+        if isinstance(b.records, (list, tuple)):
+            parts.extend(b.records)
+        else:
+            parts.append(b.records)
     return b"".join(parts)
 
 
@@ -140,11 +187,9 @@ def decode_batch(data: bytes, n_sensors: int) -> Batch:
         off += FLOATS_BYTES
         if len(data) < off + count * POLL_BYTES:
             raise LinkError(f"batch block of {count} polls is cut short")
-        arrays = []
-        for size in ARRAY_ITEM:
-            arrays.append(bytes(data[off : off + count * size]))
-            off += count * size
-        blocks.append(Block(index, first, count, ints, floats, tuple(arrays)))
+        records = bytes(data[off : off + count * POLL_BYTES])
+        off += count * POLL_BYTES
+        blocks.append(Block(index, first, count, ints, floats, records))
     if off != len(data):
         raise LinkError(f"batch frame has {len(data) - off} bytes after its last block")
     return Batch(boot_id, number, glob, blocks)

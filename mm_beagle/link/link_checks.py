@@ -12,6 +12,7 @@ fails on every connection and the node waits for ever. Every refusal is a
 
 from __future__ import annotations
 
+import os
 import re
 import socket
 
@@ -82,6 +83,15 @@ def endpoint_problem(endpoint: str, role: str) -> str:
                     "credentials"
                 )
     return ""
+
+
+def patch_dir_problem(patch_dir: str) -> str:
+    """Why ``patch_dir`` cannot hold patch files ('' if it is a directory, or '': off). Checked
+    at start: otherwise a peer's or a user's load_patch is the first to find out."""
+    if not patch_dir or os.path.isdir(os.path.expanduser(patch_dir)):
+        return ""
+    what = "does not exist" if not os.path.lexists(patch_dir) else "is not a directory"
+    return f"'patch_dir' {patch_dir!r} {what} (give the directory of the patch files, or '')"
 
 
 def credentials_file_problem(path: str) -> str:

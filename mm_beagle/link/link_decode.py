@@ -18,7 +18,7 @@ import re
 import zlib
 
 from mm_beagle.link.link import LinkError
-from mm_pc.ros.throttle import WarnThrottle
+from mm_pc.core.throttle import WarnThrottle
 
 MAX_STATUS_BYTES = 256 * 1024  # a status (~1-3 kB: hist_z holds a compressed 160 kB array)
 MAX_EVENT_BYTES = 16 * 1024

@@ -42,6 +42,9 @@ from mm_beagle.poller import shared_state as ss
 from mm_beagle.poller.poller import PollerConfig
 
 CREDENTIALS_PROBE_S = 3.0  # TCP reaches the agent but zenoh does not open for this long
+# The newest batches' latencies kept (about 100 batches/s: ~80 s; mm-bench agent reads
+# up to that many). 100 000 grew the node by ~0.19 MB/min for its first 17 min (soak).
+LATENCIES_KEPT = 8192
 
 
 class RemoteAgent(Feed, HistoryFetch, CommandClient, StampClock):
@@ -102,7 +105,7 @@ class RemoteAgent(Feed, HistoryFetch, CommandClient, StampClock):
         self._history_id = secrets.randbits(40)  # request ids a peer cannot guess ahead
         self.latency_ms: collections.deque = collections.deque(maxlen=4096)
         # poll stamp -> applied here (ms; meaningful on one clock: benchmarks)
-        self.apply_latency_ms: collections.deque = collections.deque(maxlen=100_000)
+        self.apply_latency_ms: collections.deque = collections.deque(maxlen=LATENCIES_KEPT)
         self._offset_ns: int | None = None  # the estimate (smallest delay, leaking up)
         self._offset_t = 0.0
         # per sensor: the offset applied to its newest poll's stamp, and that poll's agent stamp

@@ -8,7 +8,9 @@ boot is followed only from its status, once the old one fell silent for
 :data:`SEQ_SLACK`), totals that do not add up to the node's plus the block's polls, a
 status whose devices changed within its boot. A sensor whose live blocks were all refused
 for :data:`RESYNC_S` follows the agent again. A restarted agent continues the node's totals
-and sequence numbers. Part of :class:`~mm_beagle.link.remote.RemoteAgent`.
+and sequence numbers; a boot announced by a status is left again, as if never followed, when
+the old boot's polls go on while it sent none (:meth:`Feed._follow_back`: a forged status
+in a pause of the agent's frames). Part of :class:`~mm_beagle.link.remote.RemoteAgent`.
 """
 
 from __future__ import annotations
@@ -22,7 +24,8 @@ from mm_beagle.poller import chip_config, ring_layout
 from mm_beagle.poller import shared_state as ss
 from mm_beagle.poller.options import OPTIONS
 
-RING_DTYPES = ring_layout.WIRE_DTYPES  # a batch block's arrays, in RING_FIELDS order
+RING_DTYPES = ring_layout.WIRE_DTYPES  # the fields of a batch block's records, in RING order
+RECORD = np.dtype(ring_layout.DTYPE)  # one poll of a batch block (the ring's own record)
 XY = (ss.I_X_TOTAL, ss.I_Y_TOTAL)
 # Plausibility of what the link says (docs/hardware-setup.md, "What a local process can do"):
 # a sensor's seq may advance at most SEQ_RATE_MARGIN x the highest poll rate an agent
@@ -52,7 +55,13 @@ class Feed:
     RemoteAgent; gaps are fetched by :class:`~mm_beagle.link.remote_history.HistoryFetch`,
     stamps mapped by :class:`~mm_beagle.link.remote_clock.StampClock`)."""
 
+    _left: dict | None = None  # the boot left for an announced one, until that one sends polls
+    false_boots = 0  # boots announced by a status and left again: the old one sent polls
+
     def _on_batch(self, batch: link.Batch, recv_ns: int) -> None:
+        left = self._left
+        if left is not None and batch.boot_id == left["boot"] and batch.boot_id != self.boot:
+            self._follow_back(batch, left)
         if self.mismatch:
             return
         if self.boot is None or (
@@ -69,6 +78,7 @@ class Feed:
         self._check_blocks(batch, now)
         self.boot_heard = now
         self.last_heard = now
+        self._left = None  # the boot followed sends polls: the one before is not coming back
         if not self.link_up:
             self.link_up = self.ever_up = True
             self.since_wall = time.time()
@@ -138,8 +148,49 @@ class Feed:
         if before is None or self.next_agent[block.index] != before:
             self._seq_ref[block.index] = (now, end)
 
+    def _follow_back(self, batch: link.Batch, left: dict) -> None:
+        """A batch of the boot left for a new one announced by a status, continuing its
+        polls while the new boot has sent none: the agent never restarted (the status was
+        forged, or came during a pause of its frames). Back to the boot left, as it was;
+        the announced boot is never followed again."""
+        ahead = [
+            b for b in batch.blocks
+            if b.count and b.first_seq + b.count > (left["next_agent"][b.index] or 0)
+        ]  # fmt: skip
+        if not ahead:
+            return  # a late frame of the old boot's last polls (already applied)
+        announced = self.boot
+        for key, value in left.items():
+            setattr(self, key, value)
+        self.boots_seen.discard(self.boot)
+        if announced is not None:
+            self.boots_seen.add(announced)
+        self._left = None
+        self.boot_heard = time.monotonic()
+        self.false_boots += 1
+        self._emit(
+            "log",
+            f"the agent's boot {self.boot:#x} sends polls again after boot {announced:#x} was "
+            "announced without any: not a restart (a forged status?); following "
+            f"{self.boot:#x} again, {announced:#x} never",
+        )
+
     def _new_boot(self, boot_id: int, uptime_s: float = 0.0) -> None:
         if self.boot is not None:  # a restarted agent: continue from what we had
+            # what to go back to if the old boot turns out alive (:meth:`_follow_back`)
+            self._left = {
+                "boot": self.boot,
+                "boot_devices": self.boot_devices,
+                "mismatch": self.mismatch,
+                "restarts": self.restarts,
+                "batch_number": self.batch_number,
+                "next_agent": list(self.next_agent),
+                "_seq_ref": list(self._seq_ref),
+                "base_i": self.base_i.copy(),
+                "base_f": self.base_f.copy(),
+                "agent_i": self.agent_i.copy(),
+                "agent_f": self.agent_f.copy(),
+            }
             self.restarts += 1
             self.base_i[:, self._mono] += self.agent_i[:, self._mono]
             self.base_f += self.agent_f
@@ -201,11 +252,10 @@ class Feed:
         skip = expected - first
         ints = np.frombuffer(block.ints, np.int64)
         floats = np.frombuffer(block.floats, np.float64)
+        records = np.frombuffer(block.records, RECORD)
         sums = [0, 0]
         if count > skip:
-            sums = [
-                int(np.frombuffer(block.arrays[k], RING_DTYPES[k])[skip:].sum()) for k in (1, 2)
-            ]
+            sums = [int(records[k][skip:].sum()) for k in ("dx", "dy")]
         if check:
             have = [int(self.agent_i[i][k]) + p for k, p in zip(XY, self._pending[i], strict=True)]
             got = [int(ints[k]) for k in XY]
@@ -214,7 +264,7 @@ class Feed:
                     raise Refused(f"sensor {i}'s totals {got} are not {have} + its polls {sums}")
                 expected = self._resync(i, block, "do not add up to the node's")
                 skip = 0
-                sums = [int(np.frombuffer(block.arrays[k], RING_DTYPES[k]).sum()) for k in (1, 2)]
+                sums = [int(records[k].sum()) for k in ("dx", "dy")]
             self._pending[i] = [0, 0]
         elif not totals:  # a history reply: its counts are in the next live block's totals
             self._pending[i] = [p + d for p, d in zip(self._pending[i], sums, strict=True)]
@@ -224,8 +274,7 @@ class Feed:
         if count > skip:
             node_first = int(self.base_i[i][ss.I_SEQ]) + expected
             slots = np.arange(node_first, node_first + count - skip) % self.state.ring_size
-            for ring, data, dtype in zip(self._rings[i], block.arrays, RING_DTYPES, strict=True):
-                ring[slots] = np.frombuffer(data, dtype)[skip:]
+            self.state.ring[i][slots] = records[skip:]
             if sync:
                 stamps = self._rings[i][0]
                 stamps[slots] += self._stamp_offsets(i, stamps[slots])

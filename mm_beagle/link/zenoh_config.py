@@ -17,6 +17,7 @@ from mm_beagle.link.agent_requests import RX_MAX_MESSAGE_BYTES
 from mm_beagle.link.link import DEFAULT_ENDPOINT, NODE_RX_MAX_BYTES, LinkError
 from mm_beagle.link.link_auth import load_credentials
 
+TX_BATCH_BYTES = 16384  # the agent's zenoh batches (memory per queued message; zenoh: 65535)
 # zenoh's log on the agent: only its lines about peers accepted or refused (credentials)
 ZENOH_LOG = "off,zenoh_transport::unicast::establishment::accept=debug"
 
@@ -135,6 +136,10 @@ def agent_zenoh_config(listen: list[str], credentials: str = ""):
         zenoh.init_log_from_env_or(ZENOH_LOG)
     cfg = zenoh_config(listen=listen, credentials=credentials)
     cfg.insert_json5("transport/link/rx/max_message_size", str(RX_MAX_MESSAGE_BYTES))
+    # 16 KiB batches (zenoh: 64 KiB): what waits in a slow peer's transmission queue is
+    # batches, so a stuck reader held up to 0.8 MB more of the agent's RSS; a history
+    # reply (<= 78 kB) goes as a few fragments, a poll batch (< 2 kB) as one
+    cfg.insert_json5("transport/link/tx/batch_size", str(TX_BATCH_BYTES))
     # No shared memory: a local peer's messages over 3 kB came in its 16 MB zenoh segment,
     # mapped into the agent (+16 MB RSS per peer, and past max_message_size).
     cfg.insert_json5("transport/shared_memory/enabled", "false")

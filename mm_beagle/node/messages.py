@@ -122,7 +122,9 @@ def fill_polls(out, first: int, nxt: int, dropped: int, arr: dict, cpi_now: int)
 
     ``first``/``nxt``/``dropped``/``arr``: the answer of
     :meth:`~mm_beagle.poller.shared_state.SharedState.samples`;
-    ``cpi_now``: the CPI in force, for when no poll is returned. Returns ``out``.
+    ``cpi_now``: the CPI in force, for when no poll is returned. ``poll_cpi``: each
+    poll's resolution from the ring, so a CPI change inside a reply is exact for the
+    client (issue 28); ``cpi`` stays the newest poll's for old clients. Returns ``out``.
     """
     out.first_seq, out.next_seq, out.dropped = first, nxt, dropped
     out.cpi = int(arr["cpi"][-1]) if len(arr["cpi"]) else int(cpi_now)
@@ -132,6 +134,7 @@ def fill_polls(out, first: int, nxt: int, dropped: int, arr: dict, cpi_now: int)
     out.status = as_array("H", arr["status"])
     out.flags = as_array("B", arr["flags"])
     out.quality = as_array("h", arr["quality"])  # the chip's figure per poll, -1 = none
+    out.poll_cpi = as_array("H", arr["cpi"])
     return out
 
 

@@ -31,7 +31,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
 from mm_beagle.link.remote import RemoteAgent
-from mm_beagle.node import messages
+from mm_beagle.node import memory_trace, messages
 from mm_beagle.node.data_topic import SensorDataTopic
 from mm_beagle.node.diagnostics import Diagnostics
 from mm_beagle.node.live_parameters import LiveParameters
@@ -45,6 +45,8 @@ from mm_pc.ros import spin as ros_spin
 from mm_pc.ros.clock import ClockWatch
 
 NODE_NAME = "mm_beagle"
+#: how long a poller stopped during the node's start gets to answer "stop", then to end (s)
+STOP_WHILE_STARTING_S = 0.5
 
 
 class BeagleNode(Node):
@@ -77,8 +79,16 @@ class BeagleNode(Node):
         self.stuck = ""  # why the poller counts as stuck, '' while it polls
         started_ns = time.time_ns()
         self.supervisor = PollerSupervisor(self)
+        # A signal while the node starts (stop set): main stops what was started, nothing
+        # more is made (under load the poller's start and the services took seconds more).
+        self.start_interrupted = stop is not None and stop.is_set()
+        if self.start_interrupted:
+            return
         self.poller.start()
         self.supervisor.wait_for_first_bring_up(timeout=10.0, stop=stop)  # stop: Ctrl-C
+        self.start_interrupted = stop is not None and stop.is_set()
+        if self.start_interrupted:
+            return
         # the read-and-clear cursors' origin: now, or the remote link's first contact
         start = ss.Totals.zero(getattr(self.poller, "origin_ns", 0) or started_ns)
 
@@ -135,12 +145,18 @@ class BeagleNode(Node):
         self.diagnostics.publish()
 
     def shutdown(self) -> None:
-        """Stop the poller process (or close the link to the agent)."""
-        self.poller.stop()
+        """Stop the poller process (or close the link to the agent). One stopped while it
+        started may still be importing and cannot answer the stop command: it gets
+        :data:`STOP_WHILE_STARTING_S` before it is terminated, not the usual 3 s."""
+        if self.start_interrupted:
+            self.poller.stop(timeout=STOP_WHILE_STARTING_S)
+        else:
+            self.poller.stop()
 
 
 def main(argv: list[str] | None = None) -> int:
     """Exit 0 on a clean stop, 2 for bad configuration (found while starting), else 1."""
+    memory_trace.start()  # MM_BEAGLE_TRACEMALLOC: a debug aid, off unless set
     stop = ros_spin.init(argv, "mm-beagle")
     node = None
     code = 0

@@ -225,6 +225,8 @@ def declare(node: Node) -> NodeSettings:
     remote = RemoteSettings(
         p["agent"], p["agent_name"], p["agent_credentials"], p["agent_clock_sync"]
     )
+    if p["backend"] != "remote" and (problem := link_checks.patch_dir_problem(p["patch_dir"])):
+        raise ValueError(problem)  # (remote: the agent's own --patch-dir)
     if p["backend"] == "remote":
         try:  # name, endpoint (tls/quic certificates, iface) and credentials file
             link_checks.check_link_settings(

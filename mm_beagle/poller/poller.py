@@ -23,18 +23,20 @@ into the totals -- a settings read never eats counts.
 from __future__ import annotations
 
 import ctypes
+import operator
 import os
 import signal
 import time
 import traceback
+from collections import Counter
 from collections.abc import Callable, Generator
 from dataclasses import dataclass, field
-from multiprocessing.connection import Connection
+from itertools import repeat
 from typing import TYPE_CHECKING, cast
 
 from mm_beagle.poller import chip_config, commands
 from mm_beagle.poller import shared_state as ss
-from mm_beagle.poller.channel import Bus, Channel
+from mm_beagle.poller.channel import Bus, Channel, no_clock
 from mm_beagle.poller.patches import patch_load_steps, resolve_patch_file
 from mm_beagle.poller.sim_backend import SimConfig
 from pln2033 import SensorError
@@ -43,7 +45,9 @@ from pln2033.errors import FirmwareError, InvalidCpiError
 from pln2033.pln2033 import PLN2033, RegisterMap
 from pln2033.sensor import ChipInfo, SensorDriver
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # multiprocessing.connection: 1.1 MB RSS on the agent for annotations
+    from multiprocessing.connection import Connection
+
     from pln2033.bus import SpiBus
 
 ERRORS_BEFORE_DOWN = 3  # consecutive failed polls before a sensor is declared down
@@ -230,13 +234,24 @@ class Poller:
     # --- polling ---
 
     def poll(self, ch: Channel, stamp_ns: int, now: float) -> None:
-        """Poll one sensor once; count errors, declare it down, or bring it up again."""
+        """Poll one sensor once; count errors, declare it down, or bring it up again.
+
+        After a failed poll the CPI is read back before the next poll's counts are taken
+        (:meth:`check_health`): a glitch of one or two polls can be a chip that reset
+        itself, whose counts since are at its default CPI; it is re-initialised (its counts
+        dropped, the reset reported) instead of those counts being scaled by the old CPI
+        until the next periodic check."""
         if ch.driver is None:
             if now >= ch.next_retry:
                 self.try_init(ch, now)
             return
+        if ch.consecutive_errors:
+            driver = ch.driver
+            self.check_health(ch, now)
+            if ch.driver is not driver:  # it had reset: re-initialised (or down) meanwhile
+                return
         try:
-            ch.poll(stamp_ns)
+            ch.poll(stamp_ns, no_clock)
         except SensorError as exc:
             self.poll_failed(ch, stamp_ns, now, exc)
             return
@@ -339,9 +354,9 @@ class Poller:
         problem = driver.cpi_problem(cpi)
         if problem or not isinstance(cpi, int):  # the chip's check refuses a non-integer
             return (commands.INVALID, f"{ch.device} ({ch.chip}): {problem}")
-        # Drain the counters at the old CPI first, so every count keeps its scale.
-        ch.record(time.time_ns(), driver.read_motion())
-        driver.set_cpi(cpi)
+        # The driver drains the counters in the CPI write's own transfer: every count made
+        # at the old CPI is recorded at it, none falls between the drain and the write.
+        driver.set_cpi(cpi, on_drain=lambda m: ch.record(time.time_ns(), m, ss.FLAG_COMMAND_READ))
         ch.cpi_wanted = cpi
         ch.set_cpi_cache(*driver.get_cpi())
         return (commands.OK, ch.cpi_y)
@@ -423,18 +438,16 @@ class Poller:
         """Poll every sensor at ``poll_rate`` until stopped (or ``max_polls``, for benchmarks).
 
         ``paced=False`` polls flat out (benchmarks: CPU per poll). A late loop
-        skips the missed slots instead of bursting; each period goes into the
-        histogram (1 us bins). The common case (every sensor up, last poll
-        good) costs one attribute test per sensor besides the poll itself; the poll
-        count and period sum reach the shared state at each service, not per poll.
+        skips the missed slots instead of bursting. The common case (every sensor up, last
+        poll good) costs one attribute test per sensor besides the poll itself, and one
+        list append per tick: the ticks' times are turned into the period histogram
+        (1 us bins), the late count, the poll count and the period sum at each service
+        (:meth:`_flush_ticks`), not per poll.
         """
         cfg = self.cfg
-        glob, hist = self.state.glob_view, self.state.hist_view
-        g_polls, g_late, g_sum = ss.G_POLLS, ss.G_LATE, ss.G_PERIOD_SUM_NS
+        glob = self.state.glob_view
         wall_ns, sleep = time.time_ns, time.sleep
         period_ns = round(1e9 / cfg.poll_rate)
-        late_ns = ss.LATE_FACTOR * period_ns
-        last_bin = ss.HIST_BINS - 1
         now = time.monotonic()
         for ch in self.channels:
             self.try_init(ch, now)
@@ -445,47 +458,49 @@ class Poller:
         service_ns = int(self.service_period * 1e9)
         next_health = next_t + health_ns
         next_service = next_t + service_ns
-        last = mark = 0  # the previous poll's t; the newest t in G_PERIOD_SUM_NS
         channels = self.channels
         poll, failed = self.poll, self.poll_failed
-        polls = counted = 0  # polls done; of which in G_POLLS
+        ticks: list[int] = []  # the ticks' times since the last service
+        tick = ticks.append
+        last = 0  # the tick before those (0: none yet)
+        polls = 0
         # wall-clock stamps as the poll clock plus an offset taken again at every service:
-        # one clock read per poll instead of two (both clocks are slewed alike by NTP; a
-        # step of the wall clock reaches the stamps at the next service)
+        # one clock read per poll (both clocks are slewed alike by NTP; a step of the wall
+        # clock reaches the stamps at the next service)
         wall_off = wall_ns() - clock()
-        t = 0
+        fast = self._fast_polls()
         while self.running:
-            # each sensor stamped just before its own read, by the same lines for every
-            # sensor: they are read ~20 us apart, and the pose math moves each later one
+            # each sensor stamped at its own transfer (Channel.poll reads the clock right
+            # before it): they are read ~20 us apart, and the pose math moves each later one
             # back to the first one's time (mm_pc.core.polls.deskew: 1 us left over is
             # 0.06 mm per 10 m at 0.5 m/s for two-sensor); the tick's time is the first's
-            for i, ch in enumerate(channels):
-                s = clock()
-                if not i:
-                    t = s
-                stamp = s + wall_off
-                if ch.ok:
+            t = 0
+            if fast:  # every sensor up, its last poll good: their polls, taken once
+                for ch, ch_poll in fast:
                     try:
-                        ch.poll(stamp)
+                        s = ch_poll(wall_off)
                     except SensorError as exc:
-                        failed(ch, stamp, t / 1e9, exc)
-                else:
-                    poll(ch, stamp, t / 1e9)
-            if last:
-                period = t - last
-                b = period // 1000
-                hist[b if b < last_bin else last_bin] += 1
-                if period > late_ns:
-                    glob[g_late] += 1
+                        s = clock()
+                        failed(ch, s + wall_off, s / 1e9, exc)
+                        fast = ()  # the general case below until all are good again
+                    t = t or s
             else:
-                mark = t
-            last = t
+                for ch in channels:
+                    if ch.ok:
+                        try:
+                            s = ch.poll(wall_off)
+                        except SensorError as exc:
+                            s = clock()
+                            failed(ch, s + wall_off, s / 1e9, exc)
+                    else:
+                        s = clock()
+                        poll(ch, s + wall_off, s / 1e9)
+                    t = t or s
+                fast = self._fast_polls()
+            tick(t)
             polls += 1
             if t >= next_service:
-                # the poll count and period sum go into the shared state here, not per poll
-                glob[g_polls] += polls - counted
-                glob[g_sum] += t - mark
-                counted, mark = polls, t
+                last = self._flush_ticks(ticks, last, period_ns)
                 next_service = t + service_ns
                 self.service()
                 wall_off = wall_ns() - clock()
@@ -493,6 +508,7 @@ class Poller:
                     next_health = t + health_ns
                     for ch in channels:
                         self.check_health(ch, t / 1e9)
+                fast = self._fast_polls()  # a command or check may have re-attached one
             if polls == max_polls:
                 break
             if not paced:
@@ -504,10 +520,43 @@ class Poller:
                 glob[ss.G_OVERRUNS] += missed
                 next_t += missed * period_ns
             sleep((next_t - t) / 1e9)
-        glob[g_polls] += polls - counted
-        glob[g_sum] += last - mark
+        self._flush_ticks(ticks, last, period_ns)
         self.service()
         glob[ss.G_RUNNING] = 0
+
+    def _fast_polls(self) -> tuple[tuple[Channel, Callable[[int], int]], ...]:
+        """Each channel with its ``poll`` while every one is up and its last poll was good,
+        else (): the run loop's common case without two attribute reads per sensor. A
+        channel's ``ok`` and ``poll`` change only in a failed poll, the run loop's general
+        case or a service (commands, health checks): the loop takes this again after each."""
+        chans = self.channels
+        if all(ch.ok for ch in chans):
+            return tuple((ch, ch.poll) for ch in chans)
+        return ()
+
+    def _flush_ticks(self, ticks: list[int], last: int, period_ns: int) -> int:
+        """The ticks' times (perf counter, ns; ``last``: the tick before them, 0 = none)
+        into the shared state: G_POLLS, G_PERIOD_SUM_NS, G_LATE (periods over
+        LATE_FACTOR x ``period_ns``) and the histogram. Empties ``ticks``; returns the
+        newest tick (the next call's ``last``). Each step runs in C (map, Counter)."""
+        if not ticks:
+            return last
+        glob, hist = self.state.glob_view, self.state.hist_view
+        glob[ss.G_POLLS] += len(ticks)
+        newest = ticks[-1]
+        periods = list(map(operator.sub, ticks, [last, *ticks]))
+        if not last:
+            del periods[0]
+        if periods:
+            glob[ss.G_PERIOD_SUM_NS] += newest - (last or ticks[0])
+            late = sum(map(int(ss.LATE_FACTOR * period_ns).__lt__, periods))
+            if late:
+                glob[ss.G_LATE] += late
+            top = ss.HIST_BINS - 1
+            for b, k in Counter(map(operator.floordiv, periods, repeat(1000))).items():
+                hist[b if b < top else top] += k
+        ticks.clear()
+        return newest
 
 
 def tune_process(priority: int, parent_death: bool = True) -> str:

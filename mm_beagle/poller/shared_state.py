@@ -13,6 +13,7 @@ to be unlinked afterwards.
 
 from __future__ import annotations
 
+import operator
 import time
 from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING, Any
@@ -30,27 +31,28 @@ from mm_pc.core.poll_flags import FLAG_SPI_ERROR as FLAG_SPI_ERROR
 if TYPE_CHECKING:
     import numpy as np
 
-# int64 fields per sensor
+# int64 fields per sensor. The last four, then the first two floats (the metres), are
+# contiguous in memory (see SharedState): the poller's hot path writes them with one pack.
 I_VERSION = 0
-I_SEQ = 1  # polls done for this sensor
-I_X_TOTAL = 2  # measured counts
-I_Y_TOTAL = 3
-I_LIFT_TOTAL = 4  # polls that reported the lift bit
-I_SPI_ERRORS = 5
-I_OVERFLOWS = 6
-I_STATE = 7  # see STATE_*
-I_CPI_X = 8
-I_CPI_Y = 9
-I_STAMP_NS = 10  # system time of the newest poll
-I_GEN_X = 11  # emulator ground truth: counts that entered the sensor's counter
-I_GEN_Y = 12
-I_REINITS = 13  # successful (re)initialisations
-I_LIFT_LOST_X = 14  # emulator ground truth: counts cleared by lifts
-I_LIFT_LOST_Y = 15
-I_LOW_QUALITY = 16  # polls whose quality was below the chip's threshold (treated like a lift)
-I_QUALITY = 17  # the newest poll's quality figure (-1: the chip has none)
-I_CHIP_POSE_NS = 18  # system time of the newest on-chip pose (the OTOS; 0 = none)
-I_RING_FROM = 19  # oldest seq the ring holds (the remote backend starts mid-run)
+I_LIFT_TOTAL = 1  # polls that reported the lift bit
+I_SPI_ERRORS = 2
+I_OVERFLOWS = 3
+I_STATE = 4  # see STATE_*
+I_CPI_X = 5
+I_CPI_Y = 6
+I_GEN_X = 7  # emulator ground truth: counts that entered the sensor's counter
+I_GEN_Y = 8
+I_REINITS = 9  # successful (re)initialisations
+I_LIFT_LOST_X = 10  # emulator ground truth: counts cleared by lifts
+I_LIFT_LOST_Y = 11
+I_LOW_QUALITY = 12  # polls whose quality was below the chip's threshold (treated like a lift)
+I_QUALITY = 13  # the newest poll's quality figure (-1: the chip has none)
+I_CHIP_POSE_NS = 14  # system time of the newest on-chip pose (the OTOS; 0 = none)
+I_RING_FROM = 15  # oldest seq the ring holds (the remote backend starts mid-run)
+I_SEQ = 16  # polls done for this sensor
+I_X_TOTAL = 17  # measured counts
+I_Y_TOTAL = 18
+I_STAMP_NS = 19  # system time of the newest poll
 N_INT = 20
 
 # int64 fields that only grow: a restarted agent's are added to what came before
@@ -180,18 +182,14 @@ class SharedState:
     ``glob``, ``hist``, ``ring_*``), made on first use.
     """
 
-    # (name, struct code, item size, per sensor?, length); the rings: see ring_layout
+    # (name, struct code, item size, per sensor?, length); per sensor its ints then its
+    # floats (one row: the hot path's seq, counts, stamp and metres are contiguous); the
+    # ring: one record per poll (ring_layout.RECORD), ring_size records per sensor, as bytes
     _LAYOUT = (
-        ("ints", "q", 8, True, N_INT),
-        ("floats", "d", 8, True, N_FLOAT),
+        ("sensor", "q", 8, True, N_INT + N_FLOAT),
         ("glob", "q", 8, False, N_GLOBAL),
         ("hist", "q", 8, False, HIST_BINS),
-        *(
-            (attr, f.code, size, True, 0)
-            for attr, f, size in zip(
-                ring_layout.ATTRS, ring_layout.RING, ring_layout.ITEM_BYTES, strict=True
-            )
-        ),
+        ("ring", "B", ring_layout.POLL_BYTES, True, 0),
     )
     RING_FIELDS = ring_layout.ATTRS
 
@@ -202,15 +200,18 @@ class SharedState:
         # a bytearray or a multiprocessing RawArray: both export the buffer protocol, which
         # Python 3.11's typing cannot name (collections.abc.Buffer is 3.12)
         self.mem = memoryview(buffer).cast("B")  # type: ignore[arg-type]
-        # name -> (offset, code, item size, rows, row length)
-        self._where: dict[str, tuple[int, str, int, int, int]] = {}
+        # name -> (offset, code, item size, rows, row length, bytes from row to row)
+        self._where: dict[str, tuple[int, str, int, int, int, int]] = {}
         offset = 0
         for name, code, size, per_sensor, length in self._LAYOUT:
             offset = (offset + 7) & ~7
             rows, cols = (n_sensors if per_sensor else 1), (length or ring_size)
-            self._where[name] = (offset, code, size, rows, cols)
+            self._where[name] = (offset, code, size, rows, cols, cols * size)
             offset += rows * cols * size
         self.nbytes = offset
+        at, _code, _size, rows, _cols, row = self._where.pop("sensor")
+        self._where["ints"] = (at, "q", 8, rows, N_INT, row)
+        self._where["floats"] = (at + 8 * N_INT, "d", 8, rows, N_FLOAT, row)
         if offset > len(self.mem):
             raise ValueError(f"shared buffer of {len(self.mem)} bytes; the layout needs {offset}")
         self.glob_view = self._view("glob", 0)
@@ -220,37 +221,47 @@ class SharedState:
         self._arrays: dict[str, object] = {}
 
     def _view(self, name: str, row: int) -> memoryview[Any]:
-        offset, code, size, _rows, cols = self._where[name]
-        start = offset + row * cols * size
+        offset, code, size, _rows, cols, stride = self._where[name]
+        start = offset + row * stride
         # typeshed types cast() per literal format code; this one comes from _LAYOUT
         return self.mem[start : start + cols * size].cast(code)  # type: ignore[call-overload]
 
-    def sensor_views(
-        self, i: int
-    ) -> tuple[memoryview[int], memoryview[float], tuple[memoryview[int], ...]]:
-        """Sensor ``i``'s ints, floats and ring fields (RING_FIELDS order) as memoryviews."""
-        return (
-            self._view("ints", i),
-            self._view("floats", i),
-            tuple(self._view(name, i) for name in self.RING_FIELDS),
-        )
+    def sensor_views(self, i: int) -> tuple[memoryview[int], memoryview[float], memoryview]:
+        """Sensor ``i``'s ints, floats and ring (its records' bytes) as memoryviews."""
+        return self._view("ints", i), self._view("floats", i), self.ring_bytes(i)
 
-    def ring_bytes(self, name: str, i: int) -> memoryview:
-        """Sensor ``i``'s slice of one ring field, as raw bytes."""
-        offset, _code, size, _rows, cols = self._where[name]
-        start = offset + i * cols * size
+    def sensor_bytes(self, i: int) -> memoryview:
+        """Sensor ``i``'s ints then floats as one run of bytes (int ``k`` at ``8 k``, float
+        ``k`` at ``8 (N_INT + k)``): I_SEQ .. I_STAMP_NS, F_X_TOTAL_M, F_Y_TOTAL_M in one pack."""
+        offset, _code, _size, _rows, _cols, stride = self._where["ints"]
+        return self.mem[offset + i * stride : offset + (i + 1) * stride]
+
+    def ring_bytes(self, i: int) -> memoryview:
+        """Sensor ``i``'s ring: ``ring_size`` records (ring_layout.RECORD) as raw bytes;
+        poll ``seq`` is at byte ``(seq % ring_size) * POLL_BYTES``."""
+        offset, _code, size, _rows, cols, stride = self._where["ring"]
+        start = offset + i * stride
         return self.mem[start : start + cols * size]
 
     def __getattr__(self, name: str):
-        """The numpy views (readers only: the writer never needs numpy)."""
+        """The numpy views (readers only: the writer never needs numpy): ``ints``,
+        ``floats`` (sensors x fields), ``glob``, ``hist``, ``ring`` (sensors x slots, the
+        record's structured dtype) and ``ring_stamp`` ... ``ring_quality`` (one field of
+        ``ring``: strided views, writable)."""
         where = self.__dict__.get("_where")
-        if where is None or name not in where:
+        if where is None or (name not in where and name not in self.RING_FIELDS):
             raise AttributeError(name)
         import numpy as np
 
-        offset, code, _size, rows, cols = where[name]
-        arr = np.frombuffer(self.mem, dtype=np.dtype(code), count=rows * cols, offset=offset)
-        arr = arr.reshape((rows, cols) if name not in ("glob", "hist") else (cols,))
+        if name in self.RING_FIELDS:
+            arr = self.ring[ring_layout.NAMES[self.RING_FIELDS.index(name)]]
+        else:
+            offset, code, size, rows, cols, stride = where[name]
+            dtype = np.dtype(ring_layout.DTYPE) if name == "ring" else np.dtype(code)
+            flat = name in ("glob", "hist")
+            shape = (cols,) if flat else (rows, cols)
+            strides = (size,) if flat else (stride, size)
+            arr = np.ndarray(shape, dtype, buffer=self.mem, offset=offset, strides=strides)
         self._arrays[name] = arr
         setattr(self, name, arr)
         return arr
@@ -283,7 +294,7 @@ class SharedState:
                 iv = ints.tolist()
                 fv = floats.tolist()
                 if ints[I_VERSION] == v1:
-                    return Totals(*iv[1:I_RING_FROM], *fv)
+                    return Totals(*_totals_ints(iv), *fv)
             if time.monotonic() > deadline:
                 raise PollerBusyError(f"{BUSY_MESSAGE} (sensor {i}, {timeout_s * 1e3:.0f} ms)")
             tries += 1
@@ -303,10 +314,8 @@ class SharedState:
         limit = n if max_samples <= 0 else min(max_samples, n)
         end = min(seq_now, first + limit)
         idx = np.arange(first, end, dtype=np.int64) % n
-        arrays = {
-            name: getattr(self, attr)[i][idx]
-            for name, attr in zip(ring_layout.NAMES, ring_layout.ATTRS, strict=True)
-        }
+        records = self.ring[i][idx]  # one copy of the records, then each field contiguous
+        arrays = {name: np.ascontiguousarray(records[name]) for name in ring_layout.NAMES}
         # Slots the poller overwrote while we copied are not trustworthy.
         oldest_valid = self.snapshot(i).seq - n
         if oldest_valid > first:
@@ -332,8 +341,17 @@ class SharedState:
         ]
 
 
-# The poller's hot path (channel.Channel.poll) writes these by literal index.
-assert (I_VERSION, I_SEQ, I_X_TOTAL, I_Y_TOTAL, I_STAMP_NS) == (0, 1, 2, 3, 10)
-# ... and unpacks the ring fields in this order (channel.Channel.poll/record)
+# Totals' int fields, in its order
+_totals_ints = operator.itemgetter(
+    I_SEQ, I_X_TOTAL, I_Y_TOTAL, I_LIFT_TOTAL, I_SPI_ERRORS, I_OVERFLOWS, I_STATE, I_CPI_X,
+    I_CPI_Y, I_STAMP_NS, I_GEN_X, I_GEN_Y, I_REINITS, I_LIFT_LOST_X, I_LIFT_LOST_Y,
+    I_LOW_QUALITY, I_QUALITY, I_CHIP_POSE_NS,
+)  # fmt: skip
+assert len(_totals_ints(range(N_INT))) + N_FLOAT == len(fields(Totals))
+
+# The poller's hot path (channel.Channel.poll) writes these by literal index and packs
+# I_SEQ .. I_STAMP_NS and the two metres as one run (they end the ints, start the floats).
+assert (I_VERSION, I_SEQ, I_X_TOTAL, I_Y_TOTAL, I_STAMP_NS, N_INT) == (0, 16, 17, 18, 19, 20)
+# ... and packs the ring record's fields in this order (channel.Channel.poll/record)
 assert ring_layout.NAMES == ("stamp_ns", "dx", "dy", "status", "cpi", "flags", "quality")
 assert (F_X_TOTAL_M, F_Y_TOTAL_M, FLAG_MOTION) == (0, 1, 2)

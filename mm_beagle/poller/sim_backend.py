@@ -9,6 +9,7 @@ simulator); the spidev path never imports this module.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -66,6 +67,38 @@ def parse_fail_windows(
             raise ValueError(f"fail window '{spec}' needs 0 <= START < END")
         out[dev].append((a, b))
     return out
+
+
+SIM_MOUNTS_FORM = "X,Y,YAW per sensor (m, m, degrees), sensors separated by ';'"
+
+
+def parse_sim_mounts(text: str, devices: list[str]) -> list[tuple[float, float, float]]:
+    """``"0.051,-0.0385,3;0.047,0.041,-2"`` (mm-monitor's ``--sim-mounts``) -> one (x, y, yaw
+    rad) per device, base_link; '' -> [] (as designed). ValueError saying the format for
+    anything else: not 3 numbers per sensor, not one mount per device, non-finite, a
+    position over 1 m, a yaw over 180 deg."""
+    if not text.strip():
+        return []
+    parts = text.split(";")
+    if len(parts) != len(devices):
+        raise ValueError(
+            f"'sim_mounts' has {len(parts)} sensors for {len(devices)} devices; {SIM_MOUNTS_FORM}"
+        )
+    mounts = []
+    for k, part in enumerate(parts):
+        try:
+            x, y, yaw = (float(v) for v in part.split(","))
+        except ValueError:
+            raise ValueError(
+                f"'sim_mounts' needs {SIM_MOUNTS_FORM}; sensor {k} is {part.strip()!r}"
+            ) from None
+        if not all(map(math.isfinite, (x, y, yaw))) or max(abs(x), abs(y)) > 1 or abs(yaw) > 180:
+            raise ValueError(
+                f"'sim_mounts': sensor {k} ({part.strip()}) needs |x|, |y| <= 1 m and "
+                "|yaw| <= 180 deg"
+            )
+        mounts.append((x, y, math.radians(yaw)))
+    return mounts
 
 
 # --- sensor backends -----------------------------------------------------------------------

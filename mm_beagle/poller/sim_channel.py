@@ -11,6 +11,9 @@ Only the sim backend imports this module.
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable
+
 from mm_beagle.poller import shared_state as ss
 from mm_beagle.poller.channel import Channel
 from pln2033 import Motion
@@ -74,17 +77,20 @@ class SimChannel(Channel):
             self.truth = SimChannelStats(self.ints, stats, self.cpi_y, emulated_cpi)
         if self.truth is None and self.fast and driver is not None:
             # no truth to keep (the benchmark's stub bus): the production hot path as it is
-            self.poll = self._fast_poll  # type: ignore[method-assign,assignment]  # per-instance
+            self.poll = self._fast_poll  # type: ignore[method-assign]  # per-instance
 
-    def poll(self, stamp_ns: int) -> None:
-        super().poll(stamp_ns)
+    def poll(self, offset_ns: int, now: Callable[[], int] = time.perf_counter_ns) -> int:
+        s = super().poll(offset_ns, now)
         if self.truth is not None:
             self.truth.write()
+            self._resync()  # the fast poll's copy of the lock word
+        return s
 
     def record(self, stamp_ns: int, m: Motion | None, extra_flags: int = 0) -> None:
         super().record(stamp_ns, m, extra_flags)
         if self.truth is not None:
             self.truth.write()
+            self._resync()
 
 
 def truth_of(ch: Channel) -> SimChannelStats | None:

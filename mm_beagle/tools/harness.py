@@ -1,13 +1,14 @@
 """Run mm-beagle as a separate process and talk to it over real ROS 2 services.
 
 Used by the demo, the benchmarks and the integration tests. Every run gets
-localhost-only discovery and, unless the user set ROS_DOMAIN_ID, its own random
-domain (1..101) that no other run of ours holds, so nothing leaves this machine
-and parallel runs do not see each other.
+localhost-only discovery (UDP on 127.0.0.1, no shared memory) and, unless the user set
+ROS_DOMAIN_ID, its own random domain (1..101) that no other run of ours holds, so nothing
+leaves this machine and parallel runs do not see each other.
 """
 
 from __future__ import annotations
 
+import math
 import os
 import random
 import signal
@@ -17,6 +18,7 @@ import sys
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager, suppress
+from pathlib import Path
 
 from mm_pc.ros.services import service_types
 
@@ -72,10 +74,96 @@ def isolated_ros_env(domain_id: int | None = None, keep_user_domain: bool = True
         kept = env.get(ISOLATED_MARK) or user
         domain_id = int(kept) if kept.isdigit() else _reserve_domain()
     env["ROS_DOMAIN_ID"] = env[ISOLATED_MARK] = str(domain_id)
-    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     env.pop("ROS_STATIC_PEERS", None)
+    _localhost_transports(env)
     env["PYTHONUNBUFFERED"] = "1"
     return env
+
+
+#: the environment keys :func:`_localhost_transports` sets (and use_isolated_ros_env copies)
+DDS_KEYS = ("ROS_AUTOMATIC_DISCOVERY_RANGE", "FASTRTPS_DEFAULT_PROFILES_FILE")
+
+#: the name our profile files start with (a parent's is kept, whatever its folder)
+PROFILE_PREFIX = "mm-fastdds-localhost-"
+
+#: Fast DDS participants of our localhost runs: UDPv4 on 127.0.0.1 only, no shared memory
+#: (multicast discovery on loopback, 127.0.0.1 also as initial peer)
+LOCALHOST_UDP_PROFILE = """<?xml version="1.0" encoding="UTF-8" ?>
+<profiles xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
+  <transport_descriptors>
+    <transport_descriptor>
+      <transport_id>mm_localhost_udp</transport_id>
+      <type>UDPv4</type>
+      <interfaceWhiteList><address>127.0.0.1</address></interfaceWhiteList>
+    </transport_descriptor>
+  </transport_descriptors>
+  <participant profile_name="mm_localhost_udp" is_default_profile="true">
+    <rtps>
+      <userTransports><transport_id>mm_localhost_udp</transport_id></userTransports>
+      <useBuiltinTransports>false</useBuiltinTransports>
+      <builtin>
+        <initialPeersList>
+          <locator><udpv4><address>127.0.0.1</address></udpv4></locator>
+        </initialPeersList>
+      </builtin>
+    </rtps>
+  </participant>
+</profiles>
+"""
+
+
+def _localhost_transports(env: dict[str, str]) -> None:
+    """Keep ``env``'s ROS traffic on this machine, without Fast DDS shared memory.
+
+    ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` makes rmw_fastrtps add its shared-memory
+    transport whatever a profile or FASTDDS_BUILTIN_TRANSPORTS says, and that transport's
+    port files in /dev/shm (left by killed runs, another user's, or locked under load) print
+    a red ``[RTPS_TRANSPORT_SHM Error] Failed init_port ...`` at start. So with Fast DDS
+    (the default RMW) the discovery range is left at SUBNET and a default profile limits
+    every participant to UDPv4 on 127.0.0.1 (:data:`LOCALHOST_UDP_PROFILE`): nothing leaves
+    the machine either. A user's own profile file or another RMW keeps LOCALHOST.
+    """
+    env.pop("ROS_LOCALHOST_ONLY", None)  # Jazzy maps it to LOCALHOST (and SHM)
+    rmw = env.get("RMW_IMPLEMENTATION", "").strip()
+    users = [p for p in (env.get("FASTRTPS_DEFAULT_PROFILES_FILE", ""),
+                         env.get("FASTDDS_DEFAULT_PROFILES_FILE", ""))
+             if p and not Path(p).name.startswith(PROFILE_PREFIX)]  # ours: a parent's
+    if rmw not in ("", "rmw_fastrtps_cpp", "rmw_fastrtps_dynamic_cpp") or users:
+        env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+        return
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "SUBNET"
+    env["FASTRTPS_DEFAULT_PROFILES_FILE"] = localhost_profile_file()
+
+
+def localhost_profile_file() -> str:
+    """:data:`LOCALHOST_UDP_PROFILE` as a file for FASTRTPS_DEFAULT_PROFILES_FILE, rewritten
+    atomically when its text differs.
+
+    It lives in the user's cache folder (``$XDG_CACHE_HOME/mouse-monitor``, default
+    ``~/.cache/...``), not in /tmp: a run must not leave files in the shared temporary
+    folder, and this one is reused by every later run. Without a writable home it falls
+    back to the temporary folder.
+    """
+    import tempfile
+
+    name = f"{PROFILE_PREFIX}{os.getuid()}.xml"
+    cache = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    folder = Path(cache) / "mouse-monitor"
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        if not os.access(folder, os.W_OK):
+            raise PermissionError(folder)
+    except OSError:
+        folder = Path(tempfile.gettempdir())
+    path = folder / name
+    with suppress(OSError):
+        if path.read_text() == LOCALHOST_UDP_PROFILE:
+            return str(path)
+    fd, tmp = tempfile.mkstemp(dir=folder, prefix=name, suffix=".tmp")
+    with os.fdopen(fd, "w") as f:
+        f.write(LOCALHOST_UDP_PROFILE)
+    os.replace(tmp, path)
+    return str(path)
 
 
 def use_isolated_ros_env(
@@ -83,9 +171,11 @@ def use_isolated_ros_env(
 ) -> dict[str, str]:
     """Apply :func:`isolated_ros_env` to this process (before rclpy.init)."""
     env = isolated_ros_env(domain_id, keep_user_domain)
-    for key in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", ISOLATED_MARK):
-        os.environ[key] = env[key]
-    os.environ.pop("ROS_STATIC_PEERS", None)
+    for key in ("ROS_DOMAIN_ID", ISOLATED_MARK, *DDS_KEYS):
+        if key in env:
+            os.environ[key] = env[key]
+    for key in ("ROS_STATIC_PEERS", "ROS_LOCALHOST_ONLY"):
+        os.environ.pop(key, None)
     return env
 
 
@@ -219,7 +309,7 @@ def emulated_sensors(
     mm-beagle-agent on emulated sensors and the node in backend:=remote on its link,
     the whole BBB chain on this machine. ``chips``: "pmw3360,pmw3360" (one per device,
     or one for all; '' = PLN2033s); ``sim_mounts``: the node's parameter (x, y, yaw rad
-    per sensor; not with the agent). Yields the node's process."""
+    per sensor; the agent gets them as its --sim-mounts). Yields the node's process."""
     chip_param = {"chips": [chips]} if chips else {}
     if not through_agent:
         params = {"backend": "sim", "sim_trajectory": trajectory, **chip_param}
@@ -232,6 +322,11 @@ def emulated_sensors(
     agent_opts = {"backend": "sim", "sim_trajectory": trajectory, "listen": [endpoint]}
     if chips:
         agent_opts["chips"] = chips
+    if sim_mounts:  # the agent's form: "X,Y,YAW;..." (m, m, degrees)
+        m = [float(v) for v in sim_mounts]
+        agent_opts["sim_mounts"] = ";".join(
+            f"{m[k]!r},{m[k + 1]!r},{math.degrees(m[k + 2])!r}" for k in range(0, len(m), 3)
+        )
     with (
         agent_process(agent_opts, log_path + ".agent"),
         beagle_process(

@@ -33,7 +33,7 @@ mm-bench chips [--polls N] --json
     process: with a constant-reply stub (driver + poller only) and with the
     chip's emulator. See mm_beagle.tools.bench_chips.
 
-mm-bench pipeline [--rates 15,100] [--cpi 1600] [--speed 0.5] [--duration 20] --json
+mm-bench pipeline [--rates 15,100] [--cpi 1600] [--speed 0.5] [--duration 20] [--lifts 0] --json
     One s-curves path (CSV) integrated in-process and through the real processes
     (mm-beagle sim on the file, one mm-odometry per method and rate): final error per
     10 m and yaw error side by side, against the file's ground truth.

@@ -8,6 +8,7 @@ section "mm_pc.bench.gui in detail".
 
 from __future__ import annotations
 
+import gc
 import math
 import os
 import sys
@@ -94,7 +95,8 @@ def cpu_figures(cpu_s: float, wall_s: float, replies: int) -> dict:
 HEARTBEAT_MS = 10
 STALL_MS = 100.0
 #: the actions of the stall phase, in order (see :func:`_stalls`)
-STALL_ACTIONS = ("tabs_500hz", "simulate_mowing_run", "csv_export", "png_export", "replay")
+STALL_ACTIONS = ("tabs_500hz", "simulate_mowing_run", "csv_export", "png_export", "replay",
+                 "replay_seek")
 
 
 class _Heartbeat:
@@ -172,7 +174,9 @@ def _stalls(window, bridge, app, tmp: Path, actions=STALL_ACTIONS, sim_timeout_s
     * ``csv_export``: the Data tab's Export CSV of the first sensor (every row);
     * ``png_export``: File > Export view as PNG of every tab;
     * ``replay``: a 30 s recording at 100 Hz read in the background and replayed at 10x,
-      then Back to live.
+      then Back to live;
+    * ``replay_seek``: that recording paused, a seek to 29 s, then back to 17 s
+      (``seek_back_s``, ``seek_back_replies``: from the keyframe before 17 s).
 
     Returns {"longest_ms", "count_over_100ms", "by_action": {action: figures}, ...}.
     """
@@ -315,12 +319,56 @@ def _replay(window, app, tmp, extra):
             lambda: leave_replay(window))  # fmt: skip
 
 
+def _replay_seek(window, app, tmp, extra):
+    """The replay's recording (30 s at 100 Hz, read before) paused, a seek to 29 s (fed by
+    the timer), then a seek back to 17 s: ``seek_back_s`` (how long the seek back took,
+    to the 20 ms of the loop's check) and ``seek_back_replies`` (replies it fed: from the
+    keyframe at or before 17 s)."""
+    from mm_pc.monitor.replay import begin_replay, leave_replay, load_recording
+
+    path = tmp / "replay.mcap"
+    if not path.exists():
+        _replay(window, app, tmp, extra)
+    _, replies, _ = load_recording(path)
+    st: dict = {}
+
+    def start() -> None:
+        rep = begin_replay(window, path, replies, 1.0)
+        rep.pause()
+        rep.seek(29.0)
+        st.update(rep=rep, phase="forward")
+
+    def done() -> bool:
+        rep = st.get("rep")
+        if rep is None or rep.seeking:
+            return False
+        if st["phase"] == "forward":
+            st.update(phase="back", t0=time.perf_counter(), p0=rep.position)
+            rep.seek(17.0)
+            base = rep.keyframes.frames[-1].position if rep.keyframes.frames else 0
+            st["base"] = base
+            if rep.seeking:
+                return False
+        st.setdefault("back_s", time.perf_counter() - st["t0"])
+        return True
+
+    def after() -> None:
+        rep = st.get("rep")
+        extra["seek_back_s"] = round(st.get("back_s", math.nan), 3)
+        extra["seek_back_replies"] = rep.position - st.get("base", 0) if rep else -1
+        extra["seek_keyframes"] = len(rep.keyframes) if rep else 0
+        leave_replay(window)
+
+    return start, done, 60.0, after
+
+
 _ACTIONS = {
     "tabs_500hz": _tab_switches,
     "simulate_mowing_run": _simulate,
     "csv_export": _csv_export,
     "png_export": _png_export,
     "replay": _replay,
+    "replay_seek": _replay_seek,
 }
 
 
@@ -438,6 +486,7 @@ def bench_gui(
     polls: str = "reply",
     executor: str = "events",
     stalls: bool = True,
+    gc_freeze: bool = True,
 ) -> dict:
     """Run the GUI benchmark (see the module doc); a JSON-ready dict.
 
@@ -452,7 +501,9 @@ def bench_gui(
     ``get_samples`` (one more call per sensor, the fallback for an older node);
     ``executor``: the bridge's rclpy executor (:data:`~mm_pc.monitor.ros_bridge.EXECUTORS`);
     ``stalls``: then the longest GUI-thread stalls during the user's heavy actions
-    (:func:`_stalls`, ``stalls`` in the JSON).
+    (:func:`_stalls`, ``stalls`` in the JSON); ``gc_freeze``: freeze the start-up objects
+    once the window is shown, as mm-monitor does
+    (:func:`~mm_pc.monitor.app.freeze_startup_objects`; False to compare).
     """
     from mm_pc.monitor.ros_bridge import EXECUTORS, validate_rate
 
@@ -483,6 +534,11 @@ def bench_gui(
             params = {"backend": "sim", "sim_trajectory": trajectory}
             stack.enter_context(beagle_process(params, env, str(tmp / "beagle.log")))
         window, bridge = _build_window(tmp, rate_hz, node, executor)
+        if gc_freeze:
+            from mm_pc.monitor.app import freeze_startup_objects
+
+            freeze_startup_objects()
+            stack.callback(gc.unfreeze)
         if bridge is not None:
             bridge.polls_in_reply = polls == "reply"
         stack.callback(window.close)
@@ -502,6 +558,7 @@ def bench_gui(
             result["goal_live_cpu_percent"] = GOAL_LIVE_CPU_PERCENT
         if stalls:
             result["stalls"] = _stalls(window, bridge, app, tmp)
+            result["stalls"]["gc_freeze"] = gc_freeze
     return result
 
 

@@ -14,9 +14,15 @@ sim backend's ``file:PATH`` format). The ground truth is the file as the sim rea
   ring, :data:`ONBOARD`); the final pose each publishes once the robot stands.
 
 Errors: final position (mm per 10 m travelled) and yaw (rad) against the ground truth,
-with each process's gap count from /diagnostics. The speed-up: the path at ``speed``
-is the same shape at any speed (s_curves scales its speed, not its curvature), so the
-default 0.5 m/s keeps the run at ~20 s of motion for ~10 m.
+with each process's gap count from /diagnostics and the published final covariance
+(``sigma_xy_mm``, ``sigma_yaw_rad``). ``lifts`` (lifts per second per sensor, 10 ms
+each, the sim's ``sim_lift_rate``) lifts the emulated sensors through the processes
+only (the in-process rows stay unlifted): each mm-odometry row then also gives its
+``lifted_steps``, ``switched_steps`` (``exact`` on the other sensor) and
+``lift_fill_sigma_m`` (the fill variance it added, docs/pose-math.md "Covariance").
+The speed-up: the path at ``speed`` is the same shape at any speed (s_curves scales
+its speed, not its curvature), so the default 0.5 m/s keeps the run at ~20 s of motion
+for ~10 m.
 """
 
 from __future__ import annotations
@@ -148,9 +154,10 @@ def _odometry_command(namespace: str, params: dict) -> list[str]:
 
 def through_processes(
     path: Path, rates, cpi: int, start_delay: float = 8.0, timeout: float = 120.0,
-    log_dir: Path | None = None,
+    log_dir: Path | None = None, lifts: float = 0.0,
 ) -> dict:  # fmt: skip
-    """mm-beagle (sim, the file) and one mm-odometry per method and rate: final errors."""
+    """mm-beagle (sim, the file; ``lifts`` per second per sensor) and one mm-odometry per
+    method and rate: final errors."""
     from diagnostic_msgs.msg import DiagnosticArray
     from nav_msgs.msg import Odometry as OdometryMsg
 
@@ -167,6 +174,7 @@ def through_processes(
         "sim_start_delay": start_delay, "cpi": cpi,
         # mm-beagle's own odometry too (every poll of the ring, on the board)
         "odometry_rate": 15.0, "odometry_method": "two-sensor",
+        "sim_lift_rate": float(lifts),
     }  # fmt: skip
     topics = {k: f"{ns[k]}/mm_odometry/odom" for k in nodes}
     topics[ONBOARD] = "/mm_beagle/odom"
@@ -227,10 +235,17 @@ def through_processes(
         p = msg.pose.pose
         yaw = 2 * math.atan2(p.orientation.z, p.orientation.w)
         row = _row((p.position.x, p.position.y, yaw), truth, length)
+        cov = msg.pose.covariance
+        row["sigma_xy_mm"] = round(math.sqrt(cov[0] + cov[7]) * 1e3, 3)
+        row["sigma_yaw_rad"] = float(f"{math.sqrt(cov[35]):.3g}")
         d = next((d for n, d in diags.items() if k in ns and n.startswith(ns[k] + "/")), {})
         if k in ns:  # mm-odometry's /diagnostics
             row["gaps"] = int(d.get("gaps", -1))
             row["polls_integrated"] = int(d.get("polls_integrated", -1))
+            if lifts:
+                row["lifted_steps"] = int(d.get("lifted_steps", -1))
+                row["switched_steps"] = int(d.get("switched_steps", -1))
+                row["lift_fill_sigma_m"] = float(d.get("lift_fill_sigma_m", "nan"))
         out[k] = row
     out["logs"] = str(log_dir)
     return out
@@ -257,9 +272,9 @@ class _Stack:
 
 def pipeline(
     rates=(15.0, 100.0), cpi: int = 1600, speed: float = 0.5, duration: float = 20.0,
-    path_file: str = "", processes: bool = True,
+    path_file: str = "", processes: bool = True, lifts: float = 0.0,
 ) -> dict:  # fmt: skip
-    """The whole comparison as one JSON-ready dict."""
+    """The whole comparison as one JSON-ready dict (``lifts``: through the processes)."""
     with tempfile.TemporaryDirectory(prefix="mm_pipeline_path_") as tmp:
         path = Path(path_file) if path_file else Path(tmp) / "s_curves.csv"
         if not path_file:
@@ -273,6 +288,7 @@ def pipeline(
                 "motion_s": round(len(v) * sim.DT, 3),
                 "cpi": cpi,
                 "request_hz": list(rates),
+                "lifts_per_s_per_sensor": lifts,
                 "mounts": [[m.x, m.y, m.yaw] for m in DEFAULT_MOUNTS],
                 "ground_truth": "the CSV as the sim reads it: mm_pc.sim.robot."
                 "load_trajectory_file then integrate_pose (exact per 1 ms step)",
@@ -285,7 +301,7 @@ def pipeline(
             },
         }
         if processes:
-            res["processes"] = through_processes(path, rates, cpi)
+            res["processes"] = through_processes(path, rates, cpi, lifts=lifts)
             res["side_by_side_mm_per_10m"] = {
                 k: [v["error_mm_per_10m"], res["processes"][k].get("error_mm_per_10m")]
                 for k, v in res["in_process"].items()
@@ -301,6 +317,10 @@ def main_args(parser) -> None:
     parser.add_argument("--duration", type=float, default=20.0, help="seconds of motion")
     parser.add_argument("--path-file", default="", help="a t,v,w CSV instead of the s-curves")
     parser.add_argument("--in-process-only", action="store_true", help="skip the processes")
+    parser.add_argument(
+        "--lifts", type=float, default=0.0,
+        help="lifts per second per sensor (10 ms each) in the sim, through the processes only",
+    )  # fmt: skip
     parser.add_argument("--json", action="store_true", help="print JSON only (the default)")
 
 
@@ -316,8 +336,11 @@ def run(args) -> dict:
         raise ValueError(f"--cpi {args.cpi}: the sim's CPI, 100..25600")
     if not (args.speed > 0 and args.duration > 0):
         raise ValueError("--speed and --duration must be > 0")
+    if not 0 <= args.lifts <= 100:
+        raise ValueError(f"--lifts {args.lifts:g}: lifts per second per sensor, 0..100")
     if args.path_file:
         sim.load_trajectory_file(args.path_file)  # a bad file: ValueError naming its line
     return pipeline(
-        rates, args.cpi, args.speed, args.duration, args.path_file, not args.in_process_only
-    )
+        rates, args.cpi, args.speed, args.duration, args.path_file, not args.in_process_only,
+        args.lifts,
+    )  # fmt: skip

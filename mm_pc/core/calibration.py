@@ -391,6 +391,28 @@ class Calibration:
             out.append(m if pos is None else replace(m, x=pos[0], y=pos[1]))
         return tuple(out)
 
+    def built_mounts(
+        self, devices: Sequence[str], default_mounts: Sequence[SensorMount]
+    ) -> tuple[SensorMount, ...]:
+        """The sensors as this calibration says they are built (the map draws these).
+
+        One :class:`SensorMount` per default mount: for the i-th of ``devices``
+        the fitted position (as :meth:`mounts`) and the yaw turned by the
+        calibration's angle offset (base_link, m and rad); mounts without a
+        device yet stay as given.
+        """
+        devices, default_mounts = list(devices), tuple(default_mounts)
+        out = []
+        for i, m in enumerate(default_mounts):
+            if i >= len(devices):
+                out.append(m)
+                continue
+            c = self.get(devices[i])
+            pos = c.position
+            xy = (m.x, m.y) if pos is None else (pos[0], pos[1])
+            out.append(replace(m, x=xy[0], y=xy[1], yaw=wrap_pi(m.yaw + c.angle_offset)))
+        return tuple(out)
+
     @classmethod
     def identity(cls, sensor_ids: Iterable[str] = ()) -> Calibration:
         """Identity calibration for the given sensor ids (none: empty, all identity)."""

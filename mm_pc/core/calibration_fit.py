@@ -17,11 +17,13 @@ straight step of signed length A (shared by all sensors) has the ideal sum
 (0, A); a spin by C rad about the turning centre (base_link origin) has
 (-C px, -C py). Residuals: the corrected step sums minus these, for every
 step and sensor, plus pseudo-observations: |A| = the measured distance (or,
-without one, the mean Y scale = 1), C = +-the spin angle the user turned,
+without one, the scale reference: the mean Y scale = 1, the sensors' own CPI,
+or the spins against the configured mount radii), C = +-the spin angle the user turned,
 and sx/sy = 1 within ``anisotropy_sd`` -- straights and spins only ever
 see kx * px, so that prior splits the product (the odometry depends on the
 product only, see the docs). Solved by Gauss-Newton; covariance
-``inv(J^T J)`` with the data weighted by the residual scatter.
+``inv(J^T J)`` with the data weighted by the residual scatter, each step's sum
+also by sqrt(its path / the mean path) (count noise is a random walk).
 
 Predicted heading drift per metre (rad/m, 1 sigma) on a straight: the
 method's yaw increment from the corrected sums of a unit straight, whose
@@ -54,12 +56,14 @@ __all__ = [
     "MIN_SPIN_RAD",
     "MIN_STRAIGHT_M",
     "SCALE_RANGE",
+    "SCALE_REFERENCES",
     "STEP_KINDS",
     "CalibrationRefusedError",
     "CalibrationStep",
     "MountFit",
     "StepCheck",
     "check_step",
+    "fit_advice",
     "fit_mounts",
     "straight_run_calibration",
 ]
@@ -88,6 +92,13 @@ ANISOTROPY_SD = 0.02
 #: How well a user meets the entered spin angle and the measured distance.
 SPIN_ANGLE_SD = math.radians(0.5)
 DISTANCE_SD = 0.001
+#: How well a user knows a sensor's position (m per coordinate, a ruler on the robot).
+MOUNT_SD = 0.001
+#: Without a measured distance, what fixes the scale of distances: "sensors" (the mean Y
+#: scale = 1: the CPI as set) or "mounts" (the spins' known angle against the configured
+#: mount radii: a spin by C moves a sensor by C * r, so with r known the spins give the
+#: scale). Straights and spins alone fix only the product scale * position.
+SCALE_REFERENCES = ("sensors", "mounts")
 #: One count at 1600 CPI (m): the noise floor of a step sum.
 DEFAULT_RESOLUTION_M = INCH_M / 1600
 
@@ -237,6 +248,11 @@ class MountFit:
     ``drift_per_m``: method -> predicted heading drift (rad per metre
     driven straight, 1 sigma); ``step_residuals`` (n_steps, n): |corrected
     step sum - model| per sensor (m); ``sigma``: the data scatter used (m).
+    ``scale_reference``: what fixed the distances' scale ("distance" when a
+    length was measured, else one of :data:`SCALE_REFERENCES`);
+    ``mounts_scale``: the factor on this fit's distances that the spins and
+    the configured mount radii imply (1 = they agree), with ``mounts_scale_se``
+    from a :data:`MOUNT_SD` ruler measurement of each mount.
     """
 
     devices: tuple[str, ...]
@@ -248,6 +264,14 @@ class MountFit:
     spin_angles: np.ndarray
     straight_lengths: np.ndarray
     covariance: np.ndarray = field(repr=False)
+    scale_reference: str = "sensors"
+    mounts_scale: float = 1.0
+    mounts_scale_se: float = 0.0
+
+    @property
+    def straight_total_m(self) -> float:
+        """The straights' summed length (m): what the drift prediction falls with."""
+        return float(np.sum(np.abs(self.straight_lengths)))
 
     def calibration(self, date: str | None = None) -> Calibration:
         """The fitted calibration (method "fit", dated now in UTC unless ``date``)."""
@@ -331,6 +355,7 @@ def fit_mounts(
     resolution_m: float = DEFAULT_RESOLUTION_M,
     min_distance: float = MIN_STRAIGHT_M,
     anisotropy_sd: float = ANISOTROPY_SD,
+    scale_reference: str = "sensors",
 ) -> MountFit:
     """Least-squares fit of every sensor's mount from a guided run (model: module docstring).
 
@@ -343,6 +368,8 @@ def fit_mounts(
         spin_angle: the angle each spin turned (rad, > 0; default a full turn).
         sensor: the sensor ``exact`` uses (for its predicted drift).
         resolution_m: one count (m): the floor of the data scatter.
+        scale_reference: without ``true_distance``, what fixes the scale
+            (:data:`SCALE_REFERENCES`); ignored with one.
 
     Raises:
         CalibrationRefusedError: a step that fails :func:`check_step`, no straight
@@ -360,6 +387,13 @@ def fit_mounts(
         raise ValueError(f"spin angle must be a finite number of rad > 0, got {spin_angle}")
     if true_distance is not None and not (math.isfinite(true_distance) and true_distance > 0):
         raise ValueError(f"true distance must be a finite number of m > 0, got {true_distance}")
+    if scale_reference not in SCALE_REFERENCES:
+        raise ValueError(
+            f"scale reference must be one of {SCALE_REFERENCES}, got {scale_reference!r}"
+        )
+    nominal_radius = float(np.mean([math.hypot(m.x, m.y) for m in nominal[:n]]))
+    if scale_reference == "mounts" and not nominal_radius > 0:
+        raise ValueError("the configured mounts sit at the turning centre: no radius to scale by")
     for k, s in enumerate(steps):
         if s.n_sensors != n:
             raise ValueError(f"step {k + 1} has {s.n_sensors} sensors, expected {n}")
@@ -395,6 +429,11 @@ def fit_mounts(
     i_str = [k for k, s in enumerate(steps) if s.kind == "straight"]
     i_spin = [k for k, s in enumerate(steps) if s.kind == "spin"]
     sums = np.array([s.totals for s in steps])  # (S, n, 2)
+    # count noise is a random walk: a step's sum scatters with the square root of its path
+    # (per sensor, relative to the mean path; a count's quantisation as the floor)
+    path = np.array([np.hypot(s.d[:, :, 0], s.d[:, :, 1]).sum(axis=0) for s in steps])  # (S, n)
+    path = np.maximum(path, 100 * resolution_m)
+    weight = np.sqrt(path.mean() / path)  # (S, n): 1 / relative scatter
 
     # start values: yaw from the straight-run formula, scales 1 (or from the distance)
     p0 = np.zeros(5 * n)
@@ -421,13 +460,16 @@ def fit_mounts(
             q = theta[5 * i : 5 * i + 5]
             g = _g(q)
             for j, k in enumerate(i_str):
-                out.extend((g @ sums[k, i] - (0.0, a[j])) / sigma)
+                out.extend((g @ sums[k, i] - (0.0, a[j])) * (weight[k, i] / sigma))
             for j, k in enumerate(i_spin):
-                out.extend((g @ sums[k, i] + c[j] * q[3:5]) / sigma)
+                out.extend((g @ sums[k, i] + c[j] * q[3:5]) * (weight[k, i] / sigma))
         data = len(out)
         for i in range(n):
             out.append((theta[5 * i + 1] / theta[5 * i + 2] - 1.0) / anisotropy_sd)
-        if true_distance is None:
+        if true_distance is None and scale_reference == "mounts":
+            radius = np.mean([math.hypot(*theta[5 * i + 3 : 5 * i + 5]) for i in range(n)])
+            out.append((radius - nominal_radius) / 1e-9)
+        elif true_distance is None:
             out.append((np.mean(theta[2 : 5 * n : 5]) - 1.0) / 1e-6)
         else:
             for j, k in enumerate(i_str):
@@ -521,6 +563,8 @@ def fit_mounts(
             )
         )
     drift = _predicted_drift(theta, cov, n, sensor)
+    fitted_radius = float(np.mean([math.hypot(*theta[5 * i + 3 : 5 * i + 5]) for i in range(n)]))
+    # with nominal_radius 0 (mounts at the centre) nothing to compare: 1, i.e. "agrees"
     return MountFit(
         devices=devices,
         sensors=tuple(sensors),
@@ -531,6 +575,9 @@ def fit_mounts(
         spin_angles=theta[5 * n + n_str :].copy(),
         straight_lengths=theta[5 * n : 5 * n + n_str].copy(),
         covariance=cov,
+        scale_reference="distance" if true_distance is not None else scale_reference,
+        mounts_scale=nominal_radius / fitted_radius if nominal_radius * fitted_radius > 0 else 1.0,
+        mounts_scale_se=(MOUNT_SD / nominal_radius / math.sqrt(n)) if nominal_radius > 0 else 0.0,
     )
 
 
@@ -577,3 +624,53 @@ def _predicted_drift(theta: np.ndarray, cov: np.ndarray, n: int, sensor: int) ->
         g = _yaw_rate_row(m, mounts, sensor) @ jd
         out[m] = float(math.sqrt(max(g @ cov @ g, 0.0)))
     return out
+
+
+def fit_advice(fit: MountFit, method: str) -> str:
+    """What to add to the run for a better fit, in a few sentences (the wizard's results page).
+
+    The count noise is a random walk, so a straight's direction -- what the heading drift
+    comes from -- is known to about noise * sqrt(L) / L: the drift falls with the square root
+    of the straights' total length (measured in mm_pc.bench.pose_calibration's sim, 0.5 to
+    4 m: docs/pose-math.md "What one short run gives"), and straights four times as long
+    halve it. Without a measured length the distances keep the scale reference's error
+    (:data:`SCALE_REFERENCES`); the spins against the configured mount radii
+    (``fit.mounts_scale``) say how far the sensors' own scale is off.
+    """
+    drift = fit.drift_per_m.get(method)
+    if drift is None and fit.drift_per_m:
+        method, drift = max(fit.drift_per_m.items(), key=lambda kv: kv[1])
+    out = []
+    total = fit.straight_total_m
+    n_str = max(len(fit.straight_lengths), 1)
+    if drift is not None and total > 0:
+        each = 4 * total / n_str
+        out.append(
+            f"Your straights total {total:.1f} m: {method} keeps about "
+            f"{math.degrees(drift):.2f} deg of heading per metre driven (1 sigma), "
+            f"{math.degrees(drift) * 10:.1f} deg after 10 m. The drift falls with the square "
+            f"root of the straights' length: record straights of {each:.1f} m (four times as "
+            f"long) to halve it."
+        )
+    if fit.scale_reference != "distance":
+        scale = 1.0 / fit.mounts_scale if fit.scale_reference == "sensors" else 1.0
+        ref = {
+            "sensors": "the sensors' CPI (typically a few % off)",
+            "mounts": "the spins and the configured mount positions "
+            f"(±{fit.mounts_scale_se * 100:.1f} % for mounts measured to "
+            f"{MOUNT_SD * 1000:.0f} mm)",
+        }[fit.scale_reference]
+        sentence = f"No length was measured: distances take their scale from {ref}."
+        if fit.scale_reference == "sensors" and math.isfinite(scale):
+            sentence += (
+                f" The spins against the configured mounts say distances read "
+                f"{abs(scale - 1) * 100:.1f} % {'long' if scale > 1 else 'short'} "
+                f"(±{fit.mounts_scale_se * 100:.1f} % if the mounts are right to "
+                f"{MOUNT_SD * 1000:.0f} mm): choose the mounts as the scale on the distance "
+                "page if you measured them."
+            )
+        out.append(
+            sentence + " Best: measure one straight with a tape and enter its length "
+            "(1 mm on 1 m is 0.1 %)."
+        )
+    return " ".join(out)

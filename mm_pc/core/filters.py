@@ -209,7 +209,7 @@ def median_filter(values, window: int, *, chunk: int = 1 << 22) -> np.ndarray:
     return out
 
 
-def fill_lift_gaps(counts, lifted, *, unit: float = 1.0):
+def fill_lift_gaps(counts, lifted, *, unit: float = 1.0, dt=None):
     """Fill the polls taken while the sensor was lifted, and say how sure each fill is.
 
     The rule is :mod:`pln2033.lift_fill` (the one the board's poller uses): the
@@ -223,6 +223,8 @@ def fill_lift_gaps(counts, lifted, *, unit: float = 1.0):
         lifted: bool array of shape (n,), True where the poll had the lift bit set.
         unit: one count in the unit of ``counts`` (1 for counts, metres per count
             for metres): sets the rounding term of the uncertainty.
+        dt: each poll's own interval from the stamps (s), shape (n,): the rule runs per
+            unit of time; None: every poll one interval.
 
     Returns:
         (filled, gaps): a float copy of ``counts`` with every lifted poll replaced
@@ -242,8 +244,10 @@ def fill_lift_gaps(counts, lifted, *, unit: float = 1.0):
         return c, []
     flat = c.reshape(c.shape[0], -1)
     flags = m.tolist()
+    times = None if dt is None else np.asarray(dt, dtype=float).tolist()
     columns = [
-        lift_fill.fill_sequence(flat[:, j].tolist(), flags, unit=unit) for j in range(flat.shape[1])
+        lift_fill.fill_sequence(flat[:, j].tolist(), flags, unit=unit, dt=times)
+        for j in range(flat.shape[1])
     ]
     for j, (filled, _) in enumerate(columns):
         flat[:, j] = filled
@@ -254,16 +258,17 @@ def fill_lift_gaps(counts, lifted, *, unit: float = 1.0):
     return flat.reshape(c.shape), gaps
 
 
-def interpolate_lift_gaps(counts, lifted) -> np.ndarray:
+def interpolate_lift_gaps(counts, lifted, dt=None) -> np.ndarray:
     """Fill the polls taken while the sensor was lifted (:func:`fill_lift_gaps`, values only).
 
     Args:
         counts: per-poll displacement, shape (n,) or (n, k), counts or metres.
         lifted: bool array of shape (n,), True where the poll had the lift bit set.
+        dt: each poll's own interval (s), or None (see :func:`fill_lift_gaps`).
 
     Returns:
         A float copy of ``counts`` in which every lifted poll is replaced by the
         window estimate of :mod:`pln2033.lift_fill`, as :mod:`mm_beagle.poller.lift_gap`
         estimates it on the board.
     """
-    return fill_lift_gaps(counts, lifted)[0]
+    return fill_lift_gaps(counts, lifted, dt=dt)[0]

@@ -226,8 +226,8 @@ class _OneSensor(_Method):
         return a, c
 
     def body_map(self, lifted=None) -> np.ndarray:
-        """(3, 2n): :func:`_no_slip_map` of the sensor (a lift changes nothing: a
-        one-sensor method uses its sensor's data as given)."""
+        """(3, 2n): :func:`_no_slip_map` of the sensor (a lift changes nothing: the
+        seed's methods use their sensor's data as given; ``exact`` overrides this)."""
         return _no_slip_map(self.mounts, self.sensor)
 
     def split1(self, d) -> tuple[float, float]:
@@ -237,15 +237,68 @@ class _OneSensor(_Method):
 
 
 class _Exact(_OneSensor):
+    """No-slip split of one sensor; while that sensor is lifted, of another one.
+
+    A lifted sensor's counts are nothing or a gap-filled guess, so for a sample in
+    which its own sensor is lifted ``exact`` takes the first sensor (in mount order)
+    that is not lifted and not on the axle line, with that sensor's own split, and
+    goes back to its own sensor with the first sample it sees again. With every
+    sensor lifted it uses its own sensor's data as given (fill the gaps first).
+    """
+
     name = "exact"
+
+    def __init__(self, mounts, sensor):
+        super().__init__(mounts, sensor)
+        self._sx = np.array([m.right for m in mounts])
+        self._sy = np.array([m.forward for m in mounts])
+        #: samples integrated with another sensor than ``sensor`` (its own was lifted)
+        self.switched = 0
+
+    def pick(self, lifted: tuple[bool, ...]) -> int:
+        """The sensor whose split a sample with these lift flags uses."""
+        if not lifted[self.sensor]:
+            return self.sensor
+        for i, flag in enumerate(lifted):
+            if not flag and self.mounts[i].forward != 0:
+                return i
+        return self.sensor
+
+    def body_map(self, lifted=None) -> np.ndarray:
+        """(3, 2n): :func:`_no_slip_map` of the sensor :meth:`pick` chooses."""
+        i = self.sensor if lifted is None else self.pick(tuple(lifted))
+        return _no_slip_map(self.mounts, i)
 
     def poses(self, start, dt, d):
         a, c = self.split(d)
         return arc_poses(start, a, None, c), None
 
+    def poses_lifted(self, start, dt, d, lifted: np.ndarray):
+        """:meth:`poses` with each sample's sensor chosen by :meth:`pick`."""
+        use = np.full(len(d), self.sensor)
+        for pattern in np.unique(lifted[lifted[:, self.sensor]], axis=0):
+            rows = np.all(lifted == pattern, axis=1)
+            use[rows] = self.pick(tuple(bool(v) for v in pattern))
+        self.switched += int(np.count_nonzero(use != self.sensor))
+        rows = np.arange(len(d))
+        dx, dy = d[rows, use, 0], d[rows, use, 1]
+        c = -dx / self._sy[use]
+        a = dy + (self._sx[use] / self._sy[use]) * dx  # the same floats as split()'s
+        return arc_poses(start, a, None, c), None
+
     def step(self, pose, dt, d):
         a, c = self.split1(d)
         return (*_arc_step(pose, a, 0.0, c), None)
+
+    def step_lifted(self, pose, dt, d, lifted: tuple[bool, ...]):
+        """:meth:`step` with the sensor chosen by :meth:`pick`."""
+        i = self.pick(lifted)
+        if i == self.sensor:
+            return self.step(pose, dt, d)
+        self.switched += 1
+        m = self.mounts[i]
+        dx, dy = d[i]
+        return (*_arc_step(pose, dy + (m.right / m.forward) * dx, 0.0, -dx / m.forward), None)
 
 
 class _SeedApproach2(_OneSensor):
@@ -452,11 +505,18 @@ class Odometry:
         self.blind_samples = 0
         self.reset(pose)
 
+    @property
+    def switched_samples(self) -> int:
+        """Samples ``exact`` integrated with another sensor because its own was lifted
+        (0 for the other methods)."""
+        return getattr(self._impl, "switched", 0)
+
     def body_map(self, lifted: Sequence[bool] | None = None) -> np.ndarray:
         """(3, 2 * n_sensors): how the method turns one sample's ideal-frame counts
         (dX1, dY1, dX2, dY2, ...) in metres into the body increment (a m, b m, c rad),
         linearised (exact for ``exact`` and ``two-sensor``; the seed's approaches are
-        given ``exact``'s). ``lifted``: per sensor; ``two-sensor`` drops the lifted ones.
+        given ``exact``'s). ``lifted``: per sensor; ``two-sensor`` drops the lifted ones,
+        ``exact`` gives the map of the sensor it switched to.
         For :class:`mm_pc.core.uncertainty.PoseUncertainty`.
         """
         flags = None if lifted is None or not any(lifted) else tuple(bool(v) for v in lifted)
@@ -479,6 +539,8 @@ class Odometry:
         self._pose = p
         self.residual = None
         self.lifted_samples = self.blind_samples = 0
+        if isinstance(self._impl, _Exact):
+            self._impl.switched = 0
 
     # -- input checks and the mount-yaw undo ------------------------------------------
 
@@ -532,7 +594,7 @@ class Odometry:
         else:
             self.lifted_samples += 1
             self.blind_samples += all(lifted)
-            if isinstance(self._impl, _TwoSensor):
+            if isinstance(self._impl, (_TwoSensor, _Exact)):
                 x, y, yaw, resid = self._impl.step_lifted(self._pose_t, dt, d, lifted)
             else:
                 x, y, yaw, resid = self._impl.step(self._pose_t, dt, d)
@@ -620,8 +682,9 @@ class Odometry:
         ``lifted``: optional bool (N, n_sensors), True where a sensor was lifted
         in that interval (its ``d`` is then what it counted, or a gap-filled
         estimate). ``two-sensor`` drops those sensors' equations (one sensor left:
-        its no-slip split, as ``exact``); the one-sensor methods use ``d`` as
-        given, so fill the gaps first (:func:`mm_pc.core.filters.fill_lift_gaps`).
+        its no-slip split, as ``exact``); ``exact`` takes another sensor's split
+        while its own is lifted (:attr:`switched_samples`); the seed's methods use
+        ``d`` as given, so fill the gaps first (:func:`mm_pc.core.filters.fill_lift_gaps`).
         Every sensor lifted: the data as given, and :attr:`blind_samples` counts it.
         """
         d = np.asarray(d, dtype=float)
@@ -642,7 +705,7 @@ class Odometry:
             if mask is not None:
                 self.lifted_samples += int(np.count_nonzero(mask.any(axis=1)))
                 self.blind_samples += int(np.count_nonzero(mask.all(axis=1)))
-            if mask is not None and isinstance(self._impl, _TwoSensor):
+            if mask is not None and isinstance(self._impl, (_TwoSensor, _Exact)):
                 poses, resid = self._impl.poses_lifted(self._pose, dt, self._unturn(d), mask)
             else:
                 poses, resid = self._impl.poses(self._pose, dt, self._unturn(d))

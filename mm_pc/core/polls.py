@@ -22,15 +22,24 @@ displacement is then moved back to sensor 0's read time by :func:`deskew` (its o
 velocity times its read delay): without it ``two-sensor`` read the heading from the two
 sensors ~0.1 ms apart, a yaw bias of delay x speed / spacing (1.3 mm per 10 m at
 0.5 m/s through the real processes, docs/pose-math.md). Reads that are not polls (a
-settings read for a command, flag 16, or the drain before a CPI change) carry a stamp
-of their own; their counts are added to the same sensor's next tick (counts are never
-dropped). Polls of one sensor in ticks the other sensor has no poll for (it was down)
-are added to the next common tick too, and that step is marked a gap.
+settings read for a command, flag 16) carry a stamp of their own; their counts are added
+to the same sensor's next tick (counts are never dropped). Polls of one sensor in ticks
+the other sensor has no poll for (it was down) are added to the next common tick too,
+and that step is marked a gap -- except the last poll before a CPI change (a poll_cpi
+differs from the next): the poller's drain read at the old CPI, recorded as a poll of
+that sensor alone while the others were up.
 
 Gaps: when the polls of an interval are missing (``dropped`` > 0: the ring overran;
-the reply ends before the totals' ``seq``; no reply; its counts disagree with the
-totals; a CPI change inside the interval), the interval becomes one gap step carrying
-the whole displacement from the totals, so nothing is lost and the caller can mark it.
+the reply ends before the totals' ``seq``; no reply; its counts or metres disagree with
+the totals), the interval becomes one gap step carrying the whole displacement from the
+totals, so nothing is lost and the caller can mark it.
+
+CPI: each poll is scaled by its own resolution (``poll_cpi`` of the reply, issue 28), so
+a CPI change inside a request interval is integrated exactly and is no gap (a tick that
+sums polls of two CPIs, e.g. the drain read before the change, adds each at its own).
+A reply without ``poll_cpi`` (an old node or recording) has one ``cpi`` for all its
+polls: a CPI change inside its interval shows only as polls whose metres disagree with
+the totals', and stays a gap step from the totals, as before.
 
 Lifts: a poll counts as lifted when its lift bit or its low-quality bit is set
 (:func:`unseen`: the chip saw the floor too poorly to trust the counts, issue 15); on a
@@ -208,7 +217,10 @@ class PollBatch:
 
     ``first_seq``..``next_seq``: the sequence numbers covered; ``dropped``: polls
     asked for that had left the ring; ``cpi``: resolution at the newest poll;
-    ``stamp_ns``, ``dx``, ``dy`` (counts), ``flags``: one entry per poll.
+    ``stamp_ns``, ``dx``, ``dy`` (counts), ``flags``: one entry per poll;
+    ``poll_cpi``: each poll's resolution (counts per inch), or None when the reply had
+    none (an old node or recording: ``cpi`` then stands for every poll, and a CPI change
+    inside the interval can only be found by the totals, as a gap).
     """
 
     first_seq: int
@@ -220,6 +232,20 @@ class PollBatch:
     dy: np.ndarray
     flags: np.ndarray
     instance_id: int = 0  # the node's identity in the reply (0: not given, e.g. a recording)
+    poll_cpi: np.ndarray | None = None
+
+    @property
+    def cpis(self) -> np.ndarray:
+        """Each poll's resolution (counts per inch): ``poll_cpi``, or ``cpi`` for every poll."""
+        if self.poll_cpi is not None:
+            return self.poll_cpi
+        return np.full(len(self.stamp_ns), self.cpi, np.int64)
+
+    @property
+    def one_cpi(self) -> bool:
+        """Every poll here at ``cpi`` (always so when the reply gave no per-poll CPI)."""
+        pc = self.poll_cpi
+        return pc is None or not len(pc) or bool((pc == self.cpi).all())
 
     @classmethod
     def from_reply(cls, res) -> PollBatch:
@@ -246,7 +272,19 @@ class PollBatch:
         if n and cpi <= 0:
             raise ValueError(f"get_samples reply with {n} polls but cpi {cpi}")
         instance = int(getattr(res, "instance_id", 0))
-        return cls(first, nxt, dropped, cpi, stamp, dx, dy, flags, instance)
+        try:
+            pc = np.asarray(getattr(res, "poll_cpi", ()), dtype=np.int64)
+        except (TypeError, ValueError) as e:
+            raise ValueError(f"not a get_samples reply: poll_cpi: {e}") from None
+        if not len(pc):
+            return cls(first, nxt, dropped, cpi, stamp, dx, dy, flags, instance)
+        if len(pc) != n:
+            raise ValueError(
+                f"get_samples reply with {n} polls but {len(pc)} poll_cpi: one per poll or none"
+            )
+        if pc.min() <= 0:
+            raise ValueError(f"get_samples reply with a poll at cpi {int(pc.min())}")
+        return cls(first, nxt, dropped, cpi, stamp, dx, dy, flags, instance, pc)
 
     def __len__(self) -> int:
         return len(self.stamp_ns)
@@ -269,9 +307,12 @@ class PollBatch:
             np.concatenate([getattr(p, f) for p in parts])
             for f in ("stamp_ns", "dx", "dy", "flags")
         )
+        # per-poll CPIs when any part has them (the others' polls at their reply's cpi)
+        known = any(p.poll_cpi is not None for p in parts if len(p))
+        pc = np.concatenate([p.cpis for p in parts]) if known else None
         return cls(
             parts[0].first_seq, parts[-1].next_seq, sum(p.dropped for p in parts), cpi,
-            stamp_ns, dx, dy, flags,
+            stamp_ns, dx, dy, flags, 0, pc,
         )  # fmt: skip
 
 
@@ -326,13 +367,13 @@ class _Pending:
     dx: np.ndarray
     dy: np.ndarray
     flags: np.ndarray
-    cpi: int = 0
+    cpi: np.ndarray  # each poll's resolution (counts per inch)
     raw: np.ndarray | None = None  # the stamps as read (this sensor's own read time)
 
     @classmethod
     def empty(cls) -> _Pending:
         z = np.empty(0, np.int64)
-        return cls(z, z, z, z, 0, z)
+        return cls(z, z, z, z, z, z)
 
     def add(self, b: PollBatch) -> None:
         self.stamp = np.concatenate([self.stamp, b.stamp_ns])
@@ -340,16 +381,15 @@ class _Pending:
         self.dx = np.concatenate([self.dx, b.dx])
         self.dy = np.concatenate([self.dy, b.dy])
         self.flags = np.concatenate([self.flags, b.flags])
-        if len(b):
-            self.cpi = b.cpi
+        self.cpi = np.concatenate([self.cpi, b.cpis])
 
     @property
     def raw_stamps(self) -> np.ndarray:
         return self.stamp if self.raw is None else self.raw
 
     def drop(self, k: int) -> None:
-        self.stamp, self.dx, self.dy, self.flags, self.raw = (
-            a[k:] for a in (self.stamp, self.dx, self.dy, self.flags, self.raw_stamps)
+        self.stamp, self.dx, self.dy, self.flags, self.cpi, self.raw = (
+            a[k:] for a in (self.stamp, self.dx, self.dy, self.flags, self.cpi, self.raw_stamps)
         )
 
 
@@ -402,6 +442,8 @@ class PollTracker:
         self._pending = [_Pending.empty() for _ in range(self.n)]
         self._ctx_counts = np.zeros((0, self.n, 2), np.int64)
         self._ctx_lifted = np.zeros((0, self.n), bool)
+        self._ctx_scale = np.zeros((0, self.n))  # metres per count of those ticks
+        self._ctx_dt = np.zeros(0)  # their intervals (s): the fill runs per unit of time
         self._carry = np.zeros((self.n, 2))  # :func:`deskew`'s share not yet given back
         self._delay = np.zeros(self.n)  # the read delays (ns) of the last step
 
@@ -506,6 +548,7 @@ class PollTracker:
                     or b.next_seq != t.seq or t.instance_id != self._instance[i]
                     or (b.instance_id and t.instance_id and b.instance_id != t.instance_id)
                     or (k is not None and len(b) != k) or (cpi is not None and b.cpi != cpi)
+                    or not b.one_cpi
                 ):  # fmt: skip
                     return None  # missing, or not the same ticks, or step() would object
                 k, cpi = len(b), b.cpi
@@ -549,7 +592,7 @@ class PollTracker:
         diff = np.abs(want - got)  # math.isclose(got, want, rel_tol=1e-9, abs_tol=1e-12)
         close = (got == want) | (diff <= np.abs(1e-9 * want)) | (diff <= np.abs(1e-9 * got))
         if not (close | (diff <= 1e-12)).all():
-            return None  # a CPI change within an interval: step() makes it a gap
+            return None  # the totals disagree (an old node's CPI change): step() decides
         # usable: the state the items one by one leave behind
         last = items[-1][0]
         self._cursor = [t.seq for t in last]
@@ -557,7 +600,6 @@ class PollTracker:
         self._acc_m = [(t.x_m, t.y_m) for t in last]
         self._est_ref = [(t.x_est_m, t.y_est_m) for t in last]
         for i in range(n):
-            self._pending[i].cpi = cpi
             self.polls_used[i] += kk
         for s in sums.tolist():  # added item by item, as step() adds them
             for i in range(n):
@@ -568,6 +610,10 @@ class PollTracker:
         lifted = np.zeros((kk, n), bool)
         self._ctx_counts = np.concatenate([self._ctx_counts, counts])[-LIFT_CONTEXT_POLLS:]
         self._ctx_lifted = np.concatenate([self._ctx_lifted, lifted])[-LIFT_CONTEXT_POLLS:]
+        self._ctx_scale = np.concatenate([self._ctx_scale, np.full((kk, n), scale)])[
+            -LIFT_CONTEXT_POLLS:
+        ]
+        self._ctx_dt = np.concatenate([self._ctx_dt, dt])[-LIFT_CONTEXT_POLLS:]
         d = deskew(counts.astype(float) * scale, delay, dt, self._carry, self._delay)
         return PollSteps(first, dt, d, counts, lifted, np.zeros(kk, bool)), ends
 
@@ -598,10 +644,21 @@ class PollTracker:
                     f"({t.x_counts - ax}, {t.y_counts - ay})"
                 )
             mx, my = self._acc_m[i]
-            scale = INCH_M / b.cpi
-            for got, want_m in ((sx * scale, t.x_m - mx), (sy * scale, t.y_m - my)):
+            if b.one_cpi:
+                scale = INCH_M / b.cpi
+                gx, gy = sx * scale, sy * scale
+            else:  # each poll at its own CPI, as the node's totals add them
+                per = INCH_M / b.cpis
+                gx, gy = float((b.dx * per).sum()), float((b.dy * per).sum())
+            for got, want_m in ((gx, t.x_m - mx), (gy, t.y_m - my)):
                 if not math.isclose(got, want_m, rel_tol=1e-9, abs_tol=1e-12):
-                    return f"sensor {i}: the CPI changed within the interval"
+                    if b.poll_cpi is None:  # an old node or recording: no per-poll CPI
+                        return f"sensor {i}: the CPI changed within the interval"
+                    return (
+                        f"sensor {i}: its polls at their own CPI come to "
+                        f"({gx:.9g}, {gy:.9g}) m, the totals moved "
+                        f"({t.x_m - mx:.9g}, {t.y_m - my:.9g}) m"
+                    )
         return ""
 
     def _pending_any(self) -> bool:
@@ -635,7 +692,8 @@ class PollTracker:
     def _same_ticks(self, pend: list[_Pending]):
         """The common case, cheaply: every sensor holds polls of the same poller ticks (their
         stamps equal after :func:`snap_to_ticks`) and none read for a command. Returns
-        (ticks, counts, lifted, folded, used) as :meth:`_match_ticks` would, or None."""
+        (ticks, counts, lifted, folded, used, scale, metres) as :meth:`_match_ticks`
+        would, or None."""
         first = pend[0].stamp
         k = len(first)
         for p in pend:
@@ -647,26 +705,36 @@ class PollTracker:
             return None  # repeated stamps: the general path sums them
         counts = np.empty((k, self.n, 2), np.int64)
         lifted = np.empty((k, self.n), bool)
+        scale = np.empty((k, self.n))
         for i, p in enumerate(pend):
             counts[:, i, 0] = p.dx
             counts[:, i, 1] = p.dy
             lifted[:, i] = (p.flags & self._unseen[i]) != 0
-        return first, counts, lifted, np.zeros(k, bool), [k] * self.n
+            scale[:, i] = INCH_M / np.maximum(p.cpi, 1)
+        return first, counts, lifted, np.zeros(k, bool), [k] * self.n, scale, None
 
     def _match_ticks(self, pend: list[_Pending]):
         """Polls paired by stamp: ticks present for every sensor (real polls, not command
-        reads); each poll summed into the tick at or after it. (None, ...) when no tick."""
+        reads); each poll summed into the tick at or after it. (None, ...) when no tick.
+
+        Also each tick's metres per count (``scale`` (k, n): its own poll's CPI) and,
+        when polls of other CPIs were summed into a tick (the drain read before a CPI
+        change, polls folded across one), ``metres`` (k, n, 2): every tick's polls each
+        at its own CPI, used for those ticks (else None)."""
         real = [p.stamp[(p.flags & FLAG_COMMAND_READ) == 0] for p in pend]
         ticks = real[0]
         for s in real[1:]:
             ticks = np.intersect1d(ticks, s, assume_unique=False)
         ticks = np.unique(ticks)
         if not len(ticks):
-            return None, None, None, None, None
+            return None, None, None, None, None, None, None
         k = len(ticks)
         counts = np.zeros((k, self.n, 2), np.int64)
         lifted = np.zeros((k, self.n), bool)
         folded = np.zeros(k, bool)
+        scale = np.zeros((k, self.n))
+        metres = np.zeros((k, self.n, 2))
+        mixed = False
         used = []
         for i, p in enumerate(pend):
             m = int(np.searchsorted(p.stamp, ticks[-1], side="right"))
@@ -675,14 +743,22 @@ class PollTracker:
             np.add.at(counts[:, i, 1], idx, p.dy[:m])
             own = p.stamp[:m] == ticks[idx]
             lifted[idx[own], i] = (p.flags[:m][own] & self._unseen[i]) != 0
+            per = INCH_M / np.maximum(p.cpi[:m], 1)
+            scale[idx[own], i] = per[own]
+            np.add.at(metres[:, i, 0], idx, p.dx[:m] * per)
+            np.add.at(metres[:, i, 1], idx, p.dy[:m] * per)
+            mixed = mixed or bool((per != scale[idx, i]).any())
             # polls this sensor made while another had none -- but not those of a tick
             # whose other polls fell before the baseline (the totals of the sensors
             # of one reply are read one after the other, so they may end a tick apart)
             extra = ~own & ((p.flags[:m] & FLAG_COMMAND_READ) == 0)
             extra &= p.stamp[:m] > self._last_stamp
+            # nor the last poll before a CPI change: the poller's drain read at the old CPI
+            # (recorded as a poll of that sensor alone); the other sensors were not down
+            extra[:-1] &= p.cpi[: m - 1] == p.cpi[1:m]
             folded[idx[extra]] = True
             used.append(m)
-        return ticks, counts, lifted, folded, used
+        return ticks, counts, lifted, folded, used, scale, (metres if mixed else None)
 
     def _pair(self) -> PollSteps:
         pend = self._pending
@@ -694,9 +770,9 @@ class PollTracker:
             p.stamp = snap_to_ticks(ticks0, p.raw_stamps, p.flags)
         same = self._same_ticks(pend)
         if same is not None:
-            ticks, counts, lifted, folded, used = same
+            ticks, counts, lifted, folded, used, scale, metres = same
         else:
-            ticks, counts, lifted, folded, used = self._match_ticks(pend)
+            ticks, counts, lifted, folded, used, scale, metres = self._match_ticks(pend)
             if ticks is None:
                 return PollSteps.empty(self.n)
         k = len(ticks)
@@ -720,19 +796,29 @@ class PollTracker:
                 *self.gap_reasons[-199:],
                 f"a sensor polled alone (another was down) up to {int(ticks[j])} ns",
             ]
-        filled = self._fill(counts, lifted, cut)
-        scale = np.array([INCH_M / max(p.cpi, 1) for p in pend])
+        dt_all = np.maximum(np.diff(ticks, prepend=self._last_stamp) / 1e9, MIN_DT_S)
+        filled = self._fill(counts, lifted, cut, scale, dt_all)
+        if metres is not None:  # ticks that summed polls of another CPI: each at its own
+            exact = metres[:cut]
+            filled = np.where(lifted[:cut, :, None], filled, exact)
         stamps = ticks[:cut]
-        prev = np.concatenate([[self._last_stamp], stamps[:-1]])
-        dt = np.maximum((stamps - prev) / 1e9, MIN_DT_S)
-        d = deskew(filled * scale[None, :, None], delay, dt, self._carry, self._delay)
+        dt = dt_all[:cut]
+        d = deskew(filled, delay, dt, self._carry, self._delay)
         self._last_stamp = int(stamps[-1])
         for i in range(self.n):
-            self._emitted_m[i][0] += float(counts[:cut, i, 0].sum() * scale[i])
-            self._emitted_m[i][1] += float(counts[:cut, i, 1].sum() * scale[i])
+            s_i = scale[:cut, i]
+            if metres is None and (s_i == s_i[0]).all():
+                self._emitted_m[i][0] += float(counts[:cut, i, 0].sum() * s_i[0])
+                self._emitted_m[i][1] += float(counts[:cut, i, 1].sum() * s_i[0])
+            else:  # a CPI change among them: each tick at its own
+                em = counts[:cut, i] * s_i[:, None] if metres is None else metres[:cut, i]
+                self._emitted_m[i][0] += float(em[:, 0].sum())
+                self._emitted_m[i][1] += float(em[:, 1].sum())
         ctx_c = np.concatenate([self._ctx_counts, counts[:cut]])[-LIFT_CONTEXT_POLLS:]
         ctx_l = np.concatenate([self._ctx_lifted, lifted[:cut]])[-LIFT_CONTEXT_POLLS:]
-        self._ctx_counts, self._ctx_lifted = ctx_c, ctx_l
+        ctx_s = np.concatenate([self._ctx_scale, scale[:cut]])[-LIFT_CONTEXT_POLLS:]
+        self._ctx_counts, self._ctx_lifted, self._ctx_scale = ctx_c, ctx_l, ctx_s
+        self._ctx_dt = np.concatenate([self._ctx_dt, dt])[-LIFT_CONTEXT_POLLS:]
         return PollSteps(stamps, dt, d, counts[:cut], lifted[:cut], folded[:cut])
 
     @staticmethod
@@ -749,17 +835,28 @@ class PollTracker:
             j -= 1
         return j
 
-    def _fill(self, counts: np.ndarray, lifted: np.ndarray, cut: int) -> np.ndarray:
-        """Counts of the first ``cut`` ticks with lifted polls filled (float)."""
-        out = counts[:cut].astype(float)
+    def _fill(
+        self, counts: np.ndarray, lifted: np.ndarray, cut: int, scale: np.ndarray, dt: np.ndarray
+    ) -> np.ndarray:
+        """Metres of the first ``cut`` ticks (``scale`` (k, n): each tick's metres per
+        count; ``dt`` (k,): each tick's interval, s) with lifted polls filled per unit of
+        time (:mod:`pln2033.lift_fill`): in counts where the filler's window is at one
+        CPI, in metres where a CPI change falls into it."""
+        out = counts[:cut].astype(float) * scale[:cut, :, None]
         if not lifted.any():
             return out
         c0 = len(self._ctx_counts)
         allc = np.concatenate([self._ctx_counts, counts])
         alll = np.concatenate([self._ctx_lifted, lifted])
+        alls = np.concatenate([self._ctx_scale, scale])
+        alld = np.concatenate([self._ctx_dt, dt])
         for i in range(self.n):
             if lifted[:cut, i].any():
-                f = interpolate_lift_gaps(allc[:, i, :], alll[:, i])
+                s_i = alls[:, i]
+                if (s_i == s_i[-1]).all():
+                    f = interpolate_lift_gaps(allc[:, i, :], alll[:, i], alld) * s_i[-1]
+                else:
+                    f = interpolate_lift_gaps(allc[:, i, :] * s_i[:, None], alll[:, i], alld)
                 out[:, i, :] = f[c0 : c0 + cut]
         return out
 

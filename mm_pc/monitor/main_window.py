@@ -17,6 +17,7 @@ from PySide6.QtGui import QAction, QGuiApplication, QKeyEvent, QKeySequence
 from PySide6.QtWidgets import (
     QApplication,
     QComboBox,
+    QDialog,
     QDockWidget,
     QFormLayout,
     QGroupBox,
@@ -60,6 +61,8 @@ ACHIEVED_OK = 0.9
 WARNING_STYLE = "color: #b35900; font-weight: bold"
 #: style of a figure that has no meaning now (paused, replaying): grey, not a warning
 IDLE_STYLE = "color: #666666"
+#: the status bar's RTT tooltip while it has a figure
+RTT_TIP = "round-trip time of a data request, median of the last ones"
 
 STATE_TEXT = {
     "waiting": ("waiting for {beagle}", "#a66f00"),
@@ -144,7 +147,9 @@ class RateEditor(QWidget):
         if state in ("paused", "replay", "lost"):  # no live rate to achieve: say why
             text, style = {
                 "paused": (f"paused: no requests ({wanted:g} Hz when resumed)", IDLE_STYLE),
-                "replay": (f"replaying a recording (live {wanted:g} Hz after Back to live)",
+                "replay": (f"replaying a recording (live {wanted:g} Hz after Back to live)"
+                           if self.ctx.bridge is not None else
+                           "replaying a recording (offline: no node to poll after it)",
                            IDLE_STYLE),
                 "lost": (f"{wanted:g} Hz asked; link lost, {self.ctx.no_data_since()}",
                          WARNING_STYLE),
@@ -501,7 +506,7 @@ class MainWindow(QMainWindow):
         self.rate_label = QLabel("– Hz")
         self.rows_label = QLabel("")
         self._rows_shown_at = -math.inf  # time.perf_counter() of its last text
-        self.rtt_label.setToolTip("round-trip time of a data request, median of the last ones")
+        self.rtt_label.setToolTip(RTT_TIP)
         self.rate_label.setToolTip("replies per second achieved (the last 2 s)")
         self.chips_label = QLabel("")
         self._chips_shown: tuple = ()
@@ -569,6 +574,7 @@ class MainWindow(QMainWindow):
         else:
             state = "live" if link == "connected" else "waiting"
         self.ctx.set_data_state(state)
+        self._show_rtt(getattr(self, "_rtt_s", math.nan))
         editor = getattr(self, "rate_editor", None)
         if editor is not None:
             editor.show_achieved(editor.achieved_hz)
@@ -577,10 +583,27 @@ class MainWindow(QMainWindow):
 
     def _on_stats(self, stats) -> None:
         if stats.rtt_p50_s == stats.rtt_p50_s:  # not NaN
-            self.rtt_label.setText(f"RTT {stats.rtt_p50_s * 1e3:.1f} ms")
+            self._rtt_s = stats.rtt_p50_s
+        self._show_rtt(getattr(self, "_rtt_s", math.nan))
         self.rate_label.setText(f"{stats.rate_hz:.1f} Hz")
         low = self.rate_editor.show_achieved(stats.rate_hz if stats.replies else None)
         self.rate_label.setStyleSheet(WARNING_STYLE if low else "")
+
+    def _show_rtt(self, rtt_s: float) -> None:
+        """The median round trip (s) in the status bar; "RTT –" while the link is lost or
+        polling paused: the bridge's median is of replies before then, no figure for now."""
+        label = getattr(self, "rtt_label", None)
+        if label is None:
+            return
+        if self.ctx.stale or rtt_s != rtt_s:
+            why = {"lost": "the link is lost", "paused": "polling is paused"}.get(
+                self.ctx.data_state, "no reply yet")
+            label.setText("RTT –")
+            label.setToolTip(f"round-trip time of a data request: none while {why} "
+                             f"({self.ctx.no_data_since()})" if self.ctx.stale else RTT_TIP)
+        else:
+            label.setText(f"RTT {rtt_s * 1e3:.1f} ms")
+            label.setToolTip(RTT_TIP)
 
     def _on_data_failed(self, message: str) -> None:
         self.statusBar().showMessage(f"data request: {message}", 3000)
@@ -805,4 +828,8 @@ class MainWindow(QMainWindow):
         if self.ctx.recorder is not None:
             self.ctx.recorder.close()
             self.ctx.recorder = None
+        # its modeless windows (the log) close with it rather than stay on screen
+        for child in self.findChildren(QDialog):
+            if child.isWindow() and child.isVisible() and not child.isModal():
+                child.close()
         super().closeEvent(event)

@@ -1,8 +1,11 @@
 """The window's File > Record: pick the file, attach a recorder, show that it records.
 
 While it records, the status bar shows ``● REC 01:23 1.4 MB`` (the file in its
-tooltip): the time since it started and the bytes on disk so far (the writer keeps up
-to a chunk in memory, so the size grows in chunk steps), updated every second.
+tooltip): the time since it started and the file's size so far, updated every second.
+The size is what the file would measure if the recording stopped now
+(:meth:`~mm_pc.monitor.io.mcap_writer.McapRecorder.size_bytes`): the writer keeps up to
+1 MiB in memory before it writes a compressed chunk, so the size on disk would stay at
+0 kB for minutes at 15 Hz and then jump.
 
 The recording itself (the MCAP layout, serialisation, reading back) is Qt-free in
 :mod:`mm_pc.monitor.io` (:class:`~mm_pc.monitor.io.mcap_writer.McapRecorder`).
@@ -43,19 +46,12 @@ def recording_text(elapsed_s: float, size_bytes: int) -> str:
     return f"● REC {clock} {size}"
 
 
-def _file_size(recorder: McapRecorder) -> int:
-    try:
-        return recorder.file.stat().st_size
-    except OSError:
-        return 0
-
-
 def _update_indicator(window) -> None:
     recorder = window.ctx.recorder
     began = getattr(window, "_recording_began", None)
     if recorder is None or began is None:
         return
-    _set_indicator(window, recording_text(time.monotonic() - began, _file_size(recorder)))
+    _set_indicator(window, recording_text(time.monotonic() - began, recorder.size_bytes()))
 
 
 def _set_indicator(window, text: str | None) -> None:
@@ -78,8 +74,10 @@ def _set_indicator(window, text: str | None) -> None:
     label.setText(text)
     recorder = window.ctx.recorder
     if recorder is not None:
-        label.setToolTip(f"recording to {recorder.path}: time since it started, bytes "
-                         "written to disk so far")
+        label.setToolTip(
+            f"recording to {recorder.path}: time since it started, and the "
+            "file's size if it stopped now"
+        )
 
 
 def start_recording(window, path: str | Path, live: bool = True) -> bool:
@@ -109,7 +107,7 @@ def start_recording(window, path: str | Path, live: bool = True) -> bool:
             ctx.bridge.record_topics(live_topics(ctx.config.beagle), recorder.write_live)
     window.record_action.setText("Stop &recording")
     window._recording_began = time.monotonic()
-    _set_indicator(window, recording_text(0.0, _file_size(recorder)))
+    _set_indicator(window, recording_text(0.0, recorder.size_bytes()))
     window.statusBar().showMessage(f"recording to {recorder.path}")
     return True
 

@@ -6,17 +6,23 @@ the action and wake the executor through a guard condition; the action then
 runs on the executor thread (where every rclpy object is used), and the
 answer comes back as a Qt signal, which Qt delivers on the GUI thread.
 
-Requests of the sample timer: at most one ``get_sensor_data`` is in flight.
+Requests of the sample timer: at most ``max_in_flight`` (:data:`MAX_IN_FLIGHT`, 2)
+``get_sensor_data`` are in flight, so a round trip of about one period (2 ms at 500 Hz)
+no longer costs a tick; replies are handled strictly in the order they were asked (one
+that comes early waits for those before it), so totals and polls never go back.
 With ``fetch_polls`` (default) each reply brings exactly the polls its totals added
 since the previous reply, and the :class:`Reply` is emitted with them
 (``Reply.polls``), so the session integrates the pose per poll. The polls come
 inside the ``get_sensor_data`` reply (its ``polls_ids``/``polls_since_seq`` fields:
-one round trip a reply, docs/beagle-node.md section 3.1); for a sensor the reply
-has none for (a node without those fields, a busy ring) one ``get_samples`` follows.
+one round trip a reply, docs/beagle-node.md section 3.1); a request sent while another
+is out asks from the same cursor, so its polls start with those of the reply before it:
+they are cut off at the cursor that reply left (:func:`polls_after`), no poll twice, none
+lost. For a sensor the reply has none for (a node without those fields, a busy ring), or
+whose polls do not start where they were asked from, one ``get_samples`` follows.
 A fetch that fails, takes longer than ``timeout_s`` or whose service disappears
 leaves that sensor's entry None (the session then steps over the interval with
 the totals and marks the gap). The next ``get_sensor_data`` waits for the fetch.
-A tick that finds a request still outstanding is skipped (``skipped_ticks``):
+A tick that finds ``max_in_flight`` requests outstanding is skipped (``skipped_ticks``):
 the next reply's totals cover the gap, so a slow link (WLAN latency) costs
 neither double counts nor lost counts. A request without an answer after
 ``timeout_s`` is abandoned and counted in ``dropped_requests``.
@@ -65,6 +71,10 @@ WAITING, CONNECTED, LOST = "waiting", "connected", "lost"
 #: the CPU per reply, docs/benchmarks.md) or the Python SingleThreadedExecutor
 EVENTS, WAITSET = "events", "waitset"
 EXECUTORS = (EVENTS, WAITSET)
+#: data requests in flight at once (a second one hides a round trip of about a period)
+MAX_IN_FLIGHT = 2
+#: a second request waits until this fraction of a period after the one out (else owed)
+SPACING = 0.5
 #: the GUI thread takes the replies waiting for it at most this often (s): one frame
 #: of a 60 Hz screen, so a batch never holds a reply back longer than a frame
 DELIVERY_INTERVAL_S = 1 / 60
@@ -150,7 +160,11 @@ class RosBridge(QObject):
         self._stopping = False
         self._polling = True
         self._state = WAITING
-        self._in_flight: tuple[object, float] | None = None
+        #: data requests out, oldest first: _Request; executor thread only
+        self._in_flight: deque[_Request] = deque()
+        #: how many may be out at once (1: the one-at-a-time bridge of before)
+        self.max_in_flight = MAX_IN_FLIGHT
+        self._draining = False
         #: other calls in flight: future -> (service, device, deadline); executor thread only
         self._pending: dict[object, tuple[str, str, float]] = {}
         self._rtts: deque[float] = deque(maxlen=200)
@@ -167,6 +181,11 @@ class RosBridge(QObject):
         self._poll_fetch: list | None = None
         self.poll_fetches = self.poll_fetch_failures = 0
         self.requests = self.replies = self.skipped_ticks = 0
+        #: requests sent while another was still out (two in flight), and their replies
+        #: that brought the same polls' seqs as the reply before (not handed on)
+        self.overlapped_requests = self.duplicate_replies = 0
+        self._last_seqs: tuple = ()
+        self._last_at = -1.0
         self.dropped_requests = self.failed_replies = 0
         self._consecutive_failures = 0
         #: a tick found a request out: ask again as soon as it is done, not at the next tick
@@ -397,15 +416,30 @@ class RosBridge(QObject):
         if self._polling:
             self._request_data(manual=False)
 
+    def _full(self) -> bool:
+        """No room for another data request: ``max_in_flight`` out, a reply waiting for its
+        polls, or (polls in the reply) no cursors yet: a second request would ask for no
+        polls and its reply need a get_samples per sensor."""
+        limit = self.max_in_flight
+        if self.fetch_polls and self.polls_in_reply and not self._poll_cursor:
+            limit = 1
+        if len(self._in_flight) >= limit or self._poll_fetch is not None:
+            return True
+        # two requests sent closer than half a period (the timer catching up after the
+        # thread was held up) reach the node in the same poll: the second brings nothing
+        return bool(self._in_flight) and (
+            time.monotonic() - self._in_flight[-1].sent < SPACING / self._rate
+        )
+
     def _pay_owed(self) -> None:
-        """The request a skipped tick owes, once nothing is out any more."""
-        if self._owed and self._polling and self._in_flight is None and self._poll_fetch is None:
+        """The request a skipped tick owes, once there is room for it."""
+        if self._owed and self._polling and not self._full():
             self._owed = False
             self._request_data(manual=False)
 
     def _request_data(self, manual: bool) -> None:
         client = self._clients["get_sensor_data"]
-        if self._in_flight is not None or self._poll_fetch is not None:
+        if self._full():
             if not manual:
                 self.skipped_ticks += 1
                 self._owed = True
@@ -413,10 +447,14 @@ class RosBridge(QObject):
         if not client.service_is_ready():
             return
         self.requests += 1
-        sent = time.monotonic()
-        future = client.call_async(self._data_request())
-        self._in_flight = (future, sent)
-        future.add_done_callback(lambda f: self._on_data(f, sent))
+        self.overlapped_requests += bool(self._in_flight)
+        request = self._data_request()
+        asked = dict(zip(getattr(request, "polls_ids", ()),
+                         (int(s) for s in getattr(request, "polls_since_seq", ())), strict=False))
+        entry = _Request(None, time.monotonic(), asked, overlapped=bool(self._in_flight))
+        entry.future = client.call_async(request)
+        self._in_flight.append(entry)
+        entry.future.add_done_callback(lambda f: self._on_data(f, entry))
 
     def _data_request(self):
         """``get_sensor_data`` for every sensor; with ``fetch_polls`` it asks for the polls of
@@ -435,19 +473,36 @@ class RosBridge(QObject):
             id="", polls_ids=ids, polls_since_seq=[self._poll_cursor[d] for d in ids]
         )
 
-    def _on_data(self, future, sent: float) -> None:
-        if self._in_flight is None or self._in_flight[0] is not future:
+    def _on_data(self, future, entry: _Request) -> None:
+        """A data reply came: handle it and every one after it that came already, in the
+        order they were asked (one before it still out: it waits)."""
+        if entry not in self._in_flight:
             return  # abandoned by the watchdog
-        self._in_flight = None
-        now = time.monotonic()
-        res = future.result()
+        entry.arrived = time.monotonic()
+        self._drain()
+
+    def _drain(self) -> None:
+        if self._draining:
+            return  # a reply handled inside the loop below: the loop goes on
+        self._draining = True
+        try:
+            while self._in_flight and self._in_flight[0].arrived is not None:
+                if self._poll_fetch is not None:
+                    return  # the reply before waits for its polls: this one after it
+                self._handle_data(self._in_flight.popleft())
+        finally:
+            self._draining = False
+        self._pay_owed()
+
+    def _handle_data(self, entry: _Request) -> None:
+        sent, now = entry.sent, entry.arrived
+        res = entry.future.result()
         if res is not None and not res.success and res.message.startswith("polls_"):
             # the cursors do not fit this node (a restarted one counts from 0 again):
             # ask again at once without polls; the next reply starts new cursors
             self._poll_cursor.clear()
             self.poll_fetch_failures += 1
             self._owed = True
-            self._pay_owed()
             return
         if res is None or not res.success:
             self.failed_replies += 1
@@ -455,26 +510,35 @@ class RosBridge(QObject):
             if res is not None:
                 self._set_state(CONNECTED)  # the node answers; its sensors are down
             return
-        self.replies += 1
         self._consecutive_failures = 0
         self._rtts.append(now - sent)
-        self._reply_times.append(now)
         self._set_state(CONNECTED)
+        seqs = tuple((m.id, m.seq) for m in res.data)
+        if entry.overlapped and seqs == self._last_seqs and now - self._last_at < 1 / self._rate:
+            # served in the same poll as the reply before it (the node had both requests
+            # waiting): nothing new; a reply a period later is handed on even so
+            self.duplicate_replies += 1
+            return
+        self._last_seqs, self._last_at = seqs, now
+        self.replies += 1
+        self._reply_times.append(now)
         readings = tuple(Reading.from_msg(m) for m in res.data)
         reply = Reply(readings, received_s=now, rtt_s=now - sent)
         if self.fetch_polls:
-            self._fetch_polls(reply, {p.id: p for p in getattr(res, "polls", ())})
+            self._fetch_polls(reply, {p.id: p for p in getattr(res, "polls", ())}, entry.asked)
         else:
             self._hand_on(reply)
-            self._pay_owed()
 
     # -- the single polls of a reply (executor thread) --------------------------------------
 
-    def _fetch_polls(self, reply: Reply, in_reply: dict[str, object]) -> None:
+    def _fetch_polls(
+        self, reply: Reply, in_reply: dict[str, object], asked: dict[str, int] | None = None
+    ) -> None:
         """Each sensor's polls since its cursor up to this reply's seq: those the reply
-        carried (``in_reply``, device -> SensorPolls, asked with the cursors of
-        :meth:`_data_request`), the others (a node without the polls fields, a busy
-        ring) asked with one ``get_samples`` per sensor; emit when all are there."""
+        carried (``in_reply``, device -> SensorPolls, asked from the cursors ``asked`` of
+        :meth:`_data_request`; cut at the cursor now when a reply before this one moved
+        it), the others (a node without the polls fields, a busy ring) asked with one
+        ``get_samples`` per sensor; emit when all are there."""
         from types import SimpleNamespace
 
         polls: dict[str, object] = {}
@@ -491,8 +555,9 @@ class RosBridge(QObject):
                 )  # fmt: skip
                 continue
             carried = in_reply.get(r.id)
-            if carried is not None and carried.first_seq - carried.dropped == since:
-                polls[r.id] = carried
+            start = (asked or {}).get(r.id, since)
+            if carried is not None and carried.first_seq - carried.dropped == start <= since:
+                polls[r.id] = carried if start == since else polls_after(carried, since)
                 continue
             if not client.service_is_ready():
                 polls[r.id] = None
@@ -539,7 +604,8 @@ class RosBridge(QObject):
         self._hand_on(
             Reply(reply.readings, received_s=reply.received_s, rtt_s=reply.rtt_s, polls=polls)
         )
-        self._pay_owed()
+        if self._poll_fetch is None:  # the replies that came meanwhile, then an owed request
+            self._drain()
 
     # -- delivery to the GUI thread -------------------------------------------------------
 
@@ -619,16 +685,20 @@ class RosBridge(QObject):
         self._expire_calls(time.monotonic())
         self._expire_poll_fetch(time.monotonic())
         client = self._clients["get_sensor_data"]
-        if self._in_flight is not None:
-            future, sent = self._in_flight
-            if time.monotonic() - sent > self.timeout_s:
-                self._in_flight = None
-                client.remove_pending_request(future)
-                self.dropped_requests += 1
-                self._consecutive_failures += 1
-                self.data_failed.emit(f"no reply within {self.timeout_s:g} s")
-                if self._consecutive_failures >= 2:
-                    self._set_state(LOST)
+        dropped = False
+        while self._in_flight and self._in_flight[0].arrived is None and (
+            time.monotonic() - self._in_flight[0].sent > self.timeout_s
+        ):
+            entry = self._in_flight.popleft()
+            client.remove_pending_request(entry.future)
+            self.dropped_requests += 1
+            self._consecutive_failures += 1
+            self.data_failed.emit(f"no reply within {self.timeout_s:g} s")
+            if self._consecutive_failures >= 2:
+                self._set_state(LOST)
+            dropped = True
+        if dropped:
+            self._drain()  # those after it that came meanwhile
         if not client.service_is_ready() and self._state == CONNECTED:
             self._set_state(LOST)
 
@@ -676,6 +746,37 @@ class RosBridge(QObject):
             out[status.hardware_id] = values
         if out:
             self.diagnostics_received.emit(out)
+
+
+@dataclass
+class _Request:
+    """A data request out: its future, when it was sent and came back (time.monotonic(),
+    s; None: not yet), the poll cursors it asked from (device -> seq), and whether another
+    was out when it was sent."""
+
+    future: object
+    sent: float
+    asked: dict[str, int]
+    overlapped: bool = False
+    arrived: float | None = None
+
+
+def polls_after(polls, since: int):
+    """``polls`` (a SensorPolls from ``first_seq - dropped``) from seq ``since`` on: the
+    polls a reply before it already brought are cut off; those between ``since`` and its
+    first (left the ring) are counted as ``dropped``. Same message type, per-poll
+    arrays sliced (an array of another length, e.g. an empty ``poll_cpi``, is kept)."""
+    first, n = int(polls.first_seq), len(polls.stamp_ns)
+    skip = min(max(since - first, 0), n)
+    fields = {}
+    for name, kind in polls.get_fields_and_field_types().items():
+        value = getattr(polls, name)
+        if kind.startswith("sequence<") and len(value) == n:
+            value = value[skip:]
+        fields[name] = value
+    fields["first_seq"] = first + skip
+    fields["dropped"] = max(first - since, 0)
+    return type(polls)(**fields)
 
 
 def _qos_from_dict(q: dict):

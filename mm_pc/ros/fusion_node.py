@@ -76,6 +76,7 @@ from mm_pc.core.fusion.inputs import (
 from mm_pc.core.fusion.loop import FusionCore, increment_noise
 from mm_pc.core.maps.trilateration import Beacon
 from mm_pc.core.odometry import Pose2D, compose, inverse
+from mm_pc.core.throttle import WarnThrottle
 from mm_pc.core.uncertainty import (
     UNOBSERVED_VARIANCE,
     planar_covariance_6x6,
@@ -97,7 +98,6 @@ from mm_pc.ros.tf import (
     planar_transform,
     prefixed,
 )
-from mm_pc.ros.throttle import WarnThrottle
 
 #: Wall seconds without any odometry message after which fixes are applied on arrival.
 IDLE_AFTER_S = 0.5

@@ -13,6 +13,8 @@ from other clients, applies the calibration, runs the pose math of
 
   ~/odom (nav_msgs/Odometry): odom -> base_link pose and body twist (over the
           request's interval), with the covariance of :mod:`mm_pc.core.uncertainty`
+          (plus the lift-fill variance of the filled counts the pose used,
+          :mod:`mm_pc.core.fill_variance`)
   ~/path (nav_msgs/Path):    the poses so far (at most ``path_length``), at
           ``path_rate`` Hz
   /diagnostics:              "/NS/mm_odometry: pose" once a second: polls integrated,
@@ -29,8 +31,11 @@ Frame ids, rates, method and geometry are parameters; ``LIVE`` ones take
 ``ros2 param set`` (checked: a refused value keeps the old one). ``beagle`` is
 relative to the node's namespace (``-r __ns:=/robot1`` asks /robot1/mm_beagle).
 A request without a reply after ``reply_timeout`` is given up and asked again at the
-next tick (:class:`mm_pc.ros.deadline_client.DeadlineClient`): a lost reply costs one
-interval, stepped with the totals, never the stream.
+next tick (:class:`mm_pc.ros.deadline_client.DeadlineClient`): a lost get_sensor_data
+reply costs one interval, never the stream; a lost get_samples reply is asked again
+from the same poll with the next reply's totals (the polls are still in mm-beagle's
+ring), so only polls that really left the ring (or :data:`POLL_RETRIES` losses in a
+row) are stepped with the totals.
 Header stamps follow the node clock (:func:`mm_pc.ros.clock.node_stamp`).
 """
 
@@ -47,6 +52,7 @@ from rclpy.node import Node
 
 from mm_interfaces.srv import GetSamples, GetSensorData
 from mm_pc.core.calibration import Calibration
+from mm_pc.core.fill_variance import FillVariance
 from mm_pc.core.geometry import DEFAULT_MOUNTS, SensorMount
 from mm_pc.core.odometry import METHODS, Odometry, Pose2D, Sample
 from mm_pc.core.polls import PollBatch, PollTracker, SensorTotals, integrate_steps
@@ -67,6 +73,7 @@ from mm_pc.ros.tf import (
     prefixed,
     sensor_frame_names,
 )
+from pln2033 import INCH_M
 
 PARAMETERS = {
     "beagle": (
@@ -139,6 +146,10 @@ PARAMETERS = {
     ),
 }
 
+#: get_samples replies given up in a row for one interval before it is stepped with the
+#: totals (each retry asks from the same poll; the ring holds ~65 s of polls)
+POLL_RETRIES = 5
+
 #: parameters that take ``ros2 param set`` while the node runs; the rest are read-only
 LIVE = (
     "rate",
@@ -191,7 +202,11 @@ class OdometryNode(Node):
         #: the mm_beagle node asked, fully qualified (``beagle`` resolved in this namespace)
         self.beagle = self.resolve_service_name(p["beagle"])
         self.tracker = PollTracker(len(devices), p["use_lift_estimates"])
+        # the lift-fill variance of the filled counts the pose used (per_poll)
+        self.fill_variance = FillVariance(len(devices))
         self._fetch: dict | None = None  # the reply waiting for its polls
+        self._poll_retries = 0  # get_samples replies lost in a row for the current interval
+        self._reported_polls_lost = 0
         self._reported_gaps = 0
         self._reported_abandoned = 0
         self._last_stamp = None  # header stamp of the last integrated poll
@@ -238,6 +253,7 @@ class OdometryNode(Node):
         """~/reset: pose back to the origin, covariance to zero, the path cleared."""
         self.odometry.reset()
         self.uncertainty.reset()
+        self.fill_variance.total_var_m2 = 0.0
         self.path.poses.clear()
         return (
             f"pose back to (0, 0, 0) in {self.frame('odom_frame')}, covariance cleared, path "
@@ -281,8 +297,9 @@ class OdometryNode(Node):
     def request(self) -> None:
         """Ask mm-beagle for new sensor data (timer callback); one call in flight at a time.
 
-        Calls past ``reply_timeout`` are given up first: polls that did not come are
-        stepped over with the totals, a lost get_sensor_data reply is asked again now.
+        Calls past ``reply_timeout`` are given up first: a lost get_sensor_data reply is
+        asked again now, polls that did not come are asked again from the same poll with
+        this request's totals (:meth:`_on_polls`).
         """
         if self.client.expire():
             self.get_logger().warning(
@@ -345,9 +362,10 @@ class OdometryNode(Node):
             if t.started:
                 self.get_logger().warning(f"mm-beagle restarted ({restart}): new baseline")
             t.baseline(totals)
+            self.fill_variance.reset()
             return
         fetch = {"data": data, "totals": totals, "polls": [None] * len(self.devices),
-                 "waiting": 0}  # fmt: skip
+                 "waiting": 0, "retries": self._poll_retries}  # fmt: skip
         self._fetch = fetch
         for i, (dev, x) in enumerate(zip(self.devices, totals, strict=True)):
             want = x.seq - t.cursor(i)
@@ -363,9 +381,25 @@ class OdometryNode(Node):
             self._finish_fetch()
 
     def _on_polls(self, fetch: dict, i: int, res) -> None:
-        """One sensor's get_samples reply (None: given up; the interval becomes a gap)."""
+        """One sensor's get_samples reply (None: given up).
+
+        A reply given up drops the whole fetch: the next request asks every sensor again
+        from the same poll (the tracker's cursors did not move) up to its newer totals,
+        so the polls still in the ring are integrated one by one and nothing is stepped
+        with the totals; only after :data:`POLL_RETRIES` losses in a row does the
+        interval become a gap step."""
         if fetch is not self._fetch:
             return  # given up on
+        if res is None and fetch["retries"] < POLL_RETRIES:
+            self._fetch = None
+            self._poll_retries = fetch["retries"] + 1
+            self.get_logger().warning(
+                f"no get_samples reply for {self.devices[i]} within "
+                f"{self.samples_client.timeout_s:g} s: asking again from seq "
+                f"{self.tracker.cursor(i)}",
+                throttle_duration_sec=5.0,
+            )
+            return
         if res is not None and res.success:
             try:
                 fetch["polls"][i] = PollBatch.from_reply(res)
@@ -377,6 +411,7 @@ class OdometryNode(Node):
 
     def _finish_fetch(self) -> None:
         fetch, self._fetch = self._fetch, None
+        self._poll_retries = 0
         steps = self.tracker.step(fetch["totals"], fetch["polls"])
         for why in self.tracker.gap_reasons[len(self.tracker.gap_reasons) - int(steps.gap.sum()) :]:
             self.get_logger().warning(f"gap in the single polls: {why}; stepped with the totals")
@@ -386,6 +421,10 @@ class OdometryNode(Node):
         for k, dev in enumerate(self.devices):
             d[:, k, 0], d[:, k, 1] = self.calibration.apply(dev, d[:, k, 0], d[:, k, 1])
         before = self.odometry.pose
+        unit_m = [INCH_M / max(int(x.cpi), 1) for x in fetch["data"]]
+        fill = self.fill_variance.of_steps(steps, self.odometry.body_map, unit_m)
+        if fill.any():  # the filled counts' uncertainty, before this interval's motion
+            self.uncertainty.add(0.0, 0.0, heading=before.yaw, fill_var_m2=fill)
         integrate_steps(self.odometry, steps, d)
         after = self.odometry.pose
         self.samples_used += len(steps)
@@ -403,6 +442,8 @@ class OdometryNode(Node):
         self._reported_gaps = t.gaps
         lost = c.abandoned - self._reported_abandoned
         self._reported_abandoned = c.abandoned
+        polls_lost = self.samples_client.abandoned - self._reported_polls_lost
+        self._reported_polls_lost = self.samples_client.abandoned
         silent, longest = c.silent_s(), c.take_silence()  # now; the longest this round
         level, problems = DiagnosticStatus.OK, []
         if longest > c.timeout_s:
@@ -413,6 +454,12 @@ class OdometryNode(Node):
         elif lost:
             level = DiagnosticStatus.WARN
             problems.append(f"{lost} request(s) unanswered within {c.timeout_s:g} s, asked again")
+        if polls_lost:
+            level = level if level == DiagnosticStatus.ERROR else DiagnosticStatus.WARN
+            problems.append(
+                f"{polls_lost} get_samples request(s) unanswered within "
+                f"{self.samples_client.timeout_s:g} s, asked again from the same poll"
+            )
         if new and self.p["per_poll"]:
             level = level if level == DiagnosticStatus.ERROR else DiagnosticStatus.WARN
             problems.append(f"{new} gap(s) in the single polls: {t.gap_reasons[-1]}")
@@ -424,10 +471,14 @@ class OdometryNode(Node):
             "gaps": t.gaps,
             "last_gap": t.gap_reasons[-1] if t.gap_reasons else "",
             "steps_used": self.samples_used,
+            "lifted_steps": self.odometry.lifted_samples,
+            "switched_steps": self.odometry.switched_samples,
+            "lift_fill_sigma_m": f"{self.fill_variance.total_var_m2 ** 0.5:.6f}",
             "method": self.p["method"],
             "requests_sent": c.sent,
             "replies": c.answered,
             "requests_unanswered": c.abandoned,
+            "polls_requests_unanswered": self.samples_client.abandoned,
             "s_since_reply": f"{silent:.3f}",
             "last_poll_stamp": f"{stamp.sec}.{stamp.nanosec:09d}" if stamp else "",
         }

@@ -513,7 +513,9 @@ class OTOS:
     def get_cpi(self) -> tuple[int, int]:
         return EFFECTIVE_CPI, EFFECTIVE_CPI
 
-    def set_cpi(self, cpi: int) -> None:
+    def set_cpi(self, cpi: int, on_drain: Callable[[Motion], None] | None = None) -> None:
+        """Accepts only :data:`EFFECTIVE_CPI`; ``on_drain`` is never called (nothing changes
+        scale)."""
         problem = self.cpi_problem(cpi)
         if problem:
             raise InvalidCpiError(problem)

@@ -14,7 +14,7 @@ caller -- :meth:`PLN2033.read_all_registers` does, so no count is lost.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from ..bus import SpiBus
@@ -203,11 +203,34 @@ class PLN2033:
         self._command("set_y_cpi", self.map.encode_cpi(cpi))
         self._verify_cpi("Y", cpi, self.get_y_cpi())
 
-    def set_cpi(self, cpi: int) -> None:
-        """Set X and Y to the same resolution (as the original did)."""
+    def set_cpi(self, cpi: int, on_drain: Callable[[Motion], None] | None = None) -> None:
+        """Set X and Y to the same resolution (as the original did), verified by reading back.
+
+        With ``on_drain`` the counters are drained in the same transfer as the two CPI
+        writes (status, deltas, then the commands): no count can fall between the drain
+        and the write, so every count the chip made at the old CPI goes to ``on_drain``
+        (called before the read-back, so a failed verify loses none) and the next read
+        holds only counts at the new one. Without it the counters are left alone.
+        """
         self._check_cpi(cpi)
-        self.set_x_cpi(cpi)
-        self.set_y_cpi(cpi)
+        if on_drain is None:
+            self.set_x_cpi(cpi)
+            self.set_y_cpi(cpi)
+            return
+        code = self.map.encode_cpi(cpi)
+        rx = self._xfer(self._motion_tx + self._cpi_write_tx(code))
+        on_drain(self.decode_motion(rx[:9]))
+        self._verify_cpi("X", cpi, self.get_x_cpi())
+        self._verify_cpi("Y", cpi, self.get_y_cpi())
+
+    def _cpi_write_tx(self, code: int) -> list[int]:
+        """The frames of set X then set Y to the encoded resolution ``code``."""
+        a, w, c = self.map.addresses, self.map.write_flag, self.map.commands
+        low = [a["command_low"] | w, code >> 8, code & 0xFF]
+        tx: list[int] = []
+        for op in ("set_x_cpi", "set_y_cpi"):
+            tx += [*low, a["command_high"] | w, c[op] >> 8, c[op] & 0xFF]
+        return tx
 
     def _verify_cpi(self, axis: str, wanted: int, got: int) -> None:
         if got != wanted:

@@ -289,12 +289,43 @@ class PMW33xx:
         x = enc.decode(value(vals[1 + n :])) if vals[0] & R.CONFIG2_RPT_MOD else y
         return x, y
 
-    def set_cpi(self, cpi: int) -> None:
-        """Both axes (Config2's Rpt_Mod off), high byte first [QMK], verified by reading back."""
+    def set_cpi(self, cpi: int, on_drain: Callable[[Motion], None] | None = None) -> None:
+        """Both axes (Config2's Rpt_Mod off), high byte first [QMK], verified by reading back.
+
+        With ``on_drain``: one chip-select frame (the burst cannot share one with a write)
+        reads Motion, which freezes the counts into the delta registers and clears the
+        counters [DS3360 Motion], writes the resolution right after it (tSRW), then reads
+        the frozen deltas and SQUAL: the counts made at the old CPI are the deltas, and only
+        the Motion read's data byte and tSRW (~25 us) lie between the freeze and the write
+        (reading the deltas before the write would leave their 4 x 180 us). Assumed, as no
+        datasheet says otherwise: a write between the Motion read and the delta reads
+        leaves the frozen deltas alone (only a second Motion read loses them). The drained
+        :class:`Motion` (old CPI) goes to ``on_drain`` before the read-back.
+        """
         self._check_cpi(cpi)
         enc = self.regs.cpi
         data = enc.to_bytes(enc.encode(cpi))
-        self.write_registers(list(zip(enc.registers, data, strict=True)))
+        writes = [("w", n, v) for n, v in zip(enc.registers, data, strict=True)]
+        if on_drain is None:
+            self._xfer(self._frame(writes)[0])
+        else:
+            names = ["Motion", "Delta_X_L", "Delta_X_H", "Delta_Y_L", "Delta_Y_H", "SQUAL"]
+            segs, idx = self._frame([("r", "Motion"), *writes, *(("r", n) for n in names[1:])])
+            rx = self._xfer(segs)
+            self._in_burst = False  # [DS3360 sec. 4 step 7]
+            v = dict(zip(names, (rx[i][0] for i in idx), strict=True))
+            m = v["Motion"]
+            on_drain(
+                Motion(
+                    dx=_signed16(v["Delta_X_L"] | (v["Delta_X_H"] << 8)),
+                    dy=_signed16(v["Delta_Y_L"] | (v["Delta_Y_H"] << 8)),
+                    status=m,
+                    lifted=bool(m & R.LIFT_STAT),
+                    moved=bool(m & R.MOT),
+                    overflow=False,
+                    quality=v["SQUAL"],
+                )
+            )
         got = self.get_cpi()
         if got != (cpi, cpi):
             raise SensorError(

@@ -340,8 +340,9 @@ class PMW3901:
         """The effective CPI at the configured height, both axes (no register holds it)."""
         return self.cpi, self.cpi
 
-    def set_cpi(self, cpi: int) -> None:
-        """Accepts only the effective CPI (no write); anything else: InvalidCpiError."""
+    def set_cpi(self, cpi: int, on_drain: Callable[[Motion], None] | None = None) -> None:
+        """Accepts only the effective CPI (no write); anything else: InvalidCpiError.
+        ``on_drain`` is never called: the resolution does not change, so no count changes scale."""
         problem = self.cpi_problem(cpi)
         if problem:
             raise InvalidCpiError(problem)

@@ -129,6 +129,8 @@ def test_self_test_prints_one_json_line_and_loses_nothing():
         assert key in report
     assert report["polls"] > 500 and report["counts_generated"] > 1000
     assert report["counts_lost"] == 0
+    # the poll thread's own CPU beside the whole process's (zenoh, sender thread)
+    assert 0 < report["cpu_us_per_poll_poll_thread"] <= report["cpu_us_per_poll"]
 
 
 # --- the link, queried directly -----------------------------------------------------------
@@ -517,7 +519,8 @@ def test_applying_a_block_never_puts_the_agents_lock_word_into_the_node_state():
     arrays = [np.zeros(3, dt) for dt in RING_DTYPES]
     arrays[2][:] = (2, 2, 3)  # dy: the totals add up to the polls (or the block is refused)
     arrays = tuple(a.tobytes() for a in arrays)
-    block = link.Block(0, 0, 3, ints.tobytes(), np.zeros(ss.N_FLOAT).tobytes(), arrays)
+    records = link.records_of(arrays)
+    block = link.Block(0, 0, 3, ints.tobytes(), np.zeros(ss.N_FLOAT).tobytes(), records)
     remote.next_agent[0] = 0  # followed from seq 0 (a first contact's counts start after it)
     before = int(st[ss.I_VERSION])
     remote._apply(block, fetch_gaps=False)

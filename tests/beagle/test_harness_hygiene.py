@@ -25,7 +25,8 @@ def test_a_users_domain_id_is_kept(monkeypatch):
     monkeypatch.setenv("ROS_DOMAIN_ID", "42")
     env = isolated_ros_env()
     assert env["ROS_DOMAIN_ID"] == "42" and env[ISOLATED_MARK] == "42"
-    assert env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+    assert env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "SUBNET"  # limited to 127.0.0.1 by:
+    assert env["FASTRTPS_DEFAULT_PROFILES_FILE"] == harness.localhost_profile_file()
 
 
 def test_without_one_the_private_domain_is_in_1_to_101(monkeypatch):

@@ -241,7 +241,7 @@ def test_forged_polls_are_refused_and_never_enter_the_totals(rig):
                 8, "little", signed=True
             )
             blocks.append(link.Block(blk.index, first, blk.count, bytes(ints), blk.floats,
-                                     blk.arrays))  # fmt: skip
+                                     blk.records))  # fmt: skip
         return link.encode_batch(boot, b.number + 1, b.glob, blocks)
 
     frames = [

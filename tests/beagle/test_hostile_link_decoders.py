@@ -165,7 +165,8 @@ def frame(
             [100] * k,
         )
         arrays = tuple(np.array(f, dt).tobytes() for f, dt in zip(fields, RING_DTYPES, strict=True))
-        blocks.append(link.Block(i, first, k, ints.tobytes(), bytes(8 * ss.N_FLOAT), arrays))
+        records = link.records_of(arrays)
+        blocks.append(link.Block(i, first, k, ints.tobytes(), bytes(8 * ss.N_FLOAT), records))
     return link.encode_batch(boot, number, bytes(8 * ss.N_GLOBAL), blocks)
 
 

@@ -1,7 +1,8 @@
 """mm-beagle's own odometry hands the polls' lift flags to the pose math.
 
 Two sensors driven straight ahead at 10 counts per poll, sensor 0 lifted for ten
-polls (it reads nothing): ``two-sensor`` drops it for those polls and stays straight.
+polls (it reads nothing): ``two-sensor`` drops it for those polls and stays straight,
+``exact`` takes sensor 1's split for them.
 """
 
 from __future__ import annotations
@@ -52,7 +53,10 @@ def test_two_sensor_drops_the_lifted_sensor_for_its_polls(lift):
     assert odo.odometry.lifted_samples == (10 if lift else 0)
 
 
-def test_exact_uses_its_sensors_counts_as_they_are():
-    p = drive("exact", lift=True).odometry.pose
-    assert p.x == pytest.approx(900 * INCH_M / 1600, rel=1e-12)  # the lost 100 counts
+def test_exact_switches_to_the_other_sensor_while_its_own_is_lifted():
+    """(Before issue 28 it integrated its own sensor's nothing: x of 900 counts.)"""
+    odo = drive("exact", lift=True).odometry
+    p = odo.pose
+    assert p.x == pytest.approx(1000 * INCH_M / 1600, rel=1e-12)  # no count lost
     assert p.yaw == 0.0
+    assert odo.switched_samples == 10 and odo.lifted_samples == 10

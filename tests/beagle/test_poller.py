@@ -269,7 +269,8 @@ def test_conservation_over_20000_polls_with_lifts_settings_reads_and_a_cpi_chang
         assert int(a["dy"].astype(np.int64).sum()) == t.y_total
         ring_m = (a["dy"].astype(np.float64) * INCH_M / a["cpi"]).sum()
         assert ring_m == pytest.approx(t.y_total_m, rel=1e-9)
-        assert int(np.count_nonzero(a["flags"] & ss.FLAG_COMMAND_READ)) == settings_reads[i]
+        # the settings reads and the drain read of the CPI change: command reads
+        assert int(np.count_nonzero(a["flags"] & ss.FLAG_COMMAND_READ)) == settings_reads[i] + 1
         assert int(np.count_nonzero(a["flags"] & ss.FLAG_LIFT)) == t.lift_total
         assert not np.any(a["flags"] & (ss.FLAG_OVERFLOW | ss.FLAG_SPI_ERROR))
         assert t.overflows == t.spi_errors == 0
@@ -598,7 +599,7 @@ class FailingBus(EmulatedPLN2033):
 def test_set_cpi_spi_error_is_reported():
     rig = Rig([{"motion": ConstantVelocity(0.1, 0.2)}], bus_class=FailingBus)
     rig.run(10)
-    rig.emus[0].fail_in = 2  # the drain read works, the first CPI write fails
+    rig.emus[0].fail_in = 1  # the transfer of the drain read and the CPI writes fails
     status, msg = rig.poller.serve_command(("set_cpi", 0, 3200))
     assert status == "error" and DEVICES[0] in msg and "test" in msg
     t = rig.snap(0)
@@ -611,8 +612,9 @@ def test_set_cpi_failing_half_way_keeps_the_scale_right():
     rig = Rig([{"motion": ConstantVelocity(0.1, 0.2)}], bus_class=FailingBus)
     emu, ch = rig.emus[0], rig.channels[0]
     rig.run(10)
-    # transfers of set_cpi: drain read; set_x: 2 writes + get_x (3); set_y: first write fails
-    emu.fail_in = 1 + 2 + 3 + 1
+    # transfers of set_cpi: the drain read with both CPI writes (1); the read-back of X
+    # (2 writes + a read); of Y: its read fails (the chip runs at the new CPI already)
+    emu.fail_in = 1 + 3 + 3
     status, _ = rig.poller.serve_command(("set_cpi", 0, 3200))
     assert status == "error"
     before = rig.snap(0)
@@ -804,20 +806,22 @@ def test_health_check_with_the_right_cpi_changes_nothing():
 
 
 def test_health_check_reinitialises_a_chip_that_reset_itself():
+    # the glitch is found by the CPI read-back before the first poll after it (Poller.poll),
+    # not a periodic check later: the chip is already re-initialised when the polls go on
     rig = glitch_rig()
     rig.run(1005)
     t = rig.snap(0)
     emu = rig.emus[0]
     assert t.state == ss.STATE_UP and t.spi_errors == 2
-    assert (emu.cpi_x, emu.cpi_y) == (1000, 1000) and emu.stats.resets == 2  # init + glitch
-    rig.events()
-    rig.poller.check_health(rig.channels[0], rig.clock.t)
-    t = rig.snap(0)
     assert (t.state, t.reinits, t.cpi_x, t.cpi_y) == (ss.STATE_UP, 2, 1600, 1600)
     assert (emu.cpi_x, emu.cpi_y) == (1600, 1600)
     ev = rig.events()
-    assert [e[:2] for e in ev] == [("down", DEVICES[0]), ("up", DEVICES[0])]
-    assert "reset itself" in ev[0][2] and "1000" in ev[0][2]
+    assert [e[:2] for e in ev] == [("up", DEVICES[0]), ("down", DEVICES[0]), ("up", DEVICES[0])]
+    assert "reset itself" in ev[1][2] and "1000" in ev[1][2]
+    # a periodic check now changes nothing
+    before = rig.snap(0)
+    rig.poller.check_health(rig.channels[0], rig.clock.t)
+    assert rig.snap(0) == before and rig.events() == []
     # counts conserved again from here
     base, tot = measured(emu), (t.x_total, t.y_total)
     rig.run(100)
@@ -833,14 +837,14 @@ def test_health_check_keeps_a_commanded_cpi():
     rig.events()
     rig.poller.check_health(rig.channels[0], rig.clock.t)
     assert rig.snap(0).reinits == 1 and rig.events() == []
-    # and after a glitch it comes back at the commanded CPI, not the configured one
+    # and after a glitch that reset the chip (to 1000 CPI) it comes back at the commanded
+    # CPI, not the configured one, at the first poll after the glitch
     rig.emus[0].fault_windows = [(rig.clock.t + 0.0005, rig.clock.t + 0.0015, "raise")]
     rig.run(5)
-    assert rig.emus[0].cpi_x == 1000
-    rig.poller.check_health(rig.channels[0], rig.clock.t)
     t = rig.snap(0)
     assert (t.reinits, t.cpi_x, t.cpi_y) == (2, 400, 400)
     assert (rig.emus[0].cpi_x, rig.emus[0].cpi_y) == (400, 400)
+    assert "CPI reads 1000/1000" in next(e for e in rig.events() if e[0] == "down")[2]
 
 
 def test_health_check_spi_error_leaves_the_decision_to_the_polls():

@@ -73,7 +73,8 @@ class FakeAgent:
             [100] * k,
         )
         arrays = tuple(np.array(f, dt).tobytes() for f, dt in zip(fields, RING_DTYPES, strict=True))
-        return link.Block(i, first, k, ints.tobytes(), np.zeros(ss.N_FLOAT).tobytes(), arrays)
+        records = link.records_of(arrays)
+        return link.Block(i, first, k, ints.tobytes(), np.zeros(ss.N_FLOAT).tobytes(), records)
 
     def glob(self, polls: int) -> bytes:
         glob = np.zeros(ss.N_GLOBAL, np.int64)

@@ -69,11 +69,12 @@ def test_layout_fits_the_size_it_asks_for(n, ring):
     ]
     for a in arrays:
         a.fill(0)
+    last = [(-1,) * a.ndim for a in arrays]  # each array's last item (ints/floats: strided)
     for k, a in enumerate(arrays):
-        a.reshape(-1)[-1] = 1
-        assert sum(int(b.reshape(-1)[-1]) for b in arrays) == 1, k
+        a[last[k]] = 1
+        assert sum(int(b[at]) for b, at in zip(arrays, last, strict=True)) == 1, k
         assert sum(int(np.count_nonzero(b)) for b in arrays) == 1, k
-        a.reshape(-1)[-1] = 0
+        a[last[k]] = 0
 
 
 def test_ring_record_is_defined_once_and_every_derivation_agrees():
@@ -101,10 +102,20 @@ def test_ring_record_is_defined_once_and_every_derivation_agrees():
     assert tuple(got) == ring_layout.NAMES
     assert [got[k].dtype for k in ring_layout.NAMES] == [a.dtype for a in arrays]
     assert (int(got["stamp_ns"][0]), int(got["dx"][0]), int(got["dy"][0])) == (5, 3, -4)
-    # a block of the link decodes into the same arrays the ring holds
-    raw = tuple(state.ring_bytes(attr, 0) for attr in ss.SharedState.RING_FIELDS)
-    for field_bytes, w, a in zip(raw, wire, arrays, strict=True):
-        assert np.array_equal(np.frombuffer(field_bytes, w), a[0])
+    # the ring's bytes are records: ring_layout.RECORD, numpy's DTYPE and the link's
+    # POLL_BYTES read them alike, and a block of the link decodes into the ring's fields
+    assert ring_layout.RECORD.size == np.dtype(ring_layout.DTYPE).itemsize == link.POLL_BYTES
+    raw = state.ring_bytes(0)
+    assert len(raw) == 8 * link.POLL_BYTES
+    assert ring_layout.RECORD.unpack_from(raw, 0) == (5, 3, -4, 0x80, 1600, ss.FLAG_MOTION, -1)
+    block = link.ring_block(0, raw, 0, 1, b"", b"")
+    assert bytes(block.records) == bytes(raw[: link.POLL_BYTES])
+    records = np.frombuffer(block.records, remote_feed.RECORD)
+    for name, w, a in zip(ring_layout.NAMES, wire, arrays, strict=True):
+        assert records[name].dtype == w
+        assert np.array_equal(records[name], a[0][:1])
+    for field_bytes, w, a in zip(block.arrays, wire, arrays, strict=True):  # the tools' view
+        assert np.array_equal(np.frombuffer(field_bytes, w), a[0][:1])
 
 
 def test_two_views_of_one_buffer_see_each_other():

@@ -67,7 +67,11 @@ def test_bench_gui_reports_every_figure(qapp):
     assert st["heartbeat_ms"] == 10 and st["stall_ms"] == 100.0
     assert set(st["by_action"]) == {
         "tabs_500hz", "simulate_mowing_run", "csv_export", "png_export", "replay",
+        "replay_seek",
     }  # fmt: skip
+    # the seek back to 17 s of the 30 s recording at 100 Hz: from the keyframe at 15 s
+    assert st["seek_keyframes"] == 4 and st["seek_back_replies"] == 200
+    assert 0 < st["seek_back_s"] < 30.0
     for name, a in st["by_action"].items():
         assert "error" not in a, (name, a)
         assert a["ticks"] > 0 and a["longest_ms"] >= 10.0 * 0.5 and a["count_over_100ms"] >= 0

@@ -120,6 +120,7 @@ def test_a_gap_after_deskewed_steps_gives_the_held_back_share_back():
         (["--rates", "15,0"], "--rates '15,0': each in (0, 500] Hz"),
         (["--cpi", "5"], "--cpi 5: the sim's CPI, 100..25600"),
         (["--speed", "0"], "--speed and --duration must be > 0"),
+        (["--lifts", "-1"], "--lifts -1: lifts per second per sensor, 0..100"),
         (["--path-file", "/nonexistent/p.csv"], "trajectory file /nonexistent/p.csv: cannot"),
     ],
 )

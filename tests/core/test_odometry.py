@@ -430,14 +430,70 @@ def test_every_sensor_lifted_holds_the_pose_or_moves_by_the_filled_data():
     assert odo.blind_samples == 2 and odo.lifted_samples == 2
 
 
-@pytest.mark.parametrize("method", ["exact", "seed-approach1", "seed-approach2"])
-def test_one_sensor_methods_use_the_data_as_given_under_a_mask(method):
+@pytest.mark.parametrize("method", ["seed-approach1", "seed-approach2"])
+def test_the_seed_methods_use_the_data_as_given_under_a_mask(method):
+    """(``exact`` did too before issue 28; it now switches sensors, tested below.)"""
     r, mask = _lifted_tour(0)
     plain = Odometry(DEFAULT_MOUNTS, method).integrate(r.dt, r.d)
     odo = Odometry(DEFAULT_MOUNTS, method)
     masked = odo.integrate(r.dt, r.d, lifted=mask)
     np.testing.assert_array_equal(plain, masked)
     assert odo.lifted_samples == int(mask[:, 0].sum())
+
+
+@pytest.mark.parametrize("lift_sensor", [0, 1])
+def test_exact_switches_to_the_other_sensor_while_its_own_is_lifted_and_back(lift_sensor):
+    """Its own sensor (0) lifted: the other's split, so the tour stays on the truth;
+    the other sensor lifted: nothing changes (bit for bit)."""
+    r, mask = _lifted_tour(lift_sensor)
+    plain = Odometry(DEFAULT_MOUNTS, "exact").integrate(r.dt, r.d)
+    odo = Odometry(DEFAULT_MOUNTS, "exact")
+    poses = odo.integrate(r.dt, r.d, lifted=mask)
+    assert odo.lifted_samples == int(mask[:, lift_sensor].sum())
+    if lift_sensor == 1:
+        np.testing.assert_array_equal(poses, plain)
+        assert odo.switched_samples == 0
+        return
+    assert odo.switched_samples == int(mask[:, 0].sum()) > 50
+    # noise-free, no slip: sensor 1's no-slip split is exact per interval
+    assert np.hypot(*(poses[-1, :2] - r.truth[-1, :2])) < 1e-3
+    assert np.hypot(*(plain[-1, :2] - r.truth[-1, :2])) > 0.5  # the lost counts integrated
+    # back on its own sensor after a lift: the steps there are the unmasked ones
+    first_lift = int(np.argmax(mask[:, 0]))
+    np.testing.assert_array_equal(poses[:first_lift], plain[:first_lift])
+    after = np.flatnonzero(~mask[:, 0] & (np.arange(len(mask)) > first_lift))[:20]
+    again = Odometry(DEFAULT_MOUNTS, "exact", pose=Pose2D(*poses[after[0] - 1]))
+    np.testing.assert_array_equal(again.integrate(r.dt[after], r.d[after]), poses[after])
+    body = odo.body_map((True, False))
+    assert not body[:, :2].any() and body[:, 2:].any()  # the covariance follows the switch
+
+
+def test_exact_update_and_integrate_agree_when_switching():
+    r, mask = _lifted_tour(0)
+    start = max(0, int(np.argmax(mask[:, 0])) - 20)
+    sl = slice(start, start + 200)
+    assert mask[sl, 0].any() and not mask[sl, 0].all()
+    vec_odo = Odometry(DEFAULT_MOUNTS, "exact")
+    vec = vec_odo.integrate(r.dt[sl], r.d[sl], lifted=mask[sl])
+    odo = Odometry(DEFAULT_MOUNTS, "exact")
+    loop = np.array(
+        [odo.update(Sample.of(r.dt[i], *r.d[i], lifted=mask[i])).as_array()
+         for i in range(sl.start, sl.stop)]
+    )  # fmt: skip
+    np.testing.assert_allclose(loop, vec, atol=1e-12)
+    assert odo.switched_samples == vec_odo.switched_samples == int(mask[sl, 0].sum())
+    odo.reset()
+    assert odo.switched_samples == 0
+
+
+def test_exact_with_every_sensor_lifted_uses_its_own_data_as_given():
+    odo = Odometry(DEFAULT_MOUNTS, "exact")
+    p = odo.update(Sample.of(0.1, (0, 0.02), (0.001, 0.5), lifted=(True, True)))  # filled
+    assert (p.x, p.y, p.yaw) == pytest.approx((0.02, 0.0, 0.0))
+    assert odo.blind_samples == 1 and odo.switched_samples == 0
+    on_axle = Odometry([DEFAULT_MOUNTS[0], SensorMount(0.0, 0.04)], "exact")
+    p = on_axle.update(Sample.of(0.1, (0, 0.02), (0, 0.5), lifted=(True, False)))
+    assert p.x == pytest.approx(0.02) and on_axle.switched_samples == 0  # no yaw there
 
 
 @pytest.mark.parametrize(

@@ -399,7 +399,9 @@ def test_the_same_ticks_fast_path_pairs_exactly_as_the_general_matching():
         for _ in range(2):
             flags = np.array(data.draw(st.lists(flags_choice, min_size=k, max_size=k)), np.int64)
             dx, dy = (rng.integers(-300, 300, k).astype(np.int64) for _ in range(2))
-            pend.append(_Pending(stamps.copy(), dx, dy, flags, 1600))
+            cpi = np.array(data.draw(st.lists(st.sampled_from([800, 1600, 3200]),
+                                              min_size=k, max_size=k)), np.int64)
+            pend.append(_Pending(stamps.copy(), dx, dy, flags, cpi))  # CPI per poll
         fast = tr._same_ticks(pend)
         slow = tr._match_ticks(pend)
         assert fast is not None
@@ -411,8 +413,9 @@ def test_the_same_ticks_fast_path_pairs_exactly_as_the_general_matching():
     tr = PollTracker(2)
     s = np.array([1, 2, 3], np.int64)
     z = np.zeros(3, np.int64)
-    assert tr._same_ticks([_Pending(s, z, z, z), _Pending(s + 1, z, z, z)]) is None
+    c = np.full(3, 1600, np.int64)
+    assert tr._same_ticks([_Pending(s, z, z, z, c), _Pending(s + 1, z, z, z, c)]) is None
     cmd = np.array([0, FLAG_COMMAND_READ, 0], np.int64)
-    assert tr._same_ticks([_Pending(s, z, z, cmd), _Pending(s, z, z, z)]) is None
+    assert tr._same_ticks([_Pending(s, z, z, cmd, c), _Pending(s, z, z, z, c)]) is None
     rep = np.array([1, 1, 2], np.int64)
-    assert tr._same_ticks([_Pending(rep, z, z, z), _Pending(rep, z, z, z)]) is None
+    assert tr._same_ticks([_Pending(rep, z, z, z, c), _Pending(rep, z, z, z, c)]) is None

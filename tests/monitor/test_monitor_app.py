@@ -179,7 +179,8 @@ def test_headless_cli_runs_against_the_sim_and_writes_a_screenshot(tmp_path):
     shot = tmp_path / "shot.png"
     env = dict(os.environ, QT_QPA_PLATFORM="offscreen")
     out = subprocess.run(
-        [sys.executable, "-m", "mm_pc.monitor.app", "--sim", "--headless", "--duration", "6",
+        # 15 s: the emulated node is not waited for, and took over 6 s to come up under load
+        [sys.executable, "-m", "mm_pc.monitor.app", "--sim", "--headless", "--duration", "15",
          "--rate", "30", "--screenshot", str(shot)],
         capture_output=True, text=True, timeout=120, env=env,
     )  # fmt: skip

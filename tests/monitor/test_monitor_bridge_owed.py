@@ -48,8 +48,10 @@ def deliver_at_once(bridge: RosBridge) -> None:
     bridge._inbox_filled.connect(bridge._deliver)
 
 
-def _bridge() -> tuple[RosBridge, _Client]:
+def _bridge(in_flight: int = 1) -> tuple[RosBridge, _Client]:
+    """A bridge with ``in_flight`` data requests out at most (1: the owed logic alone)."""
     bridge = RosBridge(rate_hz=500.0, fetch_polls=False)
+    bridge.max_in_flight = in_flight
     client = _Client()
     bridge._clients = {"get_sensor_data": client}
     bridge._types = {"get_sensor_data": SimpleNamespace(Request=lambda id: id)}
@@ -79,3 +81,4 @@ def test_nothing_is_owed_while_paused(qapp):
     bridge.set_polling(False)
     client.sent[0].finish()
     assert len(client.sent) == 1
+

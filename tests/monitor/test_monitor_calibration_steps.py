@@ -17,10 +17,15 @@ import pytest
 pytest.importorskip("pytestqt")
 from PySide6.QtCore import Qt
 
-from mm_pc.core.geometry import DEFAULT_MOUNTS
+from mm_pc.core.calibration_fit import StepCheck
+from mm_pc.core.geometry import DEFAULT_MOUNTS, SensorMount
 from mm_pc.monitor.context import MonitorConfig, MonitorContext
 from mm_pc.monitor.model.calibration_autodrive import DONE, FAILED, AutoDrive
-from mm_pc.monitor.model.calibration_run import CalibrationRun
+from mm_pc.monitor.model.calibration_run import (
+    CalibrationRun,
+    direction_failure,
+    one_sensor_note,
+)
 from mm_pc.monitor.model.session import MonitorSession
 from mm_pc.monitor.model.sim_feed import sim_replies
 from mm_pc.monitor.model.sim_mounts import CALIBRATION_SIM_MOUNTS, parse_sim_mounts
@@ -53,6 +58,66 @@ def until(replies, metres: float, speed: float = 0.2) -> list:
 
 
 # --- the step checks -----------------------------------------------------------------------
+
+
+def record_one(kind: str, replies, mount) -> StepCheck:
+    """The check of one stopped ``kind`` step seen by the first sensor only."""
+    run = CalibrationRun()
+    run.start_step(kind)
+    for r in replies:
+        run.record(raw(r)[:1], r.readings[0].interval)
+    check = run.stop_step((mount,))
+    assert [c for _, c in run.steps] == [check]
+    return check
+
+
+def test_one_sensor_tells_a_push_from_a_turn_by_its_counts_direction():
+    """Issue 29: with one sensor the rigid motion is unknown; its counts run along its Y
+    axis on a straight and across its radius on a spin (51° apart at the default mount)."""
+    replies = list(sim_replies("calibration_run", 50, mounts=CALIBRATION_SIM_MOUNTS))
+    straight = [r for r in replies if 300 <= r.readings[0].seq <= 3200]
+    spin = [r for r in replies if 6300 <= r.readings[0].seq <= 13000]
+    push = until(list(sim_replies("straight", 50, mounts=CALIBRATION_SIM_MOUNTS)), 0.176)
+    nominal = DEFAULT_MOUNTS[0]
+    assert record_one("straight", straight, nominal).ok
+    assert record_one("spin", spin, nominal).ok
+    check = record_one("spin", push, nominal)
+    assert not check.ok
+    # the sim's sensor 0 is turned 3°: its push runs 3° off its Y axis
+    assert check.message == (
+        "not a spin: its counts ran 3° off the sensor's Y axis (X/Y = 0.05), like a "
+        "straight's (a spin runs 51° off it at this mount): it was pushed, not turned; "
+        "discard it and turn the robot on the spot")
+    check = record_one("straight", spin, nominal)
+    assert check.message.startswith("not a straight: its counts ran 5")
+    assert check.message.endswith("like a spin's (a straight runs 0° off it at this mount): "
+                                  "the robot turned; discard it and push it straight along an "
+                                  "edge")
+    assert "told apart by the direction of its counts" in one_sensor_note(nominal)
+    assert "a spin 51° off it" in one_sensor_note(nominal)
+    # a failed one-sensor step blocks the next until discarded, like any other
+    run = CalibrationRun()
+    run.start_step("spin")
+    for r in push:
+        run.record(raw(r)[:1], 0.02)
+    assert not run.stop_step((nominal,)).ok
+    with pytest.raises(ValueError, match="press Discard failed step"):
+        run.start_step("straight")
+    assert run.discard_step() == 0 and run.steps == []
+
+
+def test_one_sensor_on_the_axle_line_cannot_tell_and_says_so():
+    """A sensor beside the axle centre moves along its Y axis on a spin as on a straight:
+    no direction check (only the chord checks), and the note says so."""
+    on_axle = SensorMount(0.0, -0.0395)
+    assert direction_failure("spin", np.array([[[0.0, 0.176]]]), (on_axle,)) == ""
+    assert "cannot tell a push from a turn" in one_sensor_note(on_axle)
+    # two sensors: the rigid motion decides, not the direction
+    two = np.array([[[0.0, 0.176], [0.0, 0.176]]])
+    assert direction_failure("spin", two, DEFAULT_MOUNTS) == ""
+    # a chord under 1 cm is too short to trust its direction
+    assert direction_failure("spin", np.array([[[0.0, 0.009]]]), DEFAULT_MOUNTS[:1]) == ""
+    assert direction_failure("spin", np.array([[[0.0, 0.011]]]), DEFAULT_MOUNTS[:1]) != ""
 
 
 def test_a_push_recorded_as_a_spin_fails_with_what_it_did():
@@ -266,6 +331,47 @@ def test_the_wizard_drives_the_sims_run_and_shows_the_fit_next_to_the_truth(qtbo
         assert fitted_yaw == pytest.approx(true_yaw, abs=YAW_TOL_DEG)
         assert float(row[3]) == pytest.approx(float(row[4]), abs=POS_TOL_M * 100)
         assert float(row[5]) == pytest.approx(float(row[6]), abs=POS_TOL_M * 100)
+    # issue 28 item 4: what to add for a better fit; no length entered: the scale's source
+    advice = wiz.results_page.advice.text()
+    assert advice.startswith("Your straights total 1.0 m: ")
+    assert "record straights of 2.0 m (four times as long) to halve it" in advice
+    # the sim's mounts are 1-3 mm off the geometry (mean radius 63.2 vs 62.9 mm; the fit's
+    # radii, X scale tied to Y by the anisotropy prior, say 0.2 %)
+    assert ("distances take their scale from the sensors' CPI (typically a few % off). The "
+            "spins against the configured mounts say distances read 0.2 % long") in advice
+    assert wiz.results_page.advice.isVisibleTo(wiz)
+    wiz.back()
+    page = wiz.distance_page
+    page.scale_box.setCurrentIndex(page.scale_box.findData("mounts"))
+    wiz.next()
+    assert wiz.fit is not None and wiz.fit.scale_reference == "mounts"
+    assert "from the spins and the configured mount positions (±1.1 %" in (
+        wiz.results_page.advice.text())
+    page.edit.setText("50")
+    wiz.back()
+    wiz.next()
+    assert wiz.fit.scale_reference == "distance"
+    assert "No length was measured" not in wiz.results_page.advice.text()
+
+
+def test_one_sensor_in_the_wizard_says_what_its_check_can_tell_and_stops_a_push(qtbot):
+    one = ("/dev/spidev1.0",)
+    ctx = MonitorContext(MonitorSession())
+    replies = list(sim_replies("straight", 50, devices=one, mounts=CALIBRATION_SIM_MOUNTS))
+    ctx.on_reply(replies[0])
+    wiz = open_wizard(qtbot, ctx)
+    page = wiz.drive_page
+    assert page.one_sensor.isVisibleTo(wiz)
+    assert page.one_sensor.text().startswith("One sensor: a push and a turn are told apart")
+    qtbot.mouseClick(page.spin_button, Qt.LeftButton)
+    for r in until(replies, 0.176):
+        ctx.on_reply(r)
+    qtbot.mouseClick(page.stop_button, Qt.LeftButton)
+    (_, check), = ctx.session.calibration_steps()
+    assert check.message.startswith("not a spin: its counts ran 3° off the sensor's Y axis")
+    assert page.steps_table.item(0, 4).text() == f"fail: {check.message}"
+    assert page.discard_button.text() == "Discard failed step"
+    assert not page.spin_button.isEnabled()
 
 
 def test_the_drive_offer_follows_the_sim(qtbot, tmp_path):
@@ -318,9 +424,8 @@ def test_the_drive_offer_follows_the_sim(qtbot, tmp_path):
 
 
 @pytest.mark.parametrize(("args", "why"), [
-    (["--sim-mounts", "0.05,0,1"], "--sim-mounts goes with --sim (without --agent"),
-    (["--sim", "calibration_run", "--agent", "--sim-mounts", "0.05,0,1"],
-     "--sim-mounts goes with --sim (without --agent"),
+    (["--sim-mounts", "0.05,0,1"], "--sim-mounts goes with --sim"),
+    (["--agent", "--sim-mounts", "0.05,0,1"], "--agent goes with --sim"),
     (["--sim", "calibration_run", "--sim-mounts", "0.05,0"],
      "--sim-mounts needs X,Y,YAW per sensor (m, m, degrees), sensors separated by ';'; "
      "sensor 0 is '0.05,0'"),

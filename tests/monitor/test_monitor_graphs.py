@@ -251,11 +251,6 @@ def test_the_wheel_zooms_time_a_modifier_values_double_click_resets(qtbot, fake_
     assert x_range(speed0) == pytest.approx(x2)
 
 
-@pytest.mark.xfail(
-    reason="passes alone; in the full suite no hover event reaches it"
-    " (order-dependent, found at the last CI of a stop; to investigate)",
-    strict=False,
-)
 def test_hovering_a_plot_reads_its_values_out(qtbot, fake_bridge, feed):
     from PySide6.QtTest import QTest
 
@@ -378,11 +373,6 @@ def test_health_s_labels_never_overlap_the_table_at_first_start_height(qtbot, qa
             assert lab.height() >= lab.heightForWidth(lab.width()), lab.text()
 
 
-@pytest.mark.xfail(
-    reason="passes alone; in the full suite no hover event reaches it"
-    " (order-dependent, found at the last CI of a stop; to investigate)",
-    strict=False,
-)
 def test_hovering_a_health_plot_reads_its_value_out(qtbot, qapp, fake_bridge, feed):
     from PySide6.QtCore import QPoint
     from PySide6.QtTest import QTest

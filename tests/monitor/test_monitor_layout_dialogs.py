@@ -156,7 +156,7 @@ def _on_screen(qapp, dialog, screen) -> list[str]:
 
 def _walk_dialogs(qtbot, qapp, window, screen) -> dict[str, list[str]]:
     """Open every dialog of the window (with its refusals shown) and measure each."""
-    from test_monitor_dialogs import guided_replies, record_guided
+    from test_monitor_calibration_wizard import guided_replies, record_guided
 
     from mm_pc.monitor.replay import refuse
     from mm_pc.monitor.widgets.calibration_wizard import CalibrationWizard

@@ -1013,11 +1013,6 @@ def _viewport_point(view: MapView, x: float, y: float):
     return view.plot.mapFromScene(view.vb.mapViewToScene(QPointF(x, y)))
 
 
-@pytest.mark.xfail(
-    reason="passes alone; in the full suite no hover event reaches it"
-    " (order-dependent, found at the last CI of a stop; to investigate)",
-    strict=False,
-)
 def test_the_cursor_s_coordinates_and_a_measured_distance(qtbot, view, ctx, feed):
     from PySide6.QtTest import QTest
     from PySide6.QtWidgets import QApplication

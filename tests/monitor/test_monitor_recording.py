@@ -301,7 +301,9 @@ def test_record_from_the_window_and_stop(qtbot, tmp_path):
     assert ctx.recorder is not None and ctx.recorder.path == path
     assert window.record_action.text() == "Stop &recording"
     assert str(path) in window.statusBar().currentMessage()
-    assert window._recording_label.text() == "● REC 00:00 0 kB"
+    # the size the file would have if stopped now: the schemas and channels (~10 kB)
+    assert window._recording_label.text() == recording_text(0.0, ctx.recorder.size_bytes())
+    assert 5_000 < ctx.recorder.size_bytes() < 20_000
     assert str(path) in window._recording_label.toolTip()
     assert not start_recording(window, tmp_path / "second.mcap")  # one at a time
     assert "already recording" in window.statusBar().currentMessage()
@@ -806,8 +808,10 @@ def test_the_status_bar_shows_elapsed_time_and_size_while_recording(qtbot, tmp_p
     window._recording_began = time.monotonic() - 75.0  # as if it began 75 s ago
     label = window._recording_label
     qtbot.waitUntil(lambda: " 01:1" in label.text(), timeout=3000)  # the 1 s update
-    size = path.stat().st_size
-    assert size > 100_000
+    assert path.stat().st_size > 100_000  # chunks on disk
+    size = window.ctx.recorder.size_bytes()  # and the chunk still in memory
+    assert size > path.stat().st_size
     assert label.text() in (recording_text(s, size) for s in (75, 76, 77))
     stop_recording(window)
     assert window._recording_label is None
+    assert abs(path.stat().st_size - size) <= 0.005 * size  # what the file came to

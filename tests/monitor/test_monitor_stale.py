@@ -10,6 +10,7 @@ simulated replies as its ``data_received`` would.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -30,7 +31,7 @@ from mm_pc.monitor.ros_bridge import RosBridge
 from mm_pc.monitor.widgets.direction_widget import DirectionWidget
 from mm_pc.monitor.widgets.health_view import LEVEL_COLOURS, STALE_BACKGROUND, HealthView
 from mm_pc.monitor.widgets.resolution_panel import ERROR_SHOW_S, ResolutionPanel
-from mm_pc.monitor.widgets.style import sensor_colour
+from mm_pc.monitor.widgets.style import STALE_STYLE, sensor_colour
 
 
 def make_window(qtbot, tmp_path, name: str) -> tuple[MainWindow, RosBridge]:
@@ -95,6 +96,32 @@ def test_a_lost_link_greys_the_dials_health_and_sampling(qtbot, tmp_path):
     assert table.item(0, 0).background().color().name() == LEVEL_COLOURS[1][1]
 
 
+def test_the_status_bar_round_trip_is_no_figure_while_lost_or_paused(qtbot, tmp_path):
+    """Checked in X (issue 29 finding 8): after the node was killed the status bar kept
+    "RTT 1.5 ms", the median of replies from before the loss, in black as if live."""
+    window, bridge = make_window(qtbot, tmp_path, "mm_monitor_stale_rtt")
+    ctx = window.ctx
+    live(window, bridge)
+    stats = replace(bridge.stats(), rtt_p50_s=0.0015)
+    window._on_stats(stats)
+    assert window.rtt_label.text() == "RTT 1.5 ms"
+    window._on_state("lost")
+    assert window.rtt_label.text() == "RTT –"
+    assert window.rtt_label.toolTip().endswith(
+        f"none while the link is lost (no data since {since(ctx)})")
+    window._on_stats(stats)  # the bridge's stats go on with the old median
+    assert window.rtt_label.text() == "RTT –"
+    window._on_state("connected")
+    assert window.rtt_label.text() == "RTT 1.5 ms"
+    window.pause_button.setChecked(True)
+    assert window.rtt_label.text() == "RTT –"
+    assert "none while polling is paused" in window.rtt_label.toolTip()
+    window.pause_button.setChecked(False)
+    window._on_stats(replace(stats, rtt_p50_s=0.0021))
+    assert window.rtt_label.text() == "RTT 2.1 ms"
+    assert window.rtt_label.toolTip().startswith("round-trip time of a data request, median")
+
+
 def test_a_stale_dial_draws_no_arrow(qtbot):
     dial = DirectionWidget(0, "/dev/spidev1.0")
     qtbot.addWidget(dial)
@@ -144,6 +171,26 @@ def test_replaying_says_replaying_and_back_to_live_says_the_rate(qtbot, tmp_path
     assert [d.stale_text for d in window.direction_panel.widgets] == ["", ""]
     leave_replay(window)
     assert window.ctx.data_state == "live" and now.text() == "now: 100 Hz"
+
+
+def test_replaying_without_a_node_promises_no_live_rate(qtbot, tmp_path):
+    """Checked in X (mm-monitor --replay FILE, no node): the Sampling panel said "live 15 Hz
+    after Back to live", but without a node Back to live is offline."""
+    path = tmp_path / "run.mcap"
+    rec = McapRecorder(path)
+    for r in sim_replies("straight", 50.0, 0.5):
+        rec.write_reply(r)
+    rec.close()
+    config = MonitorConfig(rate_hz=15.0, calibration_file=tmp_path / "cal.yaml")
+    window = MainWindow(MonitorContext(MonitorSession(), None, config))
+    qtbot.addWidget(window)
+    replayer = start_replay(window, path, "max")
+    now = window.rate_editor.now
+    assert now.text() == "replaying a recording (offline: no node to poll after it)"
+    assert now.styleSheet() == IDLE_STYLE
+    qtbot.waitUntil(lambda: replayer.done, timeout=10_000)
+    leave_replay(window)
+    assert window.ctx.data_state == "offline"
 
 
 def test_a_cpi_refusal_goes_after_the_next_success_or_a_timeout(qtbot, fake_bridge, feed):
@@ -201,3 +248,27 @@ def test_the_residual_plot_breaks_at_an_outage(qtbot, fake_bridge, feed):
     nan = np.flatnonzero(np.isnan(y))
     assert len(nan) == 1 and t[gap[0]] < x[nan[0]] < t[gap[0] + 1]
     assert len(x) == len(t) + 1
+
+
+def test_the_map_pose_and_the_graphs_note_say_the_values_are_old(qtbot, tmp_path):
+    """Checked in X (issue 29 finding 8): with the node killed, the Map's pose readout stayed
+    black and the Graphs note read as live; the curves just end, like a robot that stopped."""
+    window, bridge = make_window(qtbot, tmp_path, "mm_monitor_stale_map_graphs")
+    ctx = window.ctx
+    live(window, bridge)
+    pose, note = window.views["Map"].pose_label, window.views["Graphs"].note
+    window.views["Graphs"].refresh()
+    live_note = note.text()
+    assert live_note.endswith("s") and "no data" not in live_note
+    assert pose.styleSheet() == "" and note.styleSheet() == ""
+    window._on_state("lost")
+    text = f"link lost: no data since {since(ctx)}"
+    assert pose.styleSheet() == STALE_STYLE == note.styleSheet()
+    assert pose.toolTip() == f"the last pose known: {text}"
+    assert note.text() == f"{live_note}; {text}"
+    window._on_state("connected")
+    assert pose.styleSheet() == "" and note.styleSheet() == ""
+    assert note.text() == live_note and not pose.toolTip().startswith("the last pose")
+    window.pause_button.setChecked(True)
+    assert note.text() == f"{live_note}; paused: no data since {since(ctx)}"
+    assert pose.styleSheet() == STALE_STYLE

@@ -46,7 +46,6 @@ from mm_pc.core.fusion.loop import FusionCore
 from mm_pc.core.maps.trilateration import Beacon
 from mm_pc.core.odometry import Pose2D
 from mm_pc.core.uncertainty import planar_covariance_6x6
-from mm_pc.ros.throttle import WarnThrottle
 
 NAN = math.nan
 Msg = SimpleNamespace  # a message stand-in: only field names matter
@@ -246,16 +245,6 @@ def test_pose_covariance_goes_to_x_y_yaw_of_the_6x6():
     assert c[np.ix_([0, 1, 5], [0, 1, 5])] == pytest.approx(p)
     assert c[2, 2] == c[3, 3] == c[4, 4] == 1e6
     assert c[0, 2] == c[5, 3] == 0.0
-
-
-def test_warn_throttle_counts_what_it_holds_back():
-    now = [0.0]
-    w = WarnThrottle(5.0, clock=lambda: now[0])
-    assert w("a") == 0
-    assert w("a") is None and w("a") is None
-    assert w("b") == 0
-    now[0] = 5.0
-    assert w("a") == 2
 
 
 # --- the stamp-ordered core -------------------------------------------------------------------

@@ -84,6 +84,8 @@ def polls_msg(device: str, res):
         flags=[int(v) for v in res.flags],
         # one figure per poll; empty: none (a chip without one, an old node or recording)
         quality=[int(v) for v in getattr(res, "quality", ())],
+        # each poll's CPI (issue 28); empty: the reply's cpi for all (an old node or recording)
+        poll_cpi=[int(v) for v in getattr(res, "poll_cpi", ())],
     )  # fmt: skip
 
 
@@ -146,7 +148,8 @@ def deserialize_appended(data: bytes, msg_type):
     """``data`` as ``msg_type``; also a recording made before fields were appended.
 
     SensorData (now LegacySensorData), SensorPolls and GetSamples' response grew
-    fields at their end (``instance_id`` in issue 13; chip and quality in issue 15).
+    fields at their end (``instance_id`` in issue 13; chip and quality in issue 15;
+    ``poll_cpi`` in issue 28).
     Older CDR bytes end early, so they get zero bytes appended: every missing field
     then reads 0, '' or empty ("unknown"), whatever alignment padding it needs.
     (SensorData's header, issue 25, came first, not last: :func:`decode_sensor_data`.)

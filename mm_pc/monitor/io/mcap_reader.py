@@ -2,6 +2,12 @@
 
 An MCAP file or a rosbag2 folder (:func:`.bag_format.bag_files`); layout in
 :mod:`mm_pc.monitor.io`. Errors are ValueErrors saying what is wrong with the file.
+
+Each reader is also a generator of steps (``*_steps``): it yields (None) after every
+:data:`STEP_MESSAGES` messages read or decoded and returns its result, so the window can
+read a recording in slices from a timer on its own thread (:func:`run_steps` drains one
+at once). A worker thread decoding in Python starved the GUI thread of the GIL for the
+whole read (0.2-0.4 s stalls at the start of a replay, docs/benchmarks.md).
 """
 
 from __future__ import annotations
@@ -25,26 +31,48 @@ from mm_pc.monitor.io.schemas import (
     is_legacy_sensor_schema,
 )
 
-__all__ = ["open_messages", "read_replies", "read_replies_up_to_cut", "read_samples"]
+__all__ = [
+    "STEP_MESSAGES", "open_messages", "read_replies", "read_replies_up_to_cut",
+    "read_replies_up_to_cut_steps", "read_samples", "run_steps",
+]  # fmt: skip
+
+#: messages read or decoded between two yields of a ``*_steps`` generator (~2-5 ms)
+STEP_MESSAGES = 50
+
+
+def run_steps(steps):
+    """Drain a ``*_steps`` generator at once; its result."""
+    while True:
+        try:
+            next(steps)
+        except StopIteration as done:
+            return done.value
 
 
 def open_messages(path: str | Path):
     """((schema, channel, message) of every message, {topic: schema name}) of a file or a
     rosbag2 folder; ValueError saying what is wrong with one that cannot be read."""
+    return run_steps(open_messages_steps(path))
+
+
+def open_messages_steps(path: str | Path):
+    """:func:`open_messages` as a generator of steps (see the module doc)."""
     path = Path(path)
     if not path.exists():
         raise ValueError(f"no recording at {path} (file not found)")
     messages, types = [], {}
     for file in bag_files(path):
-        m, t = _open_file(file)
+        m, t = yield from _open_file_steps(file)
         messages += m
         for k, v in t.items():
             types.setdefault(k, v)
     return messages, types
 
 
-def _open_file(path: Path):
+def _open_file_steps(path: Path):
     from mcap.reader import make_reader
+
+    yield  # the first import of mcap (and zstandard) is a step of its own
 
     if not path.is_file():
         raise ValueError(f"no recording at {path} (file not found)")
@@ -54,8 +82,16 @@ def _open_file(path: Path):
                 raise ValueError(f"{path} is not an MCAP file (it does not start with MCAP magic)")
             f.seek(0)
             reader = make_reader(f, validate_crcs=True)
-            messages = list(reader.iter_messages(log_time_order=False))
             summary = reader.get_summary()
+            if summary is not None and summary.chunk_indexes:
+                source = _indexed_messages(f, summary)
+            else:  # no index: mcap's linear reader
+                source = reader.iter_messages(log_time_order=False)
+            messages = []
+            for m in source:
+                messages.append(m)
+                if len(messages) % STEP_MESSAGES == 0:
+                    yield
     except ValueError:
         raise
     except Exception as e:  # the mcap reader raises many kinds on a damaged file
@@ -71,18 +107,54 @@ def _open_file(path: Path):
     return messages, types
 
 
+def _indexed_messages(f, summary):
+    """(schema, channel, message) of an indexed file's chunks in file order, one record at
+    a time (CRCs checked). mcap's ``iter_messages`` parses a whole chunk (thousands of
+    messages, ~50 ms) in one go: one slice of reading that froze the window."""
+    import io
+
+    from mcap.data_stream import ReadDataStream
+    from mcap.opcode import Opcode
+    from mcap.records import Channel, Chunk, Message, Schema
+    from mcap.stream_reader import get_chunk_data_stream
+
+    for index in sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
+        f.seek(index.chunk_start_offset + 1 + 8, io.SEEK_SET)  # past opcode and length
+        chunk = Chunk.read(ReadDataStream(f))
+        stream, length = get_chunk_data_stream(chunk, validate_crc=True)
+        while stream.count < length:
+            opcode = stream.read1()
+            size = stream.read8()
+            if opcode == Opcode.MESSAGE:
+                message = Message.read(stream, size)
+                channel = summary.channels[message.channel_id]
+                schema = summary.schemas[channel.schema_id] if channel.schema_id else None
+                yield schema, channel, message
+            elif opcode == Opcode.CHANNEL:
+                Channel.read(stream)
+            elif opcode == Opcode.SCHEMA:
+                Schema.read(stream)
+            else:
+                stream.read(size)
+
+
 def read_up_to_cut(path: str | Path):
     """(messages, types, warning) of one MCAP file that may be cut short (a crash, a full
     disk): the messages of its whole chunks, in file order, and a warning saying how much
     was read ("" for a whole file). A file that is damaged in another way (bad magic, a
     CRC error) raises the ValueError of :func:`open_messages`."""
+    return run_steps(read_up_to_cut_steps(path))
+
+
+def read_up_to_cut_steps(path: str | Path):
+    """:func:`read_up_to_cut` as a generator of steps (see the module doc)."""
     from mcap.exceptions import EndOfFile
     from mcap.records import Channel, DataEnd, Message, Schema
     from mcap.stream_reader import StreamReader
 
     path = Path(path)
     try:
-        messages, types = _open_file(path)
+        messages, types = yield from _open_file_steps(path)
         return messages, types, ""
     except ValueError as e:
         strict_error = e
@@ -101,6 +173,8 @@ def read_up_to_cut(path: str | Path):
                 channel = channels[record.channel_id]
                 messages.append((schemas.get(channel.schema_id), channel, record))
                 whole_bytes = f.tell()  # after the chunk holding it (or the file's end)
+                if len(messages) % STEP_MESSAGES == 0:
+                    yield
             elif isinstance(record, DataEnd):
                 break  # every message is read; the cut is in the index after them
 
@@ -110,13 +184,13 @@ def read_up_to_cut(path: str | Path):
         f.seek(0)
         ends = [8]  # where each whole record of the file ends (the magic is 8 bytes)
         try:
-            take(_noting_ends(StreamReader(f, validate_crcs=True).records, f, ends))
+            yield from take(_noting_ends(StreamReader(f, validate_crcs=True).records, f, ends))
         except (EndOfFile, struct.error):  # the cut (a short read): what came before is whole
             f.seek(ends[-1])
             # the whole messages at the start of a chunk cut in its middle (a damaged one
             # is lost, the chunks before it stand)
             with contextlib.suppress(Exception):
-                take(_cut_chunk_records(f.read()))
+                yield from take(_cut_chunk_records(f.read()))
             if whole_bytes == 0:
                 raise ValueError(
                     f"{path} is cut short (a crash or a full disk?) before its first whole "
@@ -186,11 +260,18 @@ def read_replies_up_to_cut(path: str | Path) -> tuple[list[Reply], str]:
     """(replies, warning) like :func:`read_replies`, but a single MCAP file cut short gives
     the replies of its whole messages and a warning saying how much was read ("" when the
     file is whole); see :func:`read_up_to_cut`."""
+    return run_steps(read_replies_up_to_cut_steps(path))
+
+
+def read_replies_up_to_cut_steps(path: str | Path):
+    """:func:`read_replies_up_to_cut` as a generator of steps (see the module doc)."""
     path = Path(path)
     if not path.is_file():  # a rosbag2 folder or a missing file: read strictly
-        return read_replies(path), ""
-    messages, types, warning = read_up_to_cut(path)
-    replies = _replies_of(path, messages, types)
+        messages, types = yield from open_messages_steps(path)
+        replies = yield from _replies_of_steps(path, messages, types)
+        return replies, ""
+    messages, types, warning = yield from read_up_to_cut_steps(path)
+    replies = yield from _replies_of_steps(path, messages, types)
     if warning and len(replies) >= 2 and not _as_whole(replies[-1], replies[-2]):
         replies.pop()  # the cut fell between its messages
         warning += "; the last reply, cut in two, is left out"
@@ -222,15 +303,44 @@ def read_replies(path: str | Path) -> list[Reply]:
 
 
 def _replies_of(path, messages, types) -> list[Reply]:
+    return run_steps(_replies_of_steps(path, messages, types))
+
+
+def _ros_types_steps():
+    """:func:`~.cdr.ros_types` with its imports and each type's C support loaded in steps of
+    their own (the first time, 0.1-0.2 s each without a bridge, under load)."""
+    import importlib
+
+    from rclpy.type_support import check_for_type_support
+
+    for name in ("rclpy.serialization", "builtin_interfaces.msg", "std_msgs.msg",
+                 "mm_interfaces.msg", "mm_interfaces.srv"):  # fmt: skip
+        importlib.import_module(name)
+        yield
     ros = ros_types()
+    for msg_type in (ros.SensorData, ros.Float64MultiArray, ros.SensorPolls):
+        check_for_type_support(msg_type)
+        yield
+    return ros
+
+
+def _replies_of_steps(path, messages, types):
+    ros = yield from _ros_types_steps()
     deserialize_message, Float64MultiArray = ros.deserialize, ros.Float64MultiArray  # noqa: N806
-    meta = [m for s, c, m in messages if c.topic == META_TOPIC and s and s.name == META_TYPE]
+    meta = []
+    for n, (s, c, m) in enumerate(messages):
+        if n % (8 * STEP_MESSAGES) == 0:
+            yield
+        if c.topic == META_TOPIC and s and s.name == META_TYPE:
+            meta.append(m)
     # a monitor recording's replies are on SENSOR_TOPIC (the live topic's SensorData is
     # another stream); a foreign bag's SensorData on any topic. Each channel's schema
     # says whether it was recorded before SensorData's header (issue 25).
     legacy: dict[tuple[bytes, str], bool] = {}  # by schema (channel ids repeat across files)
     sensor = []
-    for s, c, m in messages:
+    for n, (s, c, m) in enumerate(messages):
+        if n % (4 * STEP_MESSAGES) == 0:
+            yield
         if (
             s is not None and s.name == SENSOR_TYPE and (not meta or c.topic == SENSOR_TOPIC)
             and c.message_encoding == "cdr"
@@ -245,30 +355,43 @@ def _replies_of(path, messages, types) -> list[Reply]:
             f"{path} holds no {SENSOR_TYPE} messages (topics: {', '.join(topics) or 'none'})"
         )
     try:
-        readings = [
-            (m.sequence, m.log_time, Reading.from_msg(decode_sensor_data(m.data, old)))
-            for old, m in sensor
-        ]
+        readings = []
+        for old, m in sensor:
+            readings.append(
+                (m.sequence, m.log_time, Reading.from_msg(decode_sensor_data(m.data, old)))
+            )
+            if len(readings) % STEP_MESSAGES == 0:
+                yield
         metas = {}
         for m in meta:
             values = list(deserialize_message(m.data, Float64MultiArray).data)
             fetched = len(values) > 2 and values[2] == 1.0
             metas[m.sequence] = (m.log_time, float(values[0]), float(values[1]), fetched)
+            if len(metas) % (4 * STEP_MESSAGES) == 0:
+                yield
         polls: dict[int, dict[str, object]] = {}
+        n = 0
         for s, c, m in messages:
             if c.topic.startswith(REPLY_POLLS_TOPIC + "/") and s is not None:
                 device = c.metadata.get("device", c.topic)
                 polls.setdefault(m.sequence, {})[device] = decode_polls(s.name, m.data)
+                n += 1
+                if n % STEP_MESSAGES == 0:
+                    yield
     except Exception as e:  # deserialisation of foreign bytes can fail in many ways
         raise ValueError(
             f"{path}: a message could not be decoded ({type(e).__name__}: {e})"
         ) from None
     if metas:
         groups: dict[int, list[Reading]] = {k: [] for k in metas}
-        for seq, _, r in readings:
+        for n, (seq, _, r) in enumerate(readings):
             groups.setdefault(seq, []).append(r)
+            if n % (8 * STEP_MESSAGES) == 0:
+                yield
         out = []
         for seq in sorted(groups):  # the reply number: recorded order
+            if len(out) % (4 * STEP_MESSAGES) == 0:
+                yield
             _, received, rtt, fetched = metas.get(seq, (0, math.nan, 0.0, False))
             got = None
             if fetched:  # a device without a message: its fetch had failed

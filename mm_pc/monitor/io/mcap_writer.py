@@ -25,6 +25,7 @@ from mm_pc.monitor.io.bag_format import (
     write_metadata,
 )
 from mm_pc.monitor.io.cdr import polls_msg, ros_types, serialize_reading
+from mm_pc.monitor.io.mcap_size import SizeTracker, metadata_bytes
 from mm_pc.monitor.io.schemas import (
     META_LABEL,
     META_TOPIC,
@@ -71,6 +72,7 @@ class McapRecorder:
         try:
             self._writer = Writer(self._file, compression=CompressionType.ZSTD)
             self._writer.start(profile="ros2", library="mm_monitor")
+            self._size = SizeTracker(self._file)
             self._sensor_channel = self._channel(SENSOR_TOPIC, SENSOR_TYPE)
             self._meta_channel = self._channel(META_TOPIC, META_TYPE)
         except Exception:
@@ -90,6 +92,7 @@ class McapRecorder:
         self.on_error = None
         self.closed = False
         self._offset_ns: int | None = None
+        self._metadata_size = (-1, 0)  # (channels, bytes of the Metadata records and index)
         ros = ros_types()
         self._meta_layout = ros.MultiArrayLayout(
             dim=[ros.MultiArrayDimension(label=META_LABEL, size=2, stride=2)]
@@ -101,24 +104,26 @@ class McapRecorder:
     ) -> int:  # fmt: skip
         schemas = self._schemas
         if type_name not in schemas:
+            definition = ros2msg_definition(type_name).encode()
             schemas[type_name] = self._writer.register_schema(
-                name=type_name, encoding="ros2msg", data=ros2msg_definition(type_name).encode()
+                name=type_name, encoding="ros2msg", data=definition
             )
+            self._size.schema(type_name, "ros2msg", definition)
         profiles = [DEFAULT_QOS] if qos is None else list(qos)
         meta = {"offered_qos_profiles": qos_yaml(profiles)}
         if digest := type_hash(type_name):
             meta["topic_type_hash"] = digest
+        meta = {**meta, **(metadata or {})}
         channel = self._writer.register_channel(
-            topic=topic,
-            message_encoding="cdr",
-            schema_id=schemas[type_name],
-            metadata={**meta, **(metadata or {})},
+            topic=topic, message_encoding="cdr", schema_id=schemas[type_name], metadata=meta
         )
+        self._size.channel(topic, "cdr", meta)
         self._topics[channel] = [topic, type_name, profiles, 0]
         return channel
 
     def _add(self, channel: int, log_time: int, data: bytes, publish_time: int, seq: int) -> None:
         self._writer.add_message(channel, log_time, data, publish_time, seq)
+        self._size.message(channel, log_time, data, publish_time, seq)
         self._topics[channel][3] += 1
         if not self._first_ns or log_time < self._first_ns:
             self._first_ns = log_time
@@ -238,6 +243,36 @@ class McapRecorder:
         if self.on_error is not None:
             self.on_error(self.error)
 
+    def _metadata_records(self) -> tuple[dict, list[tuple[str, dict[str, str]]]]:
+        """The bag's info and the Metadata records :meth:`close` writes (name, fields)."""
+        info = bag_info(self.file.name, list(self._topics.values()), self._first_ns, self._last_ns)
+        own = {
+            "start_time": self.started.isoformat(),
+            "start_time_ns": str(int(self.started.timestamp() * 1e9)),
+            "end_time": datetime.now(timezone.utc).isoformat(),
+            "beagle": self.beagle,
+            "devices": ",".join(self.devices),
+            "rate_hz": f"{self.rate_hz:g}",
+            "replies": str(self.replies),
+            "reply_meta": f"{META_TOPIC}: data = [received_s, rtt_s] (s, monotonic)",
+        }
+        return info, [("mm_monitor", own), (ROSBAG2_RECORD, rosbag2_record(info))]
+
+    def size_bytes(self) -> int:
+        """The file's size so far (bytes): what it would measure if closed now, the chunk
+        still in memory counted compressed (:class:`~.mcap_size.SizeTracker`); once closed,
+        its size on disk (for a folder, the ``.mcap`` file's)."""
+        with self._lock:
+            if not self.closed:
+                if self._metadata_size[0] != len(self._topics):  # YAML: only when it grows
+                    records = self._metadata_records()[1]
+                    self._metadata_size = (len(self._topics), metadata_bytes(records))
+                return self._size.estimate() + self._metadata_size[1]
+        try:
+            return self.file.stat().st_size
+        except OSError:
+            return 0
+
     def topic_counts(self) -> dict[str, int]:
         """Messages written so far per topic."""
         return {t[0]: t[3] for t in self._topics.values()}
@@ -254,24 +289,10 @@ class McapRecorder:
             if self.closed:
                 return
             self.closed = True
-            info = bag_info(
-                self.file.name, list(self._topics.values()), self._first_ns, self._last_ns
-            )
+            info, records = self._metadata_records()
             try:
-                self._writer.add_metadata(
-                    "mm_monitor",
-                    {
-                        "start_time": self.started.isoformat(),
-                        "start_time_ns": str(int(self.started.timestamp() * 1e9)),
-                        "end_time": datetime.now(timezone.utc).isoformat(),
-                        "beagle": self.beagle,
-                        "devices": ",".join(self.devices),
-                        "rate_hz": f"{self.rate_hz:g}",
-                        "replies": str(self.replies),
-                        "reply_meta": f"{META_TOPIC}: data = [received_s, rtt_s] (s, monotonic)",
-                    },
-                )
-                self._writer.add_metadata(ROSBAG2_RECORD, rosbag2_record(info))
+                for name, data in records:
+                    self._writer.add_metadata(name, data)
                 self._writer.finish()
             except OSError as e:
                 if not self.error:

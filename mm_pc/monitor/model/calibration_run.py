@@ -10,6 +10,11 @@ Besides :func:`~mm_pc.core.calibration_fit.check_step`'s residuals, each step's
 rigid motion (two sensors or more, nominal mounts) must fit its kind: a spin
 turns in place (at least ``MIN_SPIN_RAD``, its centre moving at most
 ``MAX_SPIN_MOVE_M``), a straight does not turn (at most ``MAX_STRAIGHT_TURN_RAD``).
+With one sensor there is no rigid motion; a push and a turn are told apart by the
+direction of its counts (:func:`direction_failure`): a straight runs along the sensor's
+Y axis, a spin across its radius, so where the two directions differ by at least
+``MIN_DIRECTION_SEPARATION_RAD`` a step must run nearer its own kind's direction
+(a sensor on the axle line sees both along Y: :func:`one_sensor_note` says so).
 A failed step blocks the next one until it is discarded. An
 :class:`~mm_pc.monitor.model.calibration_autodrive.AutoDrive` may press
 Start/Stop itself, per interval (:meth:`CalibrationRun.record`).
@@ -42,8 +47,11 @@ if TYPE_CHECKING:
 __all__ = [
     "MAX_SPIN_MOVE_M",
     "MAX_STRAIGHT_TURN_RAD",
+    "MIN_DIRECTION_SEPARATION_RAD",
     "CalibrationRun",
+    "direction_failure",
     "motion_failure",
+    "one_sensor_note",
     "step_motion",
 ]
 
@@ -55,6 +63,80 @@ MAX_SPIN_MOVE_M = 0.05
 #: growing with the distance (10 % over 1 m: ~70 deg); a smaller turn is left to
 #: check_step's spread of the sensors' distances.
 MAX_STRAIGHT_TURN_RAD = math.radians(90.0)
+#: One sensor: a straight's and a spin's count directions must differ by this much (rad)
+#: for the direction to tell them apart (mount yaw errors of a few degrees and a
+#: position off by a few mm turn them by less than half of it).
+MIN_DIRECTION_SEPARATION_RAD = math.radians(30.0)
+#: One sensor: shortest chord (m) whose direction is trusted (a few counts of noise).
+MIN_DIRECTION_CHORD_M = 0.01
+
+
+def _kind_directions(mount: SensorMount) -> dict[str, float]:
+    """The direction (rad, from the sensor's +Y axis toward +X, mod pi) its counts run in
+    on a straight and on a spin, for the nominal ``mount``: a straight moves the sensor
+    along the robot's forward axis, (0, A) ideally; a spin by C moves it by (-C x, -C y)
+    (sensor frame, the calibration fit's model); a sensor turned by yaw reports them
+    turned by -yaw, i.e. ``yaw`` further toward +X (a straight's raw sum is
+    (A sin yaw, A cos yaw))."""
+    return {
+        "straight": math.remainder(mount.yaw, math.pi),
+        "spin": math.remainder(math.atan2(mount.x, mount.y) + mount.yaw, math.pi),
+    }
+
+
+def _off(a: float, b: float) -> float:
+    """Angle between two undirected lines (rad, 0..pi/2)."""
+    return abs(math.remainder(a - b, math.pi))
+
+
+def one_sensor_note(mount: SensorMount) -> str:
+    """What the one-sensor check can tell at ``mount`` (the wizard's drive page says it)."""
+    dirs = _kind_directions(mount)
+    sep = _off(dirs["straight"], dirs["spin"])
+    if sep < MIN_DIRECTION_SEPARATION_RAD:
+        return (
+            f"One sensor, {math.degrees(sep):.0f}° between a straight's and a spin's count "
+            "direction at its mount (it sits near the axle line): the checks cannot tell a "
+            "push from a turn. Make sure each step is what you press; a second sensor checks "
+            "each step's motion."
+        )
+    return (
+        "One sensor: a push and a turn are told apart by the direction of its counts (a "
+        f"straight along its Y axis, a spin {math.degrees(sep):.0f}° off it at this mount); "
+        "a second sensor would also check each step's motion."
+    )
+
+
+def direction_failure(kind: str, d: np.ndarray, mounts: Sequence[SensorMount]) -> str:
+    """One sensor: why the step's count direction does not fit ``kind`` ("" = it fits, or
+    cannot tell: two sensors or more (:func:`step_motion` checks those), a chord under
+    ``MIN_DIRECTION_CHORD_M``, or a mount where both kinds run alike)."""
+    d = np.asarray(d, dtype=float)
+    if d.ndim != 3 or d.shape[1] != 1 or not mounts:
+        return ""
+    chord = d[:, 0].sum(axis=0)
+    if math.hypot(*chord) < MIN_DIRECTION_CHORD_M:
+        return ""
+    dirs = _kind_directions(mounts[0])
+    sep = _off(dirs["straight"], dirs["spin"])
+    if sep < MIN_DIRECTION_SEPARATION_RAD:
+        return ""
+    seen = math.atan2(chord[0], chord[1])
+    own = _off(seen, dirs[kind])
+    if own <= sep / 2:
+        return ""
+    other = "spin" if kind == "straight" else "straight"
+    ratio = abs(chord[0]) / max(abs(chord[1]), 1e-12)
+    what = (
+        f"its counts ran {math.degrees(_off(seen, dirs['straight'])):.0f}° off the sensor's "
+        f"Y axis (X/Y = {ratio:.2f}), like a {other}'s (a {kind} runs "
+        f"{math.degrees(_off(dirs[kind], dirs['straight'])):.0f}° off it at this mount)"
+    )
+    if kind == "spin":
+        return f"not a spin: {what}: it was pushed, not turned; discard it and turn the robot " \
+            "on the spot"
+    return f"not a straight: {what}: the robot turned; discard it and push it straight " \
+        "along an edge"
 
 
 def step_motion(d: np.ndarray, mounts: Sequence[SensorMount]) -> tuple[float, float, float] | None:
@@ -150,6 +232,8 @@ class CalibrationRun:
     def _check(step: CalibrationStep, mounts: Sequence[SensorMount], final: bool) -> StepCheck:
         chk = check_step(step, tuple(mounts))
         why = motion_failure(step.kind, step_motion(step.d, mounts), final)
+        if not why and final and chk.ok:
+            why = direction_failure(step.kind, step.d, mounts)
         if not why:
             return chk
         return StepCheck(step.kind, False, why, chk.distance, chk.deviation, chk.spread,
@@ -214,6 +298,7 @@ class CalibrationRun:
         true_distance: float | None = None,
         spin_angle: float = 2 * math.pi,
         min_distance: float = MIN_STRAIGHT_M,
+        scale_reference: str = "sensors",
     ) -> MountFit:
         """Fit the whole mount from the recorded steps (:func:`fit_mounts`; nothing applied).
 
@@ -233,4 +318,5 @@ class CalibrationRun:
             spin_angle=spin_angle,
             sensor=sensor,
             min_distance=min_distance,
+            scale_reference=scale_reference,
         )

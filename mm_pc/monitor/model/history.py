@@ -100,6 +100,13 @@ class History:
         """The newest ``n`` rows (a copy), oldest first."""
         return self._data[max(0, self._n - n) : self._n].copy()
 
+    def truncate(self, n: int) -> None:
+        """Keep the oldest ``n`` rows (0 <= n <= len): a replay's seek back to a keyframe."""
+        if not 0 <= n <= self._n:
+            raise ValueError(f"cannot keep {n!r} of {self._n} rows")
+        self._n = n
+        self.version += 1
+
     def clear(self) -> None:
         """Drop every row (the capacity shrinks back)."""
         self._data = np.empty((min(4096, self.max_rows), len(self.columns)))

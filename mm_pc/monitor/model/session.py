@@ -26,6 +26,10 @@ Every reply of mm_beagle (live, or replayed from a recording) goes through
    (ring overrun, a failed fetch) become one **gap** step from the totals,
    counted in ``stats.gaps``, logged, and kept in :attr:`MonitorSession.gaps`
    for the map. Without polls (an old recording) the pose is integrated per reply.
+   A CPI change is no gap: each poll carries its CPI (``poll_cpi``, issue 28) and is
+   integrated at it; the change is counted in ``stats.cpi_changes``, logged and kept in
+   :attr:`MonitorSession.cpi_changes` (where the robot was). Polls without ``poll_cpi``
+   (an old node or recording) still make an interval with a CPI change a gap step.
 5. One row in the :class:`~.history.History` per reply, read by the views
    (the per-reply values: Graphs and Data show what each request served).
 
@@ -176,12 +180,27 @@ class Gap:
     reason: str
 
 
+@dataclass(frozen=True)
+class CpiChange:
+    """A sensor's resolution changed between two replies: ``t`` (s since the first reply),
+    where the robot was (``x``, ``y``: odom, m, the pose of the reply that showed it),
+    the device and its CPI before and after. A setting, not lost data."""
+
+    t: float
+    x: float
+    y: float
+    device: str
+    old: int
+    new: int
+
+
 @dataclass
 class SessionStats:
     """Counters the health view and the benchmarks read.
 
     ``polls``: single polls integrated into the pose; ``per_reply``: replies whose
-    pose was integrated per reply (no polls came with them); ``gaps``: gap steps.
+    pose was integrated per reply (no polls came with them); ``gaps``: gap steps;
+    ``cpi_changes``: a sensor's CPI seen changed between two replies (no gap).
     """
 
     replies: int = 0
@@ -193,6 +212,7 @@ class SessionStats:
     polls: int = 0
     per_reply: int = 0
     gaps: int = 0
+    cpi_changes: int = 0
     events: deque = field(default_factory=lambda: deque(maxlen=200))
 
 
@@ -236,6 +256,9 @@ class MonitorSession:
         self.tracker: PollTracker | None = None
         #: stretches without single polls, oldest first (at most 10 000 kept)
         self.gaps: deque[Gap] = deque(maxlen=10_000)
+        #: CPI changes seen, oldest first (at most 10 000 kept), and each sensor's last CPI
+        self.cpi_changes: deque[CpiChange] = deque(maxlen=10_000)
+        self._row_cpi: dict[str, int] = {}
         self._poll_filters: dict[str, SensorMedianFilter] = {}
         #: polls fetched with replies that made no step, joined to the next one's
         self._stash: dict[str, list] = {}
@@ -421,11 +444,13 @@ class MonitorSession:
         true_distance: float | None = None,
         spin_angle: float = 2 * math.pi,
         min_distance: float = MIN_STRAIGHT_M,
+        scale_reference: str = "sensors",
     ) -> MountFit:
         """Fit the whole mount from the recorded steps (does not apply it).
 
         ``true_distance``: each straight's measured length (m) or None;
-        ``spin_angle``: what each spin turned (rad). Returns the
+        ``spin_angle``: what each spin turned (rad); ``scale_reference``: the scale
+        without a measured length (``calibration_fit.SCALE_REFERENCES``). Returns the
         :class:`MountFit` (``.calibration()`` the fit, ``.straight_run`` the
         seed's formula on the same straights). Raises ValueError (a
         :class:`CalibrationRefusedError` for a refused run) with what to do;
@@ -438,6 +463,7 @@ class MonitorSession:
             true_distance=true_distance,
             spin_angle=spin_angle,
             min_distance=min_distance,
+            scale_reference=scale_reference,
         )
 
     def finish_calibration(self, calibration: Calibration | None) -> None:
@@ -540,6 +566,7 @@ class MonitorSession:
             self._t0_ns = now[0].stamp_ns
         self.tracker.baseline([_totals(r) for r in now])
         self._stash.clear()
+        self._row_cpi.clear()  # a new start (or restart) at another CPI is no CPI change
         self._speed_rows.clear()
         self._speed_stamps = [r.stamp_ns for r in now]
         self.stats.baselines += 1
@@ -615,6 +642,10 @@ class MonitorSession:
         for r, (rx, ry), (dx, dy), m, (vx, vy) in zip(
                 now, raw, processed, self._mounts, speeds, strict=True):
             wx, wy = pose.x + c * m.x - s * m.y, pose.y + s * m.x + c * m.y
+            old = self._row_cpi.get(r.id, 0)
+            if r.cpi and old and r.cpi != old:
+                self._cpi_changed(t, pose, r.id, old, r.cpi)
+            self._row_cpi[r.id] = r.cpi or old
             row += [rx, ry, dx, dy, vx, vy, wx, wy, r.lift_events, r.cpi,
                     quality_figure(r.chip, r.quality), r.low_quality_events]
             self.log.append(
@@ -624,6 +655,13 @@ class MonitorSession:
                 )
             )
         self.history.append(row)
+
+    def _cpi_changed(self, t: float, pose: Pose2D, device: str, old: int, new: int) -> None:
+        self.stats.cpi_changes += 1
+        self.cpi_changes.append(CpiChange(t, pose.x, pose.y, device, old, new))
+        self.stats.events.append(
+            ("cpi", f"{device}: CPI {old} -> {new} at {t:.3f} s (a setting, no data lost)")
+        )
 
     def _speeds(self, t: float, dt: float, now: list[Reading],
                 processed: list[tuple[float, float]]) -> list[tuple[float, float]]:
@@ -727,6 +765,7 @@ class MonitorSession:
         """
         self._prev.clear()
         self._stash.clear()
+        self._row_cpi.clear()
         if not keep_t0:
             self._t0_ns = None
 
@@ -748,6 +787,7 @@ class MonitorSession:
             f.reset()
         self.log.clear()
         self.gaps.clear()
+        self.cpi_changes.clear()
         self._speed_rows.clear()
         if self._prev and self.devices:
             self._t0_ns = self._prev[self.devices[0]].stamp_ns

@@ -10,12 +10,17 @@ terminated).
 
 The child lowers its own priority (``os.nice`` by :data:`CHILD_NICE`): on a 2-core PC
 it otherwise took a core the window needed, and the window's event loop stalled up to
-1.5 s at a load of 5 while the run was built (issue 29). How long a build takes is in
-docs/user-guide.md (measured by ``mm-bench gui``, ``stalls.sim_build_s``).
+1.5 s at a load of 5 while the run was built (issue 29). On the GUI thread every poll is
+short: the result's modules are imported one a poll while the child builds
+(:data:`WARM_MODULES`), the result is read in slices and unpickled with the garbage
+collector off (a full pass over the window's heap, set off by its 18 000 objects, took
+0.2-1.6 s under load), and the child is not waited for once it has sent it. How long a
+build takes is in docs/user-guide.md (measured by ``mm-bench gui``, ``stalls.sim_build_s``).
 """
 
 from __future__ import annotations
 
+import gc
 import importlib
 import multiprocessing
 import os
@@ -24,7 +29,14 @@ import struct
 import time
 from contextlib import suppress
 
-__all__ = ["CHILD_NICE", "SIM_TYPICAL", "SimJob", "build_in_child", "lower_priority"]
+__all__ = [
+    "CHILD_NICE",
+    "SIM_TYPICAL",
+    "WARM_MODULES",
+    "SimJob",
+    "build_in_child",
+    "lower_priority",
+]
 
 #: how long a build takes, as the view says it (``mm-bench gui``'s ``stalls.sim_build_s``:
 #: 5.6-7.4 s on a 2-core PC at a load of 3-7; issue 29 saw ~40 s at a load of 5)
@@ -33,6 +45,20 @@ SIM_TYPICAL = "usually 5-15 s; longer while other programs keep the processor bu
 READ_SLICE = 1 << 19
 #: the module of the result's classes (imported before the result is read)
 RESULT_MODULE = "mm_pc.sim.field_run"
+#: what importing it loads that the window has not (59 ms at a load of 0.5), imported one a
+#: poll while the child builds (1-17 ms each), its own dependencies first
+WARM_MODULES = (
+    "mm_pc.core.fixes.gps",
+    "mm_pc.core.fixes.perimeter",
+    "mm_pc.core.fixes.wheels",
+    "mm_pc.core.uncertainty",
+    "mm_pc.core.fusion.ekf",
+    "mm_pc.core.fusion.inputs",
+    "mm_pc.core.fusion.loop",
+    "mm_pc.core.maps.trilateration",
+    "mm_pc.sim.robot",
+    RESULT_MODULE,
+)
 #: how much the child lowers its priority (a nice increment): the window comes first
 CHILD_NICE = 10
 
@@ -56,6 +82,20 @@ def lower_priority() -> None:
         os.nice(CHILD_NICE)
 
 
+def _unpickle(payload: bytes):
+    """``pickle.loads`` without the garbage collector: the result's ~18 000 objects set off
+    collections inside it, a full one of the window's heap among them (0.2-1.6 s at a load
+    of 8-12, issue 29); 9 ms instead of 14-33 on a quiet PC. The objects are collected
+    from the next automatic pass on."""
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        return pickle.loads(payload)
+    finally:
+        if enabled:
+            gc.enable()
+
+
 class SimJob:
     """One simulation in a child process. ``seed``: the run's seed; ``started``:
     time.monotonic() at the start; ``target``: the child's function (tests pass one that
@@ -73,7 +113,8 @@ class SimJob:
         self.done = False
         self._buffer = bytearray()  # the result's bytes so far
         self.slices = 0  # reads of the result so far (one a poll)
-        self.warmed = False  # RESULT_MODULE imported (the poll before the first read)
+        self._to_import = list(WARM_MODULES)
+        self.warmed = False  # WARM_MODULES imported (one a poll, before the first read)
 
     @property
     def elapsed_s(self) -> float:
@@ -91,29 +132,28 @@ class SimJob:
         if self.done:
             return None
         try:
+            if not self.warmed:
+                # the result's classes imported one module a poll (59 ms in one poll, 124 ms
+                # at a load of 8), so the poll that unpickles it (~37 ms) does not do both
+                with suppress(ImportError):
+                    importlib.import_module(self._to_import.pop(0))
+                self.warmed = not self._to_import
             ready = self._recv.poll()
             # a child that died before taking its end of the pipe (spawn hands it over
             # through a helper thread of this process) never closes it: no EOF comes
             if not ready and self.process.exitcode is not None and not self._recv.poll(0.1):
                 raise EOFError
-            if not ready:
-                return None
-            if not self.warmed:
-                # the result's classes imported in a poll of their own (~36 ms), so the one
-                # that unpickles it (~37 ms) does not do both (126 ms at a load of 1.3)
-                self.warmed = True
-                with suppress(ImportError):
-                    importlib.import_module(RESULT_MODULE)
+            if not ready or not self.warmed:
                 return None
             payload = self._read_slice()
             if payload is None:
                 return None
-            result = pickle.loads(payload)
+            result = _unpickle(payload)
         except (EOFError, OSError):
             result = self._ended_without_result()
         except Exception as e:  # a result that does not unpickle here
             result = ("error", f"the simulation's result is unreadable: {e!r}")
-        self._finish()
+        self._finish(wait=False)
         return result
 
     def _read_slice(self) -> bytes | None:
@@ -151,8 +191,17 @@ class SimJob:
             self.process.terminate()
         self._finish()
 
-    def _finish(self) -> None:
+    def _finish(self, wait: bool = True) -> None:
+        """Done: the pipe closed; the child ended (``wait``: within 2 s, else killed).
+        Without ``wait`` (it has sent everything) it is left to end on its own: a ``join``
+        on the GUI thread waited for its interpreter's shutdown (19-29 ms at a load of 2.5,
+        longer under load at its lower priority); it is reaped by the next process start,
+        or at exit, as a daemon."""
         self.done = True
+        if not wait:
+            self.process.join(0)
+            self._recv.close()
+            return
         self.process.join(2.0)
         if self.process.is_alive():
             self.process.kill()

@@ -26,7 +26,7 @@ from PySide6.QtGui import QColor, QFont, QFontMetricsF, QPainter, QPen, QPixmap,
 from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
 
 from mm_pc.monitor.context import MonitorContext
-from mm_pc.monitor.widgets.style import sensor_colour
+from mm_pc.monitor.widgets.style import sensor_colour, stale_text
 
 __all__ = ["GAINS_PX_PER_MM", "DirectionPanel", "DirectionWidget", "auto_gain", "gain_peak"]
 
@@ -42,8 +42,6 @@ TAIL_ROWS = 1024
 FILL = 0.9
 #: Colour of the texts of a dial whose values are stale.
 STALE_COLOUR = "#888888"
-#: What a dial says in each stale state (then ctx.no_data_since()).
-STALE_WORDS = {"lost": "link lost", "paused": "paused"}
 
 
 def auto_gain(peak_m: float, radius_px: float) -> float:
@@ -262,10 +260,7 @@ class DirectionPanel(QWidget):
 
     def stale_text(self) -> str:
         """What the dials say instead of a value ("" while the values are live)."""
-        state = self.ctx.data_state
-        if state not in STALE_WORDS:
-            return ""
-        return f"{STALE_WORDS[state]}: {self.ctx.no_data_since()}"
+        return stale_text(self.ctx)
 
     def _show_stale(self, *_args) -> None:
         text = self.stale_text()

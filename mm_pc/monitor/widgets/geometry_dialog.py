@@ -76,6 +76,19 @@ class _MountRow:
     yaw: QLineEdit
 
 
+#: a sensor further from the axle centre than this is a typing error (the emulator's
+#: --sim-mounts has the same 1 m bound); the axle likewise
+MAX_MOUNT_CM = 100.0
+MAX_AXLE_CM = 300.0
+
+
+def _within(value: float, limit: float, what: str) -> float:
+    """``value`` if |value| <= ``limit``; ValueError naming ``what`` otherwise."""
+    if abs(value) > limit:
+        raise ValueError(f"{what} must be within ±{limit:g}, got {value:g}")
+    return value
+
+
 class GeometryDialog(QDialog):
     """Edit the sensor mounts (cm, deg), the axle length (cm; key axis_length), the one sensor."""
 
@@ -185,13 +198,17 @@ class GeometryDialog(QDialog):
         names = self._names(len(self.rows))
         mounts = []
         for row, name in zip(self.rows, names, strict=True):
-            x = parse_number(row.x.text(), f"{name} x (cm)") / 100
-            y = parse_number(row.y.text(), f"{name} y (cm)") / 100
-            yaw = math.radians(parse_number(row.yaw.text(), f"{name} yaw (deg)"))
-            mounts.append(SensorMount(x, y, yaw))
+            x = _within(parse_number(row.x.text(), f"{name} x (cm)"), MAX_MOUNT_CM,
+                        f"{name} x (cm)") / 100  # fmt: skip
+            y = _within(parse_number(row.y.text(), f"{name} y (cm)"), MAX_MOUNT_CM,
+                        f"{name} y (cm)") / 100  # fmt: skip
+            yaw = _within(parse_number(row.yaw.text(), f"{name} yaw (deg)"), 360.0,
+                          f"{name} yaw (deg)")  # fmt: skip
+            mounts.append(SensorMount(x, y, math.radians(yaw)))
         axis = parse_number(self.axis_edit.text(), "axle length (cm)") / 100
-        if axis <= 0:
-            raise ValueError(f"axle length must be > 0 cm, got {self.axis_edit.text().strip()!r}")
+        if not 0 < axis <= MAX_AXLE_CM / 100:
+            raise ValueError(f"axle length must be > 0 and <= {MAX_AXLE_CM:g} cm, "
+                             f"got {self.axis_edit.text().strip()!r}")  # fmt: skip
         return RobotGeometry(tuple(mounts), axis), max(self.sensor_box.currentIndex(), 0)
 
     # -- actions -------------------------------------------------------------------------------

@@ -50,7 +50,12 @@ from mm_pc.monitor.model.outages import OutageFinder, with_breaks
 from mm_pc.monitor.model.peak_decimator import PeakDecimator, bucket_size
 from mm_pc.monitor.model.session import sensor_columns
 from mm_pc.monitor.widgets.plot_habits import TimePlotBox
-from mm_pc.monitor.widgets.style import sensor_axis_colour, sensor_colour
+from mm_pc.monitor.widgets.style import (
+    STALE_STYLE,
+    sensor_axis_colour,
+    sensor_colour,
+    stale_text,
+)
 
 __all__ = ["AXIS_NAMES", "DEFAULT_WINDOW_S", "PLOTS", "GraphsView"]
 
@@ -127,6 +132,10 @@ class GraphsView(QWidget):
         self.pause_button.setToolTip("freeze the graphs to zoom and pan; resume returns to live")
         self.pause_button.toggled.connect(self.set_paused)
         self.note = QLabel("waiting for data")
+        self._note_base = "waiting for data"  # the note without the stale part
+        # wraps rather than widen the page: at 800 px it made the tab scroll sideways
+        self.note.setWordWrap(True)
+        self.note.setAlignment(Qt.AlignRight | Qt.AlignVCenter)
         bar = QHBoxLayout()
         bar.addWidget(QLabel("Window"))
         bar.addWidget(self.window_box)
@@ -155,6 +164,7 @@ class GraphsView(QWidget):
 
         ctx.devices_known.connect(self._build)
         ctx.session_reset.connect(self._on_reset)
+        ctx.data_state_changed.connect(self._on_data_state)
         if ctx.session.devices:
             self._build(ctx.session.devices)
 
@@ -348,7 +358,7 @@ class GraphsView(QWidget):
         self._version = hist.version
         t = hist.column("t")
         if len(t) == 0:
-            self.note.setText("no samples")
+            self._set_note("no samples")
             return
         if (hist, hist.dropped_rows) != self._rows_of or len(t) < self._len:
             for cache in self._peaks.values():
@@ -375,7 +385,20 @@ class GraphsView(QWidget):
                 self._set_value_range((k, key), lo, hi)
         shown = rows.stop - rows.start
         every = f", min/max of {size}-sample buckets" if size > 1 else ""
-        self.note.setText(f"{shown} of {len(t)} samples in the window{every}, t = {end:.1f} s")
+        self._set_note(f"{shown} of {len(t)} samples in the window{every}, t = {end:.1f} s")
+
+    def _on_data_state(self, _state: str) -> None:
+        self._set_note(self._note_base)
+
+    def _set_note(self, text: str) -> None:
+        """The note above the plots; while the link is lost or polling paused it says so
+        (greyed): the curves end at the last data, they do not show the robot stopping."""
+        self._note_base = text
+        stale = stale_text(self.ctx)
+        shown = f"{text}; {stale}" if stale else text
+        if shown != self.note.text():  # a new text re-lays the page out
+            self.note.setText(shown)
+            self.note.setStyleSheet(STALE_STYLE if stale else "")
 
     def _time_range(self, end: float, first: float = -np.inf) -> tuple[float, float]:
         """The shown time range: ``window_s`` back from the newest row ``end`` (s) -- or

@@ -100,7 +100,10 @@ SESSION_TIP = (
     "the gap, no count lost); refused: replies with numbers that are not finite.\n"
     "single polls: the node's 1 kHz reads the pose was built from; gaps bridged: stretches "
     "without those reads, crossed in one straight step; replies without polls: "
-    "integrated as one step each.")
+    "integrated as one step each.\n"
+    "CPI changes: a sensor's resolution was changed; each poll is integrated at its own "
+    "CPI, so a change is no gap and loses nothing (in a recording made before polls "
+    "carried their CPI it is still bridged as a gap).")
 BRIDGE_TIP = (
     "requests: questions the monitor sent at the sample rate; replies: answers.\n"
     "unanswered in time: given up after the timeout (the next reply's totals cover them).\n"
@@ -549,7 +552,7 @@ class HealthView(QWidget):
         s = self.ctx.session.stats
         b = self.bridge_stats
         key = (s.replies, s.used, s.restarts, s.incomplete, s.rejected, s.baselines, s.polls,
-               s.gaps, id(b))
+               s.gaps, s.cpi_changes, id(b))
         if key == self._stats_key:
             return
         self._stats_key = key
@@ -558,7 +561,7 @@ class HealthView(QWidget):
             f"{s.baselines} fresh starts, {s.restarts} node restarts; "
             f"{s.incomplete} missing a sensor, {s.rejected} refused; "
             f"pose from {s.polls} single polls, {s.gaps} gaps bridged, "
-            f"{s.per_reply} replies without polls"
+            f"{s.per_reply} replies without polls; {s.cpi_changes} CPI changes"
         )
         if self.ctx.bridge is None:
             self.bridge_label.setText("Bridge: offline (no ROS connection)")

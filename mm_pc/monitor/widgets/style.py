@@ -15,9 +15,12 @@ __all__ = [
     "GAP_COLOUR",
     "ROBOT_COLOUR",
     "SENSOR_COLOURS",
+    "STALE_STYLE",
+    "STALE_WORDS",
     "parse_number",
     "sensor_axis_colour",
     "sensor_colour",
+    "stale_text",
 ]
 
 #: style sheet of the red message shown next to a field that refused its input
@@ -29,6 +32,18 @@ ROBOT_COLOUR = "#1f3a93"
 #: a stretch of the path without its single polls (drawn dashed over the path)
 GAP_COLOUR = "#e0102f"
 SENSOR_COLOURS = ("#e67e22", "#2e8b57", "#8e44ad", "#c0392b")
+
+#: why the values on screen are old, per data state of the context (others: live values)
+STALE_WORDS = {"lost": "link lost", "paused": "paused"}
+#: style of a value that is old (link lost, paused): grey
+STALE_STYLE = "color: #808080"
+
+
+def stale_text(ctx) -> str:
+    """"link lost: no data since HH:MM:SS" (or "paused: …") while ``ctx`` (a
+    MonitorContext) shows old values; "" while they are live."""
+    words = STALE_WORDS.get(ctx.data_state)
+    return f"{words}: {ctx.no_data_since()}" if words else ""
 
 
 def sensor_colour(k: int) -> str:

@@ -47,7 +47,13 @@ from mm_pc.monitor.widgets.map_view.items import (
 )
 from mm_pc.monitor.widgets.map_view.pointer import MapPointer
 from mm_pc.monitor.widgets.map_view.raster import PathRaster
-from mm_pc.monitor.widgets.style import GAP_COLOUR, ROBOT_COLOUR, sensor_colour
+from mm_pc.monitor.widgets.style import (
+    GAP_COLOUR,
+    ROBOT_COLOUR,
+    STALE_STYLE,
+    sensor_colour,
+    stale_text,
+)
 
 __all__ = [
     "MAX_WIDTH_M",
@@ -59,6 +65,8 @@ __all__ = [
 #: Range of the zoom slider: visible width of the map (m), log scale.
 MIN_WIDTH_M, MAX_WIDTH_M = 0.2, 200.0
 SLIDER_STEPS = 1000
+#: the pose readout's tooltip while it is live
+POSE_TIP = "the robot's pose in the odom frame: x, y (m) and yaw (deg, counter-clockwise)"
 DEFAULT_WIDTH_M = 1.0
 
 #: Grid spacings (m): the 10 cm squares, and coarser lines for zoomed-out views.
@@ -157,9 +165,18 @@ class MapView(QWidget):
         ctx.devices_known.connect(self._on_devices)
         ctx.session_reset.connect(self.clear_paths)
         ctx.odometry_changed.connect(self._mark_dirty)
+        ctx.calibration_changed.connect(self._mark_dirty)  # the sensors move to the fit
+        ctx.data_state_changed.connect(self._show_stale)
         self.vb.setRange(xRange=(-DEFAULT_WIDTH_M / 2, DEFAULT_WIDTH_M / 2),
                          yRange=(-DEFAULT_WIDTH_M / 2, DEFAULT_WIDTH_M / 2), padding=0)
         self._ensure_sensors()
+
+    def _show_stale(self, *_args) -> None:
+        """Grey the pose readout while the link is lost or polling paused: the robot may
+        move on while the map cannot show it; the tooltip says since when."""
+        text = stale_text(self.ctx)
+        self.pose_label.setStyleSheet(STALE_STYLE if text else "")
+        self.pose_label.setToolTip(f"the last pose known: {text}" if text else POSE_TIP)
 
     # -- construction ---------------------------------------------------------------------
 
@@ -209,6 +226,7 @@ class MapView(QWidget):
         second.addLayout(self.path_bar)
         second.addStretch(1)
         self.pose_label = QLabel(_pose_text(0.0, 0.0, 0.0))
+        self.pose_label.setToolTip(POSE_TIP)
         second.addWidget(self.pose_label)
         self.toolbar = QVBoxLayout()
         self.toolbar.setSpacing(2)
@@ -513,8 +531,8 @@ class MapView(QWidget):
 
     def _build_body(self) -> None:
         """Robot outline, heading arrow and sensor axes in base_link (m); they move as
-        one group carried by the pose. Rebuilt when the geometry changes."""
-        mounts = self.ctx.session.mounts
+        one group carried by the pose. Rebuilt when the geometry or calibration changes."""
+        mounts = self._drawn_mounts()
         front = max([m.x for m in mounts] + [0.05]) + 0.025
         half = max([abs(m.y) for m in mounts] + [0.04]) + 0.015
         self._body_size = front + 0.035
@@ -537,9 +555,14 @@ class MapView(QWidget):
                 label.setPos(m.x + 1.35 * AXIS_ARROW_M * ux, m.y + 1.35 * AXIS_ARROW_M * uy)
         self._body_key = (mounts, len(self.sensor_items))
 
+    def _drawn_mounts(self) -> tuple:
+        """The sensors as built: the calibration's fitted positions and yaws (else geometry)."""
+        session = self.ctx.session
+        return session.calibration.built_mounts(session.devices, session.mounts)
+
     def _draw_robot(self) -> None:
         """Move the robot group to the pose; show details only when they are big enough."""
-        if self._body_key != (self.ctx.session.mounts, len(self.sensor_items)):
+        if self._body_key != (self._drawn_mounts(), len(self.sensor_items)):
             self._build_body()
         pose = self.ctx.session.pose
         self.body.setPos(pose.x, pose.y)

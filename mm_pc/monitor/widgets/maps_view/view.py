@@ -138,6 +138,7 @@ class MapsView(QWidget):
         self._clock = 0.0
         self._job: SimJob | None = None
         self._runs: dict[int, SimRun] = {}  # seed -> built run (the child's cache is gone)
+        self._to_load: SimRun | None = None  # arrived, shown from the next tick
         self.dialog: NewMapDialog | None = None
 
         self._build_controls()
@@ -436,6 +437,7 @@ class MapsView(QWidget):
         """Build the simulated run in a child process; it plays when ready."""
         if self._job is not None:
             return
+        self._to_load = None
         seed = self.seed_box.value() if seed is None else int(seed)
         self.error.hide()
         if seed in self._runs:
@@ -517,7 +519,13 @@ class MapsView(QWidget):
                 self.error.show()
                 return
             self._runs[job.seed] = value
-            self.load_simulation(value)
+            # shown from the next tick: unpickling (~35 ms at a load of 6) and showing it
+            # (~20 ms) in one turn of the event loop held the window up 80-130 ms
+            self._to_load = value
+            return
+        if self._to_load is not None:
+            run, self._to_load = self._to_load, None
+            self.load_simulation(run)
             return
         if self.run is None or self.source != "sim":
             self.timer.stop()
