@@ -473,19 +473,8 @@ def _run(args, headless: bool) -> int:
                 return 2
             if headless and not args.duration:  # nothing else would end the run
                 _quit_after(replayer, app)
+        stopped_by = quit_on_signals(app)
         # Python signal handlers run only between bytecodes: wake the interpreter regularly.
-        # The quit is queued, not called: a signal that lands before app.exec() (one put
-        # off by stop_signals comes 20 ms later) would otherwise be lost and the window run on.
-        stopped_by: list[int] = []
-
-        def stop(signum, _frame) -> None:
-            stopped_by.append(signum)
-            QTimer.singleShot(0, app.quit)
-
-        signal.signal(signal.SIGINT, stop)
-        signal.signal(signal.SIGTERM, stop)
-        if stop_signals.seen():  # one before these handlers: put off, or lost in a callback
-            stop(stop_signals.seen(), None)
         tick = QTimer()
         tick.timeout.connect(lambda: None)
         tick.start(200)
@@ -519,6 +508,29 @@ def _run(args, headless: bool) -> int:
             print(summary(window, seconds), flush=True)
         window.close()
     return code
+
+
+def quit_on_signals(app) -> list[int]:
+    """SIGINT/SIGTERM quit the Qt loop of ``app``; returns the list the signals received
+    are appended to. The quit is queued, not called: a signal that lands before
+    ``app.exec()`` (one put off by stop_signals comes 20 ms later) would otherwise be lost
+    and the window run on. A signal stop_signals saw before (put off, or swallowed by a
+    callback) quits too."""
+    from PySide6.QtCore import QTimer
+
+    from mm_pc import stop_signals
+
+    stopped_by: list[int] = []
+
+    def stop(signum, _frame) -> None:
+        stopped_by.append(signum)
+        QTimer.singleShot(0, app.quit)
+
+    signal.signal(signal.SIGINT, stop)
+    signal.signal(signal.SIGTERM, stop)
+    if stop_signals.seen():
+        stop(stop_signals.seen(), None)
+    return stopped_by
 
 
 def _remove_unless_failed(folder: Path, node_exit: list[str]):

@@ -37,3 +37,20 @@ def test_the_log_stays_when_the_node_died_or_the_monitor_failed(tmp_path):
         stack.push(_remove_unless_failed(folder, []))
         raise RuntimeError("the node did not come up; see its log")
     assert (folder / "sim_beagle.log").exists()
+
+
+def test_an_error_a_stops_keyboard_interrupt_became_removes_the_folder(tmp_path, monkeypatch):
+    """shiboken can turn the stop's KeyboardInterrupt into an AttributeError: after a stop
+    raised by stop_signals that error is the stop's, so the folder goes; without one the
+    same error is a failure and the log stays."""
+    from types import SimpleNamespace
+
+    from mm_pc import stop_signals
+
+    for stopped, kept in ((True, False), (False, True)):
+        folder = _folder(tmp_path)
+        monkeypatch.setattr(stop_signals, "_running", SimpleNamespace(raised=stopped))
+        with pytest.raises(AttributeError), ExitStack() as stack:
+            stack.push(_remove_unless_failed(folder, []))
+            raise AttributeError("'PySide6.QtCore.Qt' has no attribute 'AlignLeft'")
+        assert folder.exists() is kept, f"stop raised: {stopped}"

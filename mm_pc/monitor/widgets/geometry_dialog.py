@@ -82,8 +82,10 @@ MAX_MOUNT_CM = 100.0
 MAX_AXLE_CM = 300.0
 
 
-def _within(value: float, limit: float, what: str) -> float:
-    """``value`` if |value| <= ``limit``; ValueError naming ``what`` otherwise."""
+def _bounded(text: str, limit: float, what: str) -> float:
+    """The number in ``text`` if |number| <= ``limit``; ValueError naming ``what``
+    otherwise (not a number, not finite, out of bounds)."""
+    value = parse_number(text, what)
     if abs(value) > limit:
         raise ValueError(f"{what} must be within ±{limit:g}, got {value:g}")
     return value
@@ -198,12 +200,9 @@ class GeometryDialog(QDialog):
         names = self._names(len(self.rows))
         mounts = []
         for row, name in zip(self.rows, names, strict=True):
-            x = _within(parse_number(row.x.text(), f"{name} x (cm)"), MAX_MOUNT_CM,
-                        f"{name} x (cm)") / 100  # fmt: skip
-            y = _within(parse_number(row.y.text(), f"{name} y (cm)"), MAX_MOUNT_CM,
-                        f"{name} y (cm)") / 100  # fmt: skip
-            yaw = _within(parse_number(row.yaw.text(), f"{name} yaw (deg)"), 360.0,
-                          f"{name} yaw (deg)")  # fmt: skip
+            x = _bounded(row.x.text(), MAX_MOUNT_CM, f"{name} x (cm)") / 100
+            y = _bounded(row.y.text(), MAX_MOUNT_CM, f"{name} y (cm)") / 100
+            yaw = _bounded(row.yaw.text(), 360.0, f"{name} yaw (deg)")
             mounts.append(SensorMount(x, y, math.radians(yaw)))
         axis = parse_number(self.axis_edit.text(), "axle length (cm)") / 100
         if not 0 < axis <= MAX_AXLE_CM / 100:
