@@ -429,3 +429,22 @@ def test_narrow_windows_stack_the_docks_and_wide_ones_put_them_back(window, qapp
     assert window.compact == (window.width() < 960)
     side = Qt.LeftDockWidgetArea if window.compact else Qt.RightDockWidgetArea
     assert window.dockWidgetArea(window.direction_dock) == side
+
+
+@pytest.mark.parametrize("size", SIZES, ids=lambda s: f"{s[0]}x{s[1]}")
+def test_a_calibration_put_in_force_after_start_is_shown_whole(window, qapp, size):
+    """The Pose panel's calibration summary after Clear and a new calibration (the wizard's
+    Save, Load…) while the window is shown: every line visible. In a real X window the
+    form layout kept the one-line height of "none (identity)" and cut the summary."""
+    window.resize(*size)
+    settle(qapp, window)
+    cal, source = window.ctx.session.calibration, window.ctx.calibration_source
+    panel = window.calibration_panel
+    panel.clear()
+    settle(qapp, window)
+    window.ctx.set_calibration(cal, source)
+    settle(qapp, window)
+    label = panel.label
+    assert label.text().count("\n") >= 3  # the head, the file and a line per sensor
+    assert label.height() >= label.heightForWidth(label.width())
+    assert not [p for p in clipped_texts(window) if "Calibration:" in p]

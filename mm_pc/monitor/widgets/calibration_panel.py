@@ -97,6 +97,20 @@ class CalibrationPanel(QWidget):
         self.label.setText(describe_calibration(cal, Path(source).name if source else ""))
         self.label.setToolTip(describe_calibration(cal, source))
         self.clear_button.setEnabled(not cal.is_identity)
+        self._fit_label()
+
+    def _fit_label(self) -> None:
+        """The label's wrapped height as its minimum: the Pose panel's form layout kept the
+        height of the previous text when a calibration came in after the window was shown
+        (in a real X window the new lines were cut off at top and bottom)."""
+        width = self.label.width()
+        if width > 0:
+            self.label.setMinimumHeight(0)  # heightForWidth is never below the minimum
+            self.label.setMinimumHeight(self.label.heightForWidth(width))
+
+    def resizeEvent(self, event) -> None:  # noqa: N802 - Qt API
+        super().resizeEvent(event)
+        self._fit_label()
 
     def load(self, path: str | Path) -> bool:
         """Put the calibration file ``path`` in force; False (the reason in red, nothing

@@ -385,7 +385,9 @@ class GraphsView(QWidget):
                 self._set_value_range((k, key), lo, hi)
         shown = rows.stop - rows.start
         every = f", min/max of {size}-sample buckets" if size > 1 else ""
-        self._set_note(f"{shown} of {len(t)} samples in the window{every}, t = {end:.1f} s")
+        nb = "\u00a0"  # "t = 27.5 s" stays on one line when the note wraps
+        now = f"t{nb}={nb}{end:.1f}{nb}s"
+        self._set_note(f"{shown} of {len(t)} samples in the window{every}, {now}")
 
     def _on_data_state(self, _state: str) -> None:
         self._set_note(self._note_base)
