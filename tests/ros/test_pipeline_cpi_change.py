@@ -186,7 +186,10 @@ def test_cpi_changes_while_driving_are_no_gap_and_keep_the_pose_exact(tmp_path):
     for k, m in (("exact@15Hz", "exact"), ("two-sensor@15Hz", "two-sensor")):
         row = got[k]
         assert "error" not in row, got
-        assert row["gaps"] == 0, got  # was one gap step per change (two per sensor pair)
+        # was one gap step per change (two per sensor pair), named "the CPI changed"; one
+        # gap of another cause (a reply lost on a loaded machine, once in 7 runs at load 12,
+        # while the robot stood still) is allowed: the pose checks below still hold
+        assert row["gaps"] == 0 or (row["gaps"] == 1 and "CPI" not in row["last_gap"]), got
         assert row["polls_integrated"] > 2 * 15_000, got
         # the node integrated every poll of its ring at its own CPI: its pose is the one
         # of the whole rings in one go (within the float noise of the request boundaries)
