@@ -398,7 +398,6 @@ def _run(args, headless: bool) -> int:
 
         from mm_beagle.tools.harness import emulated_sensors, use_isolated_ros_env
         from mm_pc.monitor.context import MonitorConfig, MonitorContext
-        from mm_pc.monitor.export import grab_png
         from mm_pc.monitor.main_window import MainWindow
         from mm_pc.monitor.model.session import MonitorSession
         from mm_pc.monitor.settings import open_settings
@@ -488,26 +487,36 @@ def _run(args, headless: bool) -> int:
         seconds = time.monotonic() - started
         if stopped_by:
             print(stop_signals.stop_line("mm-monitor", stopped_by[0]), file=sys.stderr)
+        # the summary and the screenshot show the run as it ended: taken before the --sim
+        # node is stopped (a slow PC's bridge saw it go first and the summary said "lost")
+        ended = summary(window, seconds) if headless or args.duration else ""
+        code = 0
+        if args.screenshot is not None and not node_exit:
+            code = _screenshot(window, args.screenshot)
         if node is not None and node.poll() is None:
             node.send_signal(signal.SIGINT)  # it stops while the window and bridge close
-        code = 0
         if node_exit:
             print(f"mm-monitor: --sim: {node_exit[0]}", file=sys.stderr)
             window.close()
             return 2
-        if args.screenshot is not None:
-            window.tabs.setCurrentIndex(window.tabs.currentIndex())
-            window.frame()
-            try:
-                path = grab_png(window, args.screenshot)
-                print(f"mm-monitor: screenshot {path}", flush=True)
-            except OSError as e:
-                print(f"mm-monitor: {e}", file=sys.stderr)
-                code = 1
-        if headless or args.duration:
-            print(summary(window, seconds), flush=True)
+        if ended:
+            print(ended, flush=True)
         window.close()
     return code
+
+
+def _screenshot(window, path) -> int:
+    """The window as a PNG at ``path``; 0, or 1 with the reason on stderr."""
+    from mm_pc.monitor.export import grab_png
+
+    window.tabs.setCurrentIndex(window.tabs.currentIndex())
+    window.frame()
+    try:
+        print(f"mm-monitor: screenshot {grab_png(window, path)}", flush=True)
+    except OSError as e:
+        print(f"mm-monitor: {e}", file=sys.stderr)
+        return 1
+    return 0
 
 
 def quit_on_signals(app) -> list[int]:
