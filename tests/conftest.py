@@ -10,11 +10,21 @@ from __future__ import annotations
 import atexit
 import os
 import shutil
+import signal
 import tempfile
 
 from hypothesis import settings
 
 from mm_beagle.tools.harness import use_isolated_ros_env
+
+# The suite tests the commands as a user's terminal starts them: a suite started in the
+# background (`nohup ... &`, a CI runner) inherits SIGINT/SIGTERM ignored, which every
+# child would keep (by design: mm_pc.stop_signals leaves an ignored signal ignored) and
+# each Ctrl-C test would fail. Put back the defaults the children then inherit.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+if signal.getsignal(signal.SIGTERM) is signal.SIG_IGN:
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 # the harness's one definition (domain, localhost, no static peers); a private domain
 # even if the shell has a ROS_DOMAIN_ID: tests must not meet the user's live nodes
