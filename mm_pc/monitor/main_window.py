@@ -315,6 +315,7 @@ class MainWindow(QMainWindow):
             self._on_state(ctx.bridge.state)
         else:
             self._on_state("offline")
+        self._refreshed_at: dict[int, float] = {}  # id(view) -> its last refresh (_due)
         self.frame_timer = QTimer(self)
         self.frame_timer.setInterval(int(1000 / FRAME_HZ))
         self.frame_timer.timeout.connect(self.frame)
@@ -520,7 +521,7 @@ class MainWindow(QMainWindow):
         """Redraw the visible views (each does nothing when its data did not change)."""
         t0 = time.perf_counter()
         current = self.current_view()
-        if current is not None and hasattr(current, "refresh"):
+        if current is not None and hasattr(current, "refresh") and self._due(current, t0):
             current.refresh()
         self.direction_panel.refresh()
         hist = self.ctx.session.history
@@ -530,6 +531,17 @@ class MainWindow(QMainWindow):
             self.rows_label.setText(f"{len(hist)} samples")
         self._show_chips()
         self.frame_ms.append((time.perf_counter() - t0) * 1e3)
+
+    def _due(self, view, now: float) -> bool:
+        """Whether ``view`` is refreshed in the frame at ``now`` (perf_counter s): a view with
+        a ``refresh_period_s`` (the Data tables) at most that often, the others every frame."""
+        period = getattr(view, "refresh_period_s", 0.0)
+        if period <= 0.0:
+            return True
+        if now < self._refreshed_at.get(id(view), -math.inf) + period:
+            return False
+        self._refreshed_at[id(view)] = now
+        return True
 
     def _show_chips(self) -> None:
         """The sensors' chips in the status bar ("PMW3360 + PMW3389"), each named in the

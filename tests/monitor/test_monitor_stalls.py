@@ -3,25 +3,30 @@ fast (the timing lives in ``mm-bench gui``'s ``stalls`` figure)."""
 
 from __future__ import annotations
 
+import itertools
 import multiprocessing
 import os
 import sys
 import time
 
 import pytest
-from PySide6.QtCore import QTimer
+from PySide6.QtCore import Qt, QTimer
 
 from mm_pc.bench.gui import STALL_MS, _Heartbeat, stall_figures
-from mm_pc.monitor.context import MonitorContext
+from mm_pc.monitor.context import MonitorConfig, MonitorContext
+from mm_pc.monitor.main_window import MainWindow
 from mm_pc.monitor.model import sim_process
 from mm_pc.monitor.model.csv_export import (
+    CSV_STEP_ROWS,
+    StepRows,
     csv_chunks,
     csv_columns,
     export_csv,
     history_csv_chunks,
 )
 from mm_pc.monitor.model.session import MonitorSession
-from mm_pc.monitor.widgets.data_list import DataListView
+from mm_pc.monitor.model.sim_feed import sim_replies
+from mm_pc.monitor.widgets.data_list import REFRESH_PERIOD_S, DataListView, HistoryTableModel
 
 
 def test_stall_figures_count_the_gaps_over_100_ms():
@@ -79,17 +84,54 @@ def test_history_chunks_copy_only_the_rows_held_at_the_start(tmp_path, feed):
     hist = ctx.session.history
     n = len(hist)
     assert export_csv(hist, 0, tmp_path / "once.csv") == n
-    steps = history_csv_chunks(hist, 0, tmp_path / "steps.csv", rows=300)
+    steps = history_csv_chunks(hist, 0, tmp_path / "steps.csv", rows=300, step_s=None)
     assert next(steps) == 0
     hist.append(hist.tail(1)[0])  # a row arrives between two steps: not in this file
     assert list(steps) == [*range(300, n, 300), n]
     assert (tmp_path / "steps.csv").read_text() == (tmp_path / "once.csv").read_text()
 
 
+def test_export_steps_follow_the_pace_of_the_pc():
+    size = StepRows(2500, 0.008)
+    size.took(2500, 0.032)  # a PC four times slower than the first guess
+    assert size.rows == 625
+    size.took(625, 0.004)  # faster again: at most twice the rows before a step
+    assert size.rows == 1250
+    size.took(1250, 0.010)
+    assert size.rows == 1000
+    size.took(1000, 5.0)  # a preempted step: never under the floor
+    assert size.rows == CSV_STEP_ROWS[0]
+    for _ in range(20):
+        size.took(size.rows, 1e-6)
+    assert size.rows == CSV_STEP_ROWS[1]
+    size.took(0, 0.0)  # nothing measured: unchanged
+    assert size.rows == CSV_STEP_ROWS[1]
+    fixed = StepRows(300, None)
+    fixed.took(300, 1.0)
+    assert fixed.rows == 300
+
+
+def test_history_chunks_sized_by_time_write_the_same_file(tmp_path, feed, monkeypatch):
+    ctx = MonitorContext(MonitorSession())
+    feed(ctx, name="figure_eight", rate_hz=100.0, seconds=60.0)
+    hist = ctx.session.history
+    n = len(hist)
+    assert export_csv(hist, 0, tmp_path / "once.csv") == n
+    # a clock that says each step took 10 ms: a step of 8 ms holds 0.8x the rows before
+    clock = iter(x * 0.010 for x in range(10_000))
+    monkeypatch.setattr("mm_pc.monitor.model.csv_export.time.perf_counter", lambda: next(clock))
+    steps = list(history_csv_chunks(hist, 0, tmp_path / "steps.csv", rows=1000, step_s=0.008))
+    assert steps[:5] == [0, 1000, 1800, 2440, 2952], steps
+    sizes = [b - a for a, b in itertools.pairwise(steps[1:-1])]
+    assert steps[-1] == n and min(sizes) == CSV_STEP_ROWS[0], sizes
+    assert (tmp_path / "steps.csv").read_text() == (tmp_path / "once.csv").read_text()
+
+
 def test_history_chunks_refuse_a_history_cleared_meanwhile(qtbot, tmp_path, feed):
     ctx = MonitorContext(MonitorSession())
     feed(ctx, name="figure_eight", rate_hz=100.0, seconds=10.0)
-    steps = history_csv_chunks(ctx.session.history, 0, tmp_path / "x.csv", rows=300)
+    steps = history_csv_chunks(ctx.session.history, 0, tmp_path / "x.csv", rows=300,
+                               step_s=None)
     assert next(steps) == 0 and next(steps) == 300
     ctx.session.history.clear()
     with pytest.raises(ValueError, match="cleared or its oldest rows dropped during the export"):
@@ -185,3 +227,88 @@ def test_a_child_that_died_without_closing_the_pipe_is_reported():
     assert result is not None and result[0] == "error"
     assert "ended without a result" in result[1] and "exit code -9" in result[1]
     assert job.done and job.poll() is None
+
+
+class _Clock:
+    """``time`` for main_window with a perf_counter the test moves (s)."""
+
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def perf_counter(self) -> float:
+        return self.now
+
+    def __getattr__(self, name):
+        return getattr(time, name)
+
+
+def test_the_window_refreshes_the_data_table_at_most_every_period(qapp, tmp_path, feed,
+                                                                  monkeypatch):  # fmt: skip
+    # a repaint of the table costs ~2000 Python calls (40 ms on a slow PC): at 30 frames a
+    # second the Data tab at 500 Hz held the window 80 % of the time; the other views
+    # still get every frame
+    clock = _Clock()
+    monkeypatch.setattr("mm_pc.monitor.main_window.time", clock)
+    config = MonitorConfig(rate_hz=100.0, calibration_file=tmp_path / "cal.yaml")
+    w = MainWindow(MonitorContext(MonitorSession(), None, config), None)
+    w.frame_timer.stop()
+    replies = list(sim_replies("figure_eight", 100.0, 2.0))
+    feed(w.ctx, replies[:101])  # the first reply is the baseline: 100 rows
+    data = w.views["Data"]
+    w.tabs.setCurrentIndex(w.tabs.indexOf(data.parentWidget().parentWidget()))
+    w.frame()
+    model = data.tables[0].model
+    assert model.rowCount() == 100
+    feed(w.ctx, replies[101:111])
+    clock.now += 0.6 * REFRESH_PERIOD_S
+    w.frame()
+    assert model.rowCount() == 100  # not yet
+    clock.now += 0.6 * REFRESH_PERIOD_S
+    w.frame()
+    assert model.rowCount() == 110
+    graphs = w.views["Graphs"]
+    calls = []
+    monkeypatch.setattr(graphs, "refresh", lambda: calls.append(clock.now))
+    w.tabs.setCurrentIndex(w.tabs.indexOf(graphs.parentWidget().parentWidget()))
+    for _ in range(3):
+        clock.now += 0.01
+        w.frame()
+    assert len(calls) == 3
+    w.close()
+
+
+def test_the_row_numbers_widen_the_header_without_asking_every_label(qtbot, feed, monkeypatch):
+    # Qt's own size hint asked the model for ~200 sections' labels after every insert
+    asked = []
+    label = HistoryTableModel.headerData
+
+    def counting(self, section, orientation, role=Qt.ItemDataRole.DisplayRole):
+        if orientation == Qt.Orientation.Vertical:
+            asked.append(section)
+        return label(self, section, orientation, role)
+
+    monkeypatch.setattr(HistoryTableModel, "headerData", counting)
+    ctx = MonitorContext(MonitorSession())
+    replies = list(sim_replies("figure_eight", 100.0, 10.2))
+    feed(ctx, replies[:991])  # the first reply is the baseline: 990 rows
+    view = DataListView(ctx)
+    qtbot.addWidget(view)
+    view.resize(900, 500)
+    view.show()
+    view.refresh()
+    qtbot.wait(1)
+    table = view.tables[0].table
+    header = table.verticalHeader()
+    fm = header.fontMetrics()
+    assert fm.horizontalAdvance("990") <= header.width() < fm.horizontalAdvance("1000")
+    asked.clear()
+    feed(ctx, replies[991:1011])  # 990 -> 1010 rows: one more digit
+    view.refresh()
+    qtbot.wait(1)
+    table.viewport().repaint()
+    header.viewport().repaint()
+    assert header.width() >= fm.horizontalAdvance("1010"), header.width()
+    assert header.model().headerData(0, Qt.Orientation.Vertical) == "1010"
+    # the visible sections' labels (and a few more), not every section's
+    assert 0 < len(asked) < 400, len(asked)
+    assert max(asked) < 60, max(asked)

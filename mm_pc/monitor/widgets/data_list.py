@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from PySide6.QtCore import QAbstractTableModel, QEvent, QModelIndex, Qt, QTimer, Signal
+from PySide6.QtCore import QAbstractTableModel, QEvent, QModelIndex, QSize, Qt, QTimer, Signal
 from PySide6.QtGui import QGuiApplication, QKeySequence
 from PySide6.QtWidgets import (
     QAbstractItemView,
@@ -37,10 +37,14 @@ from mm_pc.monitor.model.csv_export import (
 from mm_pc.monitor.settings import last_folder, remember_folder
 from mm_pc.monitor.widgets.style import ERROR_STYLE
 
-__all__ = ["MAX_ROWS", "DataListView", "HistoryTableModel"]
+__all__ = ["MAX_ROWS", "REFRESH_PERIOD_S", "DataListView", "HistoryTableModel"]
 
 #: Rows listed per sensor (the newest); the CSV export has them all.
 MAX_ROWS = 100_000
+#: the window's frames announce new rows to the table at most this often (s): a repaint of
+#: the table asks the model for every visible cell's roles (~2000 Python calls, 40 ms on a
+#: slow PC), and numbers that change 30 times a second cannot be read anyway
+REFRESH_PERIOD_S = 0.1
 
 _DISPLAY = Qt.ItemDataRole.DisplayRole
 _ALIGNMENT_ROLE = Qt.ItemDataRole.TextAlignmentRole
@@ -72,6 +76,26 @@ def fit_columns(table: QTableView) -> None:
         widest = _WIDEST.get(fmt, "-99999.9999")
         table.setColumnWidth(col, max(hfm.horizontalAdvance(title) + head_pad,
                                       fm.horizontalAdvance(widest) + cell_pad))
+
+
+class _NumberHeader(QHeaderView):
+    """The tables' vertical header (the reply numbers, newest first, so section 0 holds the
+    widest). Qt's own size hint is the widest of ~200 sections' labels, asked again from the
+    model every time rows are inserted (~1000 Python calls a frame); this one measures
+    section 0 once per number of digits."""
+
+    def __init__(self, parent=None) -> None:
+        super().__init__(Qt.Orientation.Vertical, parent)
+        self._hint: tuple[int, QSize] | None = None
+
+    def sizeHint(self) -> QSize:  # noqa: N802 - Qt API
+        model = self.model()
+        if model is None or model.rowCount() == 0:
+            return super().sizeHint()
+        digits = len(str(model.headerData(0, Qt.Orientation.Vertical)))
+        if self._hint is None or self._hint[0] != digits:
+            self._hint = (digits, self.sectionSizeFromContents(0))
+        return self._hint[1]
 
 
 class HistoryTableModel(QAbstractTableModel):
@@ -177,7 +201,7 @@ class HistoryTableModel(QAbstractTableModel):
             self.endInsertRows()
         else:
             self._len = n
-        self.headerDataChanged.emit(Qt.Vertical, 0, max(0, self._rows - 1))
+        # no headerDataChanged: a row's number (len - section) moves with the row
 
     def reset(self) -> None:
         """Re-read everything (after a clear or when the history dropped old rows)."""
@@ -230,6 +254,7 @@ class SensorTable(QWidget):
         #: the CSV file name's prefix (the replayed recording's name; "" = live)
         self.csv_prefix = ""
         self.table = _CopyTableView()
+        self.table.setVerticalHeader(_NumberHeader(self.table))
         self.table.setModel(self.model)
         self.table.setSelectionBehavior(QAbstractItemView.SelectRows)
         self.table.setSelectionMode(QAbstractItemView.ExtendedSelection)
@@ -291,7 +316,8 @@ class SensorTable(QWidget):
 
     def export_in_background(self, path: str | Path) -> bool:
         """Export this sensor's rows without holding the window: the rows held now are copied
-        and written 2500 a timer tick (``csv_export.history_csv_chunks``; an hour of 100 Hz
+        and written a step a timer tick, each about 8 ms (``csv_export.history_csv_chunks``,
+        its rows follow the PC's pace; an hour of 100 Hz
         rows took ~0.6 s in one go: a freeze). No worker thread: a
         Python thread can run the garbage collector and destroy Qt objects off the GUI
         thread. The button is disabled meanwhile, the result shown beside it when done;
@@ -341,6 +367,9 @@ class SensorTable(QWidget):
 
 class DataListView(QWidget):
     """Tabs with one :class:`SensorTable` per sensor."""
+
+    #: the window's frames refresh this view at most this often (s)
+    refresh_period_s = REFRESH_PERIOD_S
 
     def __init__(self, ctx, parent=None) -> None:
         super().__init__(parent)
