@@ -95,8 +95,10 @@ def cpu_figures(cpu_s: float, wall_s: float, replies: int) -> dict:
 HEARTBEAT_MS = 10
 STALL_MS = 100.0
 #: the actions of the stall phase, in order (see :func:`_stalls`)
-STALL_ACTIONS = ("tabs_500hz", "simulate_mowing_run", "csv_export", "png_export", "replay",
-                 "replay_seek")
+STALL_ACTIONS = ("tabs_500hz", "data_tab_500hz", "simulate_mowing_run", "csv_export",
+                 "png_export", "replay", "replay_seek")
+#: how long the ``data_tab_500hz`` action keeps the Data tab open (s)
+DATA_TAB_S = 5.0
 
 
 class _Heartbeat:
@@ -169,6 +171,7 @@ def _stalls(window, bridge, app, tmp: Path, actions=STALL_ACTIONS, sim_timeout_s
     loop and the loop runs until it is over:
 
     * ``tabs_500hz``: every tab in turn, 0.3 s each, twice;
+    * ``data_tab_500hz``: the Data tab left open for :data:`DATA_TAB_S` (its table follows);
     * ``simulate_mowing_run``: Maps tab, "Simulate mowing run" clicked, until the run is
       shown (``sim_build_s``: how long the user waits);
     * ``csv_export``: the Data tab's Export CSV of the first sensor (every row);
@@ -241,6 +244,18 @@ def _tab_switches(window, app, tmp, extra):
     return timer.start, lambda: n[0] >= total, 0.3 * total + 5, lambda: extra.update(
         tab_switches=n[0]
     )
+
+
+def _data_tab(window, app, tmp, extra):
+    """The Data tab left open for :data:`DATA_TAB_S` at 500 Hz (its table takes the newest
+    rows as they come)."""
+    view, until = window.views["Data"], [math.inf]
+
+    def start() -> None:
+        window.tabs.setCurrentIndex(window.tabs.indexOf(view.parentWidget().parentWidget()))
+        until[0] = time.perf_counter() + DATA_TAB_S
+
+    return start, lambda: time.perf_counter() >= until[0], DATA_TAB_S + 5.0, lambda: None
 
 
 def _show_tab(window, app, title: str):
@@ -364,6 +379,7 @@ def _replay_seek(window, app, tmp, extra):
 
 _ACTIONS = {
     "tabs_500hz": _tab_switches,
+    "data_tab_500hz": _data_tab,
     "simulate_mowing_run": _simulate,
     "csv_export": _csv_export,
     "png_export": _png_export,

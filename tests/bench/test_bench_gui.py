@@ -10,7 +10,7 @@ pytest.importorskip("rclpy")
 pytest.importorskip("PySide6")
 
 from mm_pc.bench.cli import main as bench_main
-from mm_pc.bench.gui import bench_gui
+from mm_pc.bench.gui import DATA_TAB_S, bench_gui
 
 POSITIVE = (
     "frame_ms_p50",
@@ -66,9 +66,10 @@ def test_bench_gui_reports_every_figure(qapp):
     st = r["stalls"]
     assert st["heartbeat_ms"] == 10 and st["stall_ms"] == 100.0
     assert set(st["by_action"]) == {
-        "tabs_500hz", "simulate_mowing_run", "csv_export", "png_export", "replay",
-        "replay_seek",
+        "tabs_500hz", "data_tab_500hz", "simulate_mowing_run", "csv_export", "png_export",
+        "replay", "replay_seek",
     }  # fmt: skip
+    assert st["by_action"]["data_tab_500hz"]["seconds"] >= DATA_TAB_S
     # the seek back to 17 s of the 30 s recording at 100 Hz: from the keyframe at 15 s
     assert st["seek_keyframes"] == 4 and st["seek_back_replies"] == 200
     assert 0 < st["seek_back_s"] < 30.0

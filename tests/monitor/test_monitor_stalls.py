@@ -3,7 +3,6 @@ fast (the timing lives in ``mm-bench gui``'s ``stalls`` figure)."""
 
 from __future__ import annotations
 
-import itertools
 import multiprocessing
 import os
 import sys
@@ -17,8 +16,6 @@ from mm_pc.monitor.context import MonitorConfig, MonitorContext
 from mm_pc.monitor.main_window import MainWindow
 from mm_pc.monitor.model import sim_process
 from mm_pc.monitor.model.csv_export import (
-    CSV_STEP_ROWS,
-    StepRows,
     csv_chunks,
     csv_columns,
     export_csv,
@@ -67,6 +64,28 @@ def test_csv_export_in_background_writes_what_export_to_writes(qtbot, tmp_path, 
     assert out.read_text() == (tmp_path / "now.csv").read_text()
 
 
+def test_csv_export_in_background_shows_its_progress(qtbot, tmp_path, feed, monkeypatch):
+    monkeypatch.setattr("mm_pc.monitor.widgets.data_list.PROGRESS_PERIOD_S", 0.0)
+    ctx = MonitorContext(MonitorSession())
+    feed(ctx, name="figure_eight", rate_hz=100.0, seconds=60.0)
+    view = DataListView(ctx)
+    qtbot.addWidget(view)
+    table = view.tables[0]
+    texts: list[str] = []
+    show = table.message.setText
+    monkeypatch.setattr(table.message, "setText", lambda t: (texts.append(t), show(t)))
+    n = len(ctx.session.history)
+    out = tmp_path / "bg.csv"
+    assert table.export_in_background(out)
+    qtbot.waitUntil(lambda: table.export_button.isEnabled(), timeout=20_000)
+    shares = [int(t.rsplit(" ", 2)[-2]) for t in texts if t.endswith(" %")]
+    assert texts[0] == f"writing {n} rows to {out} …"
+    assert texts[1] == f"writing {n} rows to {out} … 0 %"  # the header
+    assert 100 * 2500 // n in shares  # the first step's rows
+    assert shares == sorted(shares) and shares[-1] <= 100, shares
+    assert texts[-1] == f"{n} rows written to {out}"
+
+
 def test_csv_chunks_write_the_file_of_one_go(tmp_path, feed):
     ctx = MonitorContext(MonitorSession())
     feed(ctx, name="figure_eight", rate_hz=100.0, seconds=10.0)
@@ -84,54 +103,17 @@ def test_history_chunks_copy_only_the_rows_held_at_the_start(tmp_path, feed):
     hist = ctx.session.history
     n = len(hist)
     assert export_csv(hist, 0, tmp_path / "once.csv") == n
-    steps = history_csv_chunks(hist, 0, tmp_path / "steps.csv", rows=300, step_s=None)
+    steps = history_csv_chunks(hist, 0, tmp_path / "steps.csv", rows=300)
     assert next(steps) == 0
     hist.append(hist.tail(1)[0])  # a row arrives between two steps: not in this file
     assert list(steps) == [*range(300, n, 300), n]
     assert (tmp_path / "steps.csv").read_text() == (tmp_path / "once.csv").read_text()
 
 
-def test_export_steps_follow_the_pace_of_the_pc():
-    size = StepRows(2500, 0.008)
-    size.took(2500, 0.032)  # a PC four times slower than the first guess
-    assert size.rows == 625
-    size.took(625, 0.004)  # faster again: at most twice the rows before a step
-    assert size.rows == 1250
-    size.took(1250, 0.010)
-    assert size.rows == 1000
-    size.took(1000, 5.0)  # a preempted step: never under the floor
-    assert size.rows == CSV_STEP_ROWS[0]
-    for _ in range(20):
-        size.took(size.rows, 1e-6)
-    assert size.rows == CSV_STEP_ROWS[1]
-    size.took(0, 0.0)  # nothing measured: unchanged
-    assert size.rows == CSV_STEP_ROWS[1]
-    fixed = StepRows(300, None)
-    fixed.took(300, 1.0)
-    assert fixed.rows == 300
-
-
-def test_history_chunks_sized_by_time_write_the_same_file(tmp_path, feed, monkeypatch):
-    ctx = MonitorContext(MonitorSession())
-    feed(ctx, name="figure_eight", rate_hz=100.0, seconds=60.0)
-    hist = ctx.session.history
-    n = len(hist)
-    assert export_csv(hist, 0, tmp_path / "once.csv") == n
-    # a clock that says each step took 10 ms: a step of 8 ms holds 0.8x the rows before
-    clock = iter(x * 0.010 for x in range(10_000))
-    monkeypatch.setattr("mm_pc.monitor.model.csv_export.time.perf_counter", lambda: next(clock))
-    steps = list(history_csv_chunks(hist, 0, tmp_path / "steps.csv", rows=1000, step_s=0.008))
-    assert steps[:5] == [0, 1000, 1800, 2440, 2952], steps
-    sizes = [b - a for a, b in itertools.pairwise(steps[1:-1])]
-    assert steps[-1] == n and min(sizes) == CSV_STEP_ROWS[0], sizes
-    assert (tmp_path / "steps.csv").read_text() == (tmp_path / "once.csv").read_text()
-
-
 def test_history_chunks_refuse_a_history_cleared_meanwhile(qtbot, tmp_path, feed):
     ctx = MonitorContext(MonitorSession())
     feed(ctx, name="figure_eight", rate_hz=100.0, seconds=10.0)
-    steps = history_csv_chunks(ctx.session.history, 0, tmp_path / "x.csv", rows=300,
-                               step_s=None)
+    steps = history_csv_chunks(ctx.session.history, 0, tmp_path / "x.csv", rows=300)
     assert next(steps) == 0 and next(steps) == 300
     ctx.session.history.clear()
     with pytest.raises(ValueError, match="cleared or its oldest rows dropped during the export"):

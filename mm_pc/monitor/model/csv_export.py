@@ -9,7 +9,6 @@ integers: ``-1.81``, not ``-1.8097499999998323``; ``1600``, not ``1600.0``.
 from __future__ import annotations
 
 import csv
-import time
 from pathlib import Path
 
 import numpy as np
@@ -17,8 +16,8 @@ import numpy as np
 from mm_pc.monitor.model.history import History
 from mm_pc.monitor.model.session import sensor_columns
 
-__all__ = ["COLUMNS", "CSV_DECIMALS", "CSV_HEADER", "StepRows", "column_name", "csv_chunks",
-           "csv_columns", "export_csv", "history_csv_chunks", "write_csv_columns"]
+__all__ = ["COLUMNS", "CSV_DECIMALS", "CSV_HEADER", "column_name", "csv_chunks", "csv_columns",
+           "export_csv", "history_csv_chunks", "write_csv_columns"]
 
 #: (header with unit, field: "t" or a sensor field, scale from SI, format)
 COLUMNS: tuple[tuple[str, str, float, str], ...] = (
@@ -100,31 +99,8 @@ def write_csv_columns(cols: list[np.ndarray], path: str | Path) -> int:
     return written
 
 
-#: rows written per :func:`csv_chunks` step, and the first step of :func:`history_csv_chunks`
+#: rows written per :func:`csv_chunks` step (~7 ms on a quiet 2-core PC)
 CSV_CHUNK_ROWS = 2500
-#: a :func:`history_csv_chunks` step aims at this long (s): its rows follow the pace of the
-#: step before, so a slow PC writes fewer rows a timer tick instead of holding the window
-#: longer (2500 rows took ~7 ms on a quiet 2-core PC, 29-33 ms on one four times slower)
-CSV_STEP_S = 0.008
-#: the fewest and the most rows an adapted step writes
-CSV_STEP_ROWS = (100, 20_000)
-
-
-class StepRows:
-    """How many rows the next export step writes: ``rows`` at first, then what
-    ``step_s`` seconds hold at the pace of the step before (at most twice the rows before,
-    within :data:`CSV_STEP_ROWS`, so one preempted step does not swing it); ``step_s``
-    None: always ``rows``."""
-
-    def __init__(self, rows: int = CSV_CHUNK_ROWS, step_s: float | None = CSV_STEP_S) -> None:
-        self.rows, self.step_s = max(1, int(rows)), step_s
-
-    def took(self, rows: int, seconds: float) -> None:
-        """A step wrote ``rows`` rows in ``seconds`` (s, wall time)."""
-        if self.step_s is None or rows <= 0 or seconds <= 0.0:
-            return
-        lo, hi = CSV_STEP_ROWS
-        self.rows = round(min(max(rows * self.step_s / seconds, lo), 2 * rows, hi))
 
 
 def csv_chunks(cols: list[np.ndarray], path: str | Path, rows: int = CSV_CHUNK_ROWS):
@@ -133,16 +109,13 @@ def csv_chunks(cols: list[np.ndarray], path: str | Path, rows: int = CSV_CHUNK_R
     when it is exhausted or closed). The same file as one go: a GUI writes it a step per
     timer tick instead of holding its thread (an hour of rows took ~0.6 s in one go)."""
     n = len(cols[0])
-    size = StepRows(rows, None)
-    return _write_steps(path, lambda i, k: [c[i : i + k] for c in cols], n, size)
+    return _write_steps(path, ([c[i : i + rows] for c in cols] for i in range(0, n, rows)), n)
 
 
 def history_csv_chunks(history: History | None, sensor_index: int, path: str | Path,
-                       rows: int = CSV_CHUNK_ROWS,
-                       step_s: float | None = CSV_STEP_S):  # fmt: skip
+                       rows: int = CSV_CHUNK_ROWS):  # fmt: skip
     """:func:`csv_chunks` of the rows ``history`` holds now, each step copying only its own
-    rows (copying an hour's strided columns at once took 48-124 ms) and sized to take about
-    ``step_s`` (:class:`StepRows`; None: ``rows`` every step). Rows appended meanwhile
+    rows (copying an hour's strided columns at once took 48-124 ms). Rows appended meanwhile
     are not written; a step raises ValueError (the file is left incomplete) when the history
     was cleared or dropped its oldest rows since the start. ValueError at once as
     :func:`export_csv`."""
@@ -150,30 +123,25 @@ def history_csv_chunks(history: History | None, sensor_index: int, path: str | P
     n, dropped = len(history), history.dropped_rows
     scales = [scale for _h, _f, scale, _fmt in COLUMNS]
 
-    def part(i: int, k: int) -> list[np.ndarray]:
-        if len(history) < n or history.dropped_rows != dropped:
-            raise ValueError("the data was cleared or its oldest rows dropped during "
-                             "the export: export again")
-        return [history.column(name)[i : min(i + k, n)] * scale
-                for name, scale in zip(names, scales, strict=True)]
+    def parts():
+        for i in range(0, n, rows):
+            if len(history) < n or history.dropped_rows != dropped:
+                raise ValueError("the data was cleared or its oldest rows dropped during "
+                                 "the export: export again")
+            yield [history.column(name)[i : min(i + rows, n)] * scale
+                   for name, scale in zip(names, scales, strict=True)]
 
-    return _write_steps(path, part, n, StepRows(rows, step_s))
+    return _write_steps(path, parts(), n)
 
 
-def _write_steps(path: str | Path, part, n: int, size: StepRows):
-    """The generator of :func:`csv_chunks`: ``part(i, k)`` gives the columns of rows
-    i..i+k, ``size`` how many rows the next step takes (told how long each took)."""
+def _write_steps(path: str | Path, parts, n: int):
     with open(path, "w", newline="") as fh:
         out = csv.writer(fh)
         out.writerow(CSV_HEADER)
         yield 0
         done = 0
-        while done < n:
-            t0 = time.perf_counter()
-            cols = part(done, size.rows)
-            out.writerows(zip(*(_csv_values(c, d) for c, d in zip(cols, CSV_DECIMALS,
+        for part in parts:
+            out.writerows(zip(*(_csv_values(c, d) for c, d in zip(part, CSV_DECIMALS,
                                                                    strict=True)), strict=True))
-            written = len(cols[0])
-            size.took(written, time.perf_counter() - t0)
-            done = min(n, done + written)
+            done = min(n, done + len(part[0]))
             yield done
