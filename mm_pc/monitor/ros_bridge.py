@@ -393,7 +393,7 @@ class RosBridge(QObject):
 
             self._recording_subs.append(
                 self.node.create_subscription(
-                    msg_type, t.name, on_message, _qos_from_dict(t.qos), raw=True
+                    msg_type, t.name, on_message, _qos_from_dict(t.subscription_qos), raw=True
                 )
             )
 

@@ -5,30 +5,55 @@ agent's clock moved onto the PC's, :mod:`mm_beagle.link.remote`). Message header
 stamps follow the node clock instead: with the system clock that is the poll
 stamp itself; with ``use_sim_time`` (ROS time from /clock) it is the node's
 ROS time minus the poll's age on the wall clock, so a pose stamped 5 ms ago
-keeps that latency on the simulated time line. The poll stamps stay in the
-messages that carry them (SensorData ``stamp``, GetSamples ``stamp_ns``).
+keeps that latency on the simulated time line. ROS time moves in /clock's steps
+while the age grows continuously, so a newer poll whose reply waited longer would
+map to an earlier time: a node's stamps for newer polls never go back (up to
+``MAX_HOLD_NS``; a larger step back is the clock jumping, a bag looping, and passes).
+The poll stamps stay in the messages that carry them (SensorData ``stamp``,
+GetSamples ``stamp_ns``).
 """
 
 from __future__ import annotations
 
+import threading
 import time
+import weakref
 
 from builtin_interfaces.msg import Time
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 
-__all__ = ["ClockWatch", "node_stamp"]
+__all__ = ["MAX_HOLD_NS", "ClockWatch", "node_stamp"]
+
+#: the most a sim-time stamp is moved forward to keep a node's stamps in order (ns)
+MAX_HOLD_NS = 100_000_000
+
+_last_sim: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # node -> (poll, stamp)
+_last_lock = threading.Lock()
 
 
 def node_stamp(node: Node, poll_ns: int) -> Time:
     """The node-clock stamp of a poll stamped ``poll_ns`` (wall clock, ns since the epoch)."""
     clock = node.get_clock()
     if getattr(clock, "ros_time_is_active", False):
-        age = max(0, time.time_ns() - int(poll_ns))
-        t = max(0, clock.now().nanoseconds - age)
+        t = _sim_stamp(node, clock.now().nanoseconds, int(poll_ns))
     else:
         t = max(0, int(poll_ns))
     return Time(sec=t // 1_000_000_000, nanosec=t % 1_000_000_000)
+
+
+def _sim_stamp(node: Node, ros_now_ns: int, poll_ns: int) -> int:
+    """ROS time minus the poll's age, after the node's last stamp if the poll is newer."""
+    t = max(0, ros_now_ns - max(0, time.time_ns() - poll_ns))
+    with _last_lock:
+        last_poll, last_t = _last_sim.get(node, (-1, 0))
+        if poll_ns == last_poll:
+            return last_t
+        if poll_ns > last_poll:
+            if last_t - MAX_HOLD_NS < t <= last_t:
+                t = last_t + 1
+            _last_sim[node] = (poll_ns, t)
+    return t
 
 
 class ClockWatch:

@@ -4,8 +4,11 @@ tf2_ros is not among the PyPI Jazzy wheels, so the nodes publish
 ``tf2_msgs/msg/TFMessage`` themselves with the QoS tf2_ros's broadcasters use
 (RViz, Nav2 and robot_localization cannot tell the difference): /tf reliable,
 volatile, depth 100; /tf_static reliable, transient-local, depth 1 (a late
-subscriber still gets the mounts). ./compile builds tf2_msgs where no system
-ROS provides it (mm_interfaces/vendor/tf2_msgs, same type hash as Jazzy's).
+subscriber still gets the mounts). Subscribers to /tf_static use tf2_ros's listener
+depth of 100 (:data:`STATIC_LISTENER_QOS`): with depth 1 a reader keeps only the last of
+several publishers' latched messages that arrive together and loses the others' frames.
+./compile builds tf2_msgs where no system ROS provides it (mm_interfaces/vendor/tf2_msgs,
+same type hash as Jazzy's).
 
 Frames: REP 103/105 (odom -> base_link, map -> odom); poses in metres and rad.
 Many robots on one /tf: every node that names frames takes ``frame_prefix`` (as
@@ -36,6 +39,7 @@ __all__ = [
     "COUNTS_SUFFIX",
     "COUNTS_YAW",
     "DYNAMIC_QOS",
+    "STATIC_LISTENER_QOS",
     "STATIC_QOS",
     "TfPublisher",
     "counts_frame",
@@ -52,6 +56,10 @@ __all__ = [
 DYNAMIC_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 STATIC_QOS = QoSProfile(
     depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+)
+#: a /tf_static subscription's (tf2_ros's StaticListenerQoS): room for every publisher's mounts
+STATIC_LISTENER_QOS = QoSProfile(
+    depth=100, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
 )
 
 

@@ -557,7 +557,7 @@ def test_onboard_odometry_broadcasts_tf_when_asked_and_resets(tmp_path):
     from nav_msgs.msg import Odometry
     from tf2_msgs.msg import TFMessage
 
-    from mm_pc.ros.tf import DYNAMIC_QOS, STATIC_QOS
+    from mm_pc.ros.tf import DYNAMIC_QOS, STATIC_LISTENER_QOS
 
     ns = "/onboard_tf"
     params = {
@@ -589,7 +589,9 @@ def test_onboard_odometry_broadcasts_tf_when_asked_and_resets(tmp_path):
                 matched += 1
             assert matched >= 5
             statics: list = []
-            client.node.create_subscription(TFMessage, "/tf_static", statics.append, STATIC_QOS)
+            client.node.create_subscription(
+                TFMessage, "/tf_static", statics.append, STATIC_LISTENER_QOS
+            )
             wait_until(lambda: statics, 5, "/tf_static for a late subscriber", interval=0.05)
             frames = statics[0].transforms[:2]  # then each one's _counts (SensorData's)
             assert [f.child_frame_id for f in statics[0].transforms] == [

@@ -68,11 +68,11 @@ def test_topic_and_reply_name_the_prefixed_counting_frame(node, client):
 def test_the_counting_frame_is_on_tf_static_turned_by_minus_90_degrees(node, client):
     from tf2_msgs.msg import TFMessage
 
-    from mm_pc.ros.tf import STATIC_QOS
+    from mm_pc.ros.tf import STATIC_LISTENER_QOS
 
     statics: list = []
     sub = client.node.create_subscription(
-        TFMessage, "/tf_static", lambda m: statics.extend(m.transforms), STATIC_QOS
+        TFMessage, "/tf_static", lambda m: statics.extend(m.transforms), STATIC_LISTENER_QOS
     )
     try:  # latched: this late subscriber still gets them
         wait_until(lambda: set(COUNTS.values()) <= {t.child_frame_id for t in statics}, 20,

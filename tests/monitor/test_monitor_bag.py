@@ -411,6 +411,10 @@ def test_the_live_topics_and_their_qos():
     assert topics["/robot1/mm_beagle/sensor_data"].qos == SENSOR_DATA_QOS
     assert SENSOR_DATA_QOS["reliability"] == "best_effort"
     assert topics["/tf_static"].qos["durability"] == "transient_local"
+    # the recording states the broadcaster's depth 1; the recorder listens with tf2_ros's 100
+    assert topics["/tf_static"].qos["depth"] == 1
+    assert topics["/tf_static"].subscription_qos == {**TF_STATIC_QOS, "depth": 100}
+    assert topics["/tf"].subscription_qos == topics["/tf"].qos
     assert topics["/tf"].qos["depth"] == 100
 
 

@@ -76,7 +76,7 @@ def start(ros_command, module: str, params: dict, ns: str) -> subprocess.Popen:
 def test_two_robots_with_frame_prefixes_share_tf_without_colliding(tmp_path, ros_command):
     from tf2_msgs.msg import TFMessage
 
-    from mm_pc.ros.tf import DYNAMIC_QOS, STATIC_QOS
+    from mm_pc.ros.tf import DYNAMIC_QOS, STATIC_LISTENER_QOS
 
     procs = {}
     for r in ROBOTS:
@@ -95,7 +95,7 @@ def test_two_robots_with_frame_prefixes_share_tf_without_colliding(tmp_path, ros
         TFMessage, "/tf", lambda m: dynamic.extend(m.transforms), DYNAMIC_QOS
     )
     client.node.create_subscription(
-        TFMessage, "/tf_static", lambda m: static.extend(m.transforms), STATIC_QOS
+        TFMessage, "/tf_static", lambda m: static.extend(m.transforms), STATIC_LISTENER_QOS
     )
     for r in ROBOTS:
         client.node.create_subscription(Odometry, f"/{r}/mm_beagle/odom", onboard[r].append, 10)
@@ -191,7 +191,7 @@ def test_remapping_tf_per_namespace_keeps_two_robots_apart(tmp_path, ros_command
     robot's namespace, so each tree is on /NS/tf and /NS/tf_static and nothing on /tf."""
     from tf2_msgs.msg import TFMessage
 
-    from mm_pc.ros.tf import DYNAMIC_QOS, STATIC_QOS
+    from mm_pc.ros.tf import DYNAMIC_QOS, STATIC_LISTENER_QOS
 
     remap = ["-r", "/tf:=tf", "-r", "/tf_static:=tf_static"]
     procs = {}
@@ -202,9 +202,9 @@ def test_remapping_tf_per_namespace_keeps_two_robots_apart(tmp_path, ros_command
         )
     client = BeagleClient("tf_remap_client")
     got: dict[str, list] = {}
-    for topic, qos in [("/tf", DYNAMIC_QOS), ("/tf_static", STATIC_QOS)] + [
+    for topic, qos in [("/tf", DYNAMIC_QOS), ("/tf_static", STATIC_LISTENER_QOS)] + [
         (f"/{r}/{name}", qos) for r in ROBOTS
-        for name, qos in (("tf", DYNAMIC_QOS), ("tf_static", STATIC_QOS))
+        for name, qos in (("tf", DYNAMIC_QOS), ("tf_static", STATIC_LISTENER_QOS))
     ]:  # fmt: skip
         got[topic] = []
         client.node.create_subscription(

@@ -61,7 +61,7 @@ def test_tf_follows_odom_reset_starts_over_and_live_parameters_are_checked(
 ):
     from tf2_msgs.msg import TFMessage
 
-    from mm_pc.ros.tf import DYNAMIC_QOS, STATIC_QOS
+    from mm_pc.ros.tf import DYNAMIC_QOS, STATIC_LISTENER_QOS
 
     ns = "/tfo"
     odo = start_odometry(ros_command, {"rate": 20.0, "path_rate": 5.0}, ns)
@@ -85,7 +85,9 @@ def test_tf_follows_odom_reset_starts_over_and_live_parameters_are_checked(
                 assert planar_tf(t) == pytest.approx(planar_odom(o), abs=1e-12)
             # /tf_static: a subscriber that comes late still gets the mounts
             statics: list = []
-            client.node.create_subscription(TFMessage, "/tf_static", statics.append, STATIC_QOS)
+            client.node.create_subscription(
+                TFMessage, "/tf_static", statics.append, STATIC_LISTENER_QOS
+            )
             wait_until(lambda: statics, 10, "/tf_static for a late subscriber")
             frames, counts = statics[0].transforms[:2], statics[0].transforms[2:]
             assert [f.child_frame_id for f in frames] == ["mouse_spidev1_0", "mouse_spidev1_1"]
@@ -158,7 +160,7 @@ def test_two_namespaces_ask_their_own_beagle_and_publish_tf_false_sends_no_tf(
     from diagnostic_msgs.msg import DiagnosticArray
     from tf2_msgs.msg import TFMessage
 
-    from mm_pc.ros.tf import DYNAMIC_QOS, STATIC_QOS
+    from mm_pc.ros.tf import DYNAMIC_QOS, STATIC_LISTENER_QOS
 
     robots = {"/robot1": STRAIGHT, "/robot2": {"backend": "sim", "sim_trajectory": "still"}}
     procs = {ns: start_odometry(ros_command, {"rate": 20.0, "publish_tf": False}, ns)
@@ -192,7 +194,9 @@ def test_two_namespaces_ask_their_own_beagle_and_publish_tf_false_sends_no_tf(
             )
             assert all(o.pose.pose.position.x == 0.0 for o in odoms["/robot2"])
             static: list = []
-            client.node.create_subscription(TFMessage, "/tf_static", static.append, STATIC_QOS)
+            client.node.create_subscription(
+                TFMessage, "/tf_static", static.append, STATIC_LISTENER_QOS
+            )
             wait_until(lambda: len(hardware) == 2, 10, f"diagnostics: {hardware}")
             time.sleep(0.5)
             assert not tf_seen and not static  # publish_tf false: nothing on either

@@ -3,8 +3,10 @@ nodes' TfPublisher sends arrives on /tf and (latched) /tf_static."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
+import time
 from pathlib import Path
 
 import pytest
@@ -32,7 +34,7 @@ def test_transforms_arrive_on_tf_and_the_mounts_stay_latched_on_tf_static():
 
     from mm_pc.core.angles import quaternion_yaw
     from mm_pc.core.geometry import DEFAULT_MOUNTS
-    from mm_pc.ros.tf import STATIC_QOS, TfPublisher, mount_transforms, planar_transform
+    from mm_pc.ros.tf import STATIC_LISTENER_QOS, TfPublisher, mount_transforms, planar_transform
 
     ctx = rclpy.Context()  # its own: other tests may hold the default context
     rclpy.init(context=ctx)
@@ -43,7 +45,9 @@ def test_transforms_arrive_on_tf_and_the_mounts_stay_latched_on_tf_static():
         tf.send_static(mount_transforms(stamp, "base_link", ["s0", "s1"], DEFAULT_MOUNTS))
         got: dict[str, list] = {"/tf": [], "/tf_static": []}
         # subscribed after the static transforms were sent: transient-local still delivers
-        node.create_subscription(TFMessage, "/tf_static", got["/tf_static"].append, STATIC_QOS)
+        node.create_subscription(
+            TFMessage, "/tf_static", got["/tf_static"].append, STATIC_LISTENER_QOS
+        )
         node.create_subscription(TFMessage, "/tf", got["/tf"].append, 10)
         ex = SingleThreadedExecutor(context=ctx)
         ex.add_node(node)
@@ -125,3 +129,58 @@ def test_a_counts_vector_through_the_counts_frame_is_the_robots_motion_in_base_l
         reported = turn(-mount.yaw, *map(float, base_to_sensor(*d)))  # what the chip counts
         back = turn(yaws[0], *turn(yaws[1], *reported))  # tf2: counts -> mouse -> base_link
         assert back == pytest.approx(d, abs=1e-15)
+
+
+def _recorder_static_qos():
+    from mm_pc.monitor.io.bag_format import live_topics
+    from mm_pc.monitor.ros_bridge import _qos_from_dict
+
+    (topic,) = [t for t in live_topics() if t.name == "/tf_static"]
+    return _qos_from_dict(topic.subscription_qos)
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize("listener", ["STATIC_LISTENER_QOS", "the monitor's recorder"])
+def test_a_late_static_listener_keeps_every_publishers_mounts(listener):
+    """Three nodes latch their mounts on /tf_static (two robots, or mm-odometry beside
+    mm-beagle's own odometry); a subscriber that joins later and has not spun yet still
+    gets all three. At depth 1 it kept only the last (a CI run lost r1's mounts)."""
+    from rclpy.executors import SingleThreadedExecutor
+    from tf2_msgs.msg import TFMessage
+
+    from mm_pc.core.geometry import DEFAULT_MOUNTS
+    from mm_pc.ros.tf import STATIC_LISTENER_QOS, TfPublisher, mount_transforms
+
+    qos = STATIC_LISTENER_QOS if listener == "STATIC_LISTENER_QOS" else _recorder_static_qos()
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    try:
+        robots = ("r0", "r1", "r2")
+        publishers = []  # held: a collected node takes its latched message with it
+        for r in robots:
+            node = rclpy.create_node(f"mm_tf_static_{r}", context=ctx)
+            publishers.append(TfPublisher(node))
+            publishers[-1].send_static(mount_transforms(
+                node.get_clock().now().to_msg(), f"{r}/base_link", [f"{r}/s0"], DEFAULT_MOUNTS[:1]
+            ))  # fmt: skip
+        listener_node = rclpy.create_node("mm_tf_static_listener", context=ctx)
+        seen: set[str] = set()
+        listener_node.create_subscription(
+            TFMessage, "/tf_static", lambda m: seen.update(t.child_frame_id for t in m.transforms),
+            qos,
+        )  # fmt: skip
+        time.sleep(1.0)  # every latched message is in the reader's queue before it is taken
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(listener_node)
+        want = {f"{r}/{f}" for r in robots for f in ("s0", "s0_counts")}
+
+        def all_seen() -> bool:
+            ex.spin_once(timeout_sec=0.1)
+            return want <= seen
+
+        with contextlib.suppress(AssertionError):  # the assert below says what was missing
+            wait_until(all_seen, 10, "every robot's mounts on /tf_static", interval=0)
+        assert seen == want
+        ex.shutdown()
+    finally:
+        rclpy.shutdown(context=ctx)

@@ -88,11 +88,18 @@ def qos_yaml(profiles: list[dict]) -> str:
 @dataclass(frozen=True)
 class LiveTopic:
     """A topic the recorder subscribes to: name, ``pkg/msg/Type``, the QoS of its publisher
-    (``qos``, the v9 dict; the subscription asks for a matching one)."""
+    (``qos``, the v9 dict, what the recording states was offered) and the depth the
+    subscription keeps (``listen_depth``, 0 = the publisher's)."""
 
     name: str
     type_name: str
     qos: dict
+    listen_depth: int = 0
+
+    @property
+    def subscription_qos(self) -> dict:
+        """The v9 dict the recorder subscribes with: the publisher's, at ``listen_depth``."""
+        return {**self.qos, "depth": self.listen_depth} if self.listen_depth else self.qos
 
 
 def live_topics(beagle: str = "/mm_beagle") -> tuple[LiveTopic, ...]:
@@ -110,7 +117,8 @@ def live_topics(beagle: str = "/mm_beagle") -> tuple[LiveTopic, ...]:
         LiveTopic(f"{base}/odom", odom, DEFAULT_QOS),
         LiveTopic(f"{ns}/mm_fusion/odom", odom, DEFAULT_QOS),
         LiveTopic("/tf", "tf2_msgs/msg/TFMessage", TF_QOS),
-        LiveTopic("/tf_static", "tf2_msgs/msg/TFMessage", TF_STATIC_QOS),
+        # tf2_ros's listener depth: several nodes' latched mounts may arrive together
+        LiveTopic("/tf_static", "tf2_msgs/msg/TFMessage", TF_STATIC_QOS, listen_depth=100),
         LiveTopic("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", DIAGNOSTICS_QOS),
     )
 
