@@ -294,3 +294,8 @@ def test_the_row_numbers_widen_the_header_without_asking_every_label(qtbot, feed
     # the visible sections' labels (and a few more), not every section's
     assert 0 < len(asked) < 400, len(asked)
     assert max(asked) < 60, max(asked)
+    # a bigger font is measured again at once, not at the next digit
+    font = header.font()
+    font.setPointSizeF(font.pointSizeF() * 2)
+    header.setFont(font)
+    assert header.sizeHint().width() >= header.fontMetrics().horizontalAdvance("1010")

@@ -85,11 +85,16 @@ class _NumberHeader(QHeaderView):
     """The tables' vertical header (the reply numbers, newest first, so section 0 holds the
     widest). Qt's own size hint is the widest of ~200 sections' labels, asked again from the
     model every time rows are inserted (~1000 Python calls a frame); this one measures
-    section 0 once per number of digits."""
+    section 0 once per number of digits, and again when its font or style changes."""
 
     def __init__(self, parent=None) -> None:
         super().__init__(Qt.Orientation.Vertical, parent)
         self._hint: tuple[int, QSize] | None = None
+
+    def changeEvent(self, event) -> None:  # noqa: N802 - Qt API
+        if event.type() in (QEvent.Type.FontChange, QEvent.Type.StyleChange):
+            self._hint = None
+        super().changeEvent(event)
 
     def sizeHint(self) -> QSize:  # noqa: N802 - Qt API
         model = self.model()
