@@ -40,7 +40,15 @@ from mm_pc.core.geometry import DEFAULT_MOUNTS
 from mm_pc.core.odometry import Odometry
 from mm_pc.sim import robot as sim
 
-__all__ = ["in_process", "pipeline", "through_processes", "write_path"]
+__all__ = [
+    "FinalPoses",
+    "in_process",
+    "pipeline",
+    "pose_of",
+    "start_pipeline",
+    "through_processes",
+    "write_path",
+]
 
 METHODS = ("exact", "two-sensor")
 #: mm-beagle's onboard odometry's key in the results (two-sensor, published at 15 Hz)
@@ -158,10 +166,7 @@ def through_processes(
 ) -> dict:  # fmt: skip
     """mm-beagle (sim, the file; ``lifts`` per second per sensor) and one mm-odometry per
     method and rate: final errors."""
-    from diagnostic_msgs.msg import DiagnosticArray
-    from nav_msgs.msg import Odometry as OdometryMsg
-
-    from mm_beagle.tools.harness import BeagleClient, _child, beagle_process, use_isolated_ros_env
+    from mm_beagle.tools.harness import use_isolated_ros_env
 
     v, _w, truth, length = _truth(path)
     motion_s = len(v) * sim.DT
@@ -176,70 +181,33 @@ def through_processes(
         "odometry_rate": 15.0, "odometry_method": "two-sensor",
         "sim_lift_rate": float(lifts),
     }  # fmt: skip
-    topics = {k: f"{ns[k]}/mm_odometry/odom" for k in nodes}
-    topics[ONBOARD] = "/mm_beagle/odom"
-    got: dict[str, list] = {k: [] for k in topics}
-    diags: dict[str, dict] = {}
-    lock = threading.Lock()
+    odometry = {
+        k: (ns[k], {"beagle": "/mm_beagle", "rate": hz, "method": m, "publish_tf": False})
+        for k, (m, hz) in nodes.items()
+    }
     with _Stack() as stack:
-        for k, (m, hz) in nodes.items():  # first: each baselines on mm-beagle's first reply
-            params = {"beagle": "/mm_beagle", "rate": hz, "method": m, "publish_tf": False}
-            stack.enter(_child(_odometry_command(ns[k], params), env, str(log_dir / f"{k}.log")))
-        stack.enter(beagle_process(beagle, env, str(log_dir / "beagle.log")))
+        client = start_pipeline(stack, odometry, beagle, env, log_dir, "mm_bench_pipeline")
         t_start = time.monotonic()
-        client = BeagleClient("mm_bench_pipeline")
-        stack.callback(client.close)
-        if not client.wait(30):
-            raise RuntimeError(f"mm-beagle did not come up (log: {log_dir / 'beagle.log'})")
-
-        def keep(k):
-            def on(msg):
-                with lock:
-                    got[k].append(msg)
-                    del got[k][:-30]
-
-            return on
-
-        for k, topic in topics.items():
-            client.node.create_subscription(OdometryMsg, topic, keep(k), 10)
-
-        def on_diag(msg):
-            for s in msg.status:
-                if s.name.endswith("mm_odometry: pose"):
-                    with lock:
-                        diags[s.name] = {kv.key: kv.value for kv in s.values}
-
-        client.node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 50)
+        watch = FinalPoses(client, {**{k: f"{ns[k]}/mm_odometry/odom" for k in nodes},
+                                    ONBOARD: "/mm_beagle/odom"})  # fmt: skip
         deadline = t_start + start_delay + motion_s + timeout
-        finals: dict[str, object] = {}
-        while time.monotonic() < deadline and len(finals) < len(topics):
+        while time.monotonic() < deadline and not watch.done:
             time.sleep(0.5)
-            if time.monotonic() < t_start + start_delay + motion_s:
-                continue
-            with lock:
-                for k in topics:
-                    recent = got[k][-10:]
-                    still = len(recent) == 10 and all(
-                        r.twist.twist.linear.x == 0 and r.twist.twist.angular.z == 0
-                        for r in recent
-                    )
-                    if still and abs(recent[-1].pose.pose.position.x) > 0.05:
-                        finals[k] = recent[-1]
+            if time.monotonic() >= t_start + start_delay + motion_s:
+                watch.note_finals()
         time.sleep(1.5)  # one more /diagnostics round after the last polls
     out: dict = {}
-    for k in topics:
-        msg = finals.get(k)
+    for k in watch.topics:
+        msg = watch.finals.get(k)
         if msg is None:
             out[k] = {"error": f"no final pose within the time allowed (logs: {log_dir})"}
             continue
-        p = msg.pose.pose
-        yaw = 2 * math.atan2(p.orientation.z, p.orientation.w)
-        row = _row((p.position.x, p.position.y, yaw), truth, length)
+        row = _row(pose_of(msg), truth, length)
         cov = msg.pose.covariance
         row["sigma_xy_mm"] = round(math.sqrt(cov[0] + cov[7]) * 1e3, 3)
         row["sigma_yaw_rad"] = float(f"{math.sqrt(cov[35]):.3g}")
-        d = next((d for n, d in diags.items() if k in ns and n.startswith(ns[k] + "/")), {})
         if k in ns:  # mm-odometry's /diagnostics
+            d = watch.diagnostics(ns[k])
             row["gaps"] = int(d.get("gaps", -1))
             row["polls_integrated"] = int(d.get("polls_integrated", -1))
             if lifts:
@@ -249,6 +217,87 @@ def through_processes(
         out[k] = row
     out["logs"] = str(log_dir)
     return out
+
+
+def start_pipeline(stack, odometry: dict, beagle: dict, env: dict, log_dir: Path, name: str):
+    """Start one mm-odometry per key of ``odometry`` (key -> (namespace, parameters), log
+    ``log_dir/KEY.log``) first, so each baselines on mm-beagle's first reply, then mm-beagle
+    (``beagle``'s parameters, ``beagle.log``), all stopped by ``stack``; a
+    :class:`~mm_beagle.tools.harness.BeagleClient` called ``name`` once mm-beagle answers."""
+    from mm_beagle.tools.harness import BeagleClient, _child, beagle_process
+
+    for k, (namespace, params) in odometry.items():
+        stack.enter(_child(_odometry_command(namespace, params), env, str(log_dir / f"{k}.log")))
+    stack.enter(beagle_process(beagle, env, str(log_dir / "beagle.log")))
+    client = BeagleClient(name)
+    stack.callback(client.close)
+    if not client.wait(30):
+        raise RuntimeError(f"mm-beagle did not come up (log: {log_dir / 'beagle.log'})")
+    return client
+
+
+def pose_of(msg) -> tuple[float, float, float]:
+    """x, y (m) and yaw (rad) of a nav_msgs/Odometry's planar pose."""
+    p = msg.pose.pose
+    return p.position.x, p.position.y, 2 * math.atan2(p.orientation.z, p.orientation.w)
+
+
+class FinalPoses:
+    """``client``'s subscriptions to each key's odometry topic (``topics``: key -> topic;
+    the last 30 messages kept) and to mm-odometry's /diagnostics (the last values of each
+    "NODE: pose" status). :meth:`note_finals` takes each key's final pose once the robot
+    stands: 10 messages in a row with no speed, away from the origin."""
+
+    KEEP = 30
+    STILL = 10
+
+    def __init__(self, client, topics: dict[str, str]) -> None:
+        from diagnostic_msgs.msg import DiagnosticArray
+        from nav_msgs.msg import Odometry as OdometryMsg
+
+        self.topics = dict(topics)
+        self.finals: dict[str, object] = {}
+        self._got: dict[str, list] = {k: [] for k in topics}
+        self._diags: dict[str, dict] = {}
+        self._lock = threading.Lock()
+        for k, topic in topics.items():
+            client.node.create_subscription(OdometryMsg, topic, self._keeper(k), 10)
+        client.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, 50)
+
+    def _keeper(self, k: str):
+        def on(msg) -> None:
+            with self._lock:
+                self._got[k].append(msg)
+                del self._got[k][: -self.KEEP]
+
+        return on
+
+    def _on_diag(self, msg) -> None:
+        for s in msg.status:
+            if s.name.endswith("mm_odometry: pose"):
+                with self._lock:
+                    self._diags[s.name] = {kv.key: kv.value for kv in s.values}
+
+    @property
+    def done(self) -> bool:
+        return len(self.finals) == len(self.topics)
+
+    def note_finals(self) -> None:
+        with self._lock:
+            for k, got in self._got.items():
+                recent = got[-self.STILL :]
+                still = len(recent) == self.STILL and all(
+                    r.twist.twist.linear.x == 0 and r.twist.twist.angular.z == 0 for r in recent
+                )
+                if still and abs(recent[-1].pose.pose.position.x) > 0.05:
+                    self.finals[k] = recent[-1]
+
+    def diagnostics(self, namespace: str) -> dict:
+        """The last pose status of the mm-odometry in ``namespace`` ({} before any)."""
+        with self._lock:
+            return next(
+                (d for n, d in self._diags.items() if n.startswith(namespace + "/")), {}
+            )
 
 
 class _Stack:

@@ -19,6 +19,7 @@ screenshot and a one-paragraph summary of what it saw.
 from __future__ import annotations
 
 import argparse
+import collections
 import gc
 import math
 import os
@@ -142,6 +143,9 @@ def summary(window, seconds: float) -> str:
             f"The pose integrated {s.stats.polls} single polls; {s.stats.gaps} gap(s) without "
             "them were stepped over with the totals (dashed red on the map)."
         )
+        if s.gaps:
+            why = collections.Counter(g.reason for g in s.gaps)
+            parts.append("Gaps: " + "; ".join(f"{r} ({n}x)" for r, n in why.most_common()) + ".")
     if window.frame_ms:
         import numpy as np
 

@@ -101,6 +101,16 @@ def test_batched_replies_give_the_same_as_one_by_one(ring):
     assert np.array_equal(batched.history.column("x"), one.history.column("x"))
 
 
+def test_the_headless_summary_names_each_gaps_cause(ring):
+    from mm_pc.monitor.app import summary
+
+    s = _session(_replies(ring, per_poll_cpi=False))
+    text = summary(SimpleNamespace(ctx=SimpleNamespace(session=s, bridge=None), frame_ms=[]), 5)
+    assert f"{len(CHANGES)} gap(s) without them" in text, text
+    # one cause, counted: the summary ends on it
+    assert text.endswith("Gaps: sensor 0: the CPI changed within the interval (2x)."), text
+
+
 def test_replies_without_poll_cpi_still_bridge_the_interval_as_a_gap(ring):
     """An old node: the reply's one cpi for all its polls; the interval with the change is
     a gap step from the totals, as before (nothing lost), and the change is still named."""

@@ -7,7 +7,6 @@ changes. Before, every change inside a request interval was a gap step from the 
 from __future__ import annotations
 
 import math
-import threading
 import time
 
 import pytest
@@ -16,11 +15,13 @@ pytest.importorskip("rclpy")
 
 from mm_pc.bench.pipeline import (
     ONBOARD,
-    _odometry_command,
+    FinalPoses,
     _row,
     _Stack,
     _truth,
     in_process,
+    pose_of,
+    start_pipeline,
     write_path,
 )
 from mm_pc.sim import robot as sim
@@ -45,10 +46,7 @@ TWO_SENSOR_WITH_CHANGES_MAX = 0.2
 def _run(path, log_dir):
     """mm-beagle + mm-odometry exact and two-sensor at 15 Hz, the CPI changes made while
     the robot drives: per key the final pose's error row, gaps and polls integrated."""
-    from diagnostic_msgs.msg import DiagnosticArray
-    from nav_msgs.msg import Odometry as OdometryMsg
-
-    from mm_beagle.tools.harness import BeagleClient, _child, beagle_process, use_isolated_ros_env
+    from mm_beagle.tools.harness import use_isolated_ros_env
 
     v, _w, truth, length = _truth(path)
     motion_s = len(v) * sim.DT
@@ -60,44 +58,19 @@ def _run(path, log_dir):
         "sim_start_delay": START_DELAY_S, "cpi": 1600,
         "odometry_rate": 15.0, "odometry_method": "two-sensor",
     }  # fmt: skip
-    topics = {k: f"{ns[k]}/mm_odometry/odom" for k in nodes}
-    topics[ONBOARD] = "/mm_beagle/odom"
-    got: dict[str, list] = {k: [] for k in topics}
-    diags: dict[str, dict] = {}
+    odometry = {
+        k: (ns[k], {"beagle": "/mm_beagle", "rate": 15.0, "method": m, "publish_tf": False})
+        for k, m in nodes.items()
+    }
     set_at: list[tuple[float, int, list[int]]] = []
-    lock = threading.Lock()
     with _Stack() as stack:
-        for k, m in nodes.items():
-            params = {"beagle": "/mm_beagle", "rate": 15.0, "method": m, "publish_tf": False}
-            stack.enter(_child(_odometry_command(ns[k], params), env, str(log_dir / f"{k}.log")))
-        stack.enter(beagle_process(beagle, env, str(log_dir / "beagle.log")))
+        client = start_pipeline(stack, odometry, beagle, env, log_dir, "test_pipeline_cpi_change")
         t_start = time.monotonic()
-        client = BeagleClient("test_pipeline_cpi_change")
-        stack.callback(client.close)
-        assert client.wait(30), f"mm-beagle did not come up (log: {log_dir / 'beagle.log'})"
-
-        def keep(k):
-            def on(msg):
-                with lock:
-                    got[k].append(msg)
-                    del got[k][:-30]
-
-            return on
-
-        for k, topic in topics.items():
-            client.node.create_subscription(OdometryMsg, topic, keep(k), 10)
-
-        def on_diag(msg):
-            for s in msg.status:
-                if s.name.endswith("mm_odometry: pose"):
-                    with lock:
-                        diags[s.name] = {kv.key: kv.value for kv in s.values}
-
-        client.node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 50)
+        watch = FinalPoses(client, {**{k: f"{ns[k]}/mm_odometry/odom" for k in nodes},
+                                    ONBOARD: "/mm_beagle/odom"})  # fmt: skip
         todo = list(CHANGES)
         deadline = t_start + START_DELAY_S + motion_s + 60.0
-        finals: dict[str, object] = {}
-        while time.monotonic() < deadline and len(finals) < len(topics):
+        while time.monotonic() < deadline and not watch.done:
             time.sleep(0.05)
             now = time.monotonic() - t_start - START_DELAY_S
             if todo and now >= todo[0][0]:
@@ -107,33 +80,22 @@ def _run(path, log_dir):
                     back.append(client.call("set_resolution", id=d, cpi=cpi, timeout=10.0).cpi)
                     time.sleep(BETWEEN_S)
                 set_at.append((round(now, 2), cpi, back))
-            if now < motion_s:
-                continue
-            with lock:
-                for k in topics:
-                    recent = got[k][-10:]
-                    still = len(recent) == 10 and all(
-                        r.twist.twist.linear.x == 0 and r.twist.twist.angular.z == 0
-                        for r in recent
-                    )
-                    if still and abs(recent[-1].pose.pose.position.x) > 0.05:
-                        finals[k] = recent[-1]
+            if now >= motion_s:
+                watch.note_finals()
         time.sleep(1.5)  # one more /diagnostics round after the last polls
         rings = [client.call("get_samples", id=d, since_seq=0, max_samples=0, timeout=10.0,
                              retries=2) for d in DEVICES]  # fmt: skip
     out: dict = {"set": set_at, "length_m": length, "rings": rings,
                  "ring_cpis": sorted(set(rings[0].poll_cpi))}  # fmt: skip
-    for k in topics:
-        msg = finals.get(k)
+    for k in watch.topics:
+        msg = watch.finals.get(k)
         if msg is None:
             out[k] = {"error": f"no final pose in time (logs: {log_dir})"}
             continue
-        p = msg.pose.pose
-        row = _row((p.position.x, p.position.y, 2 * math.atan2(p.orientation.z, p.orientation.w)),
-                   truth, length)  # fmt: skip
-        row["pose"] = (p.position.x, p.position.y, 2 * math.atan2(p.orientation.z, p.orientation.w))
+        row = _row(pose_of(msg), truth, length)
+        row["pose"] = pose_of(msg)
         if k in ns:
-            d = next((d for n, d in diags.items() if n.startswith(ns[k] + "/")), {})
+            d = watch.diagnostics(ns[k])
             row["gaps"] = int(d.get("gaps", -1))
             row["last_gap"] = d.get("last_gap", "")
             row["polls_integrated"] = int(d.get("polls_integrated", -1))
