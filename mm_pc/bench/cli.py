@@ -11,7 +11,7 @@ mm-bench maps --json
     noise, raw vs fused drift after a simulated 200 m mowing run.
     See mm_pc.bench.maps.
 
-mm-bench gui [--hours H] [--rate HZ] [--frames N] --json
+mm-bench gui [--hours H] [--rate HZ] [--frames N] [--stalls ACTIONS] [--no-node] --json
     The real monitor window offscreen with H hours of simulated history at
     HZ, polling a real mm-beagle sim node at HZ: frame time p50/p95 (all
     tabs and per tab), memory, dropped requests. See mm_pc.bench.gui.
@@ -390,6 +390,8 @@ def main(argv: list[str] | None = None) -> int:
     pose.add_argument("--json", action="store_true", help="print JSON only (the default)")
     maps = sub.add_parser("maps", help="grid map, trilateration and fusion (simulated)")
     maps.add_argument("--json", action="store_true", help="print JSON only (the default)")
+    from mm_pc.bench.gui import STALL_ACTIONS
+
     gui = sub.add_parser("gui", help="monitor frame times and memory with an hour of history")
     gui.add_argument("--hours", type=float, default=1.0, help="simulated history (h)")
     gui.add_argument("--rate", type=float, default=100.0, help="sample rate (Hz)")
@@ -407,6 +409,16 @@ def main(argv: list[str] | None = None) -> int:
         "--executor", choices=("events", "waitset"), default="events",
         help="the monitor's rclpy executor: the C++ events executor (default) or the Python "
         "wait-set one (for before/after comparisons)",
+    )
+    gui.add_argument(
+        "--stalls", default="all", metavar="ACTIONS",
+        help="the heavy actions whose GUI-thread stalls are measured: 'all' (default), "
+        "'none' or a comma list of " + ", ".join(STALL_ACTIONS),
+    )
+    gui.add_argument(
+        "--no-node", action="store_true",
+        help="no live mm-beagle: the history only, the stalls without live data (an "
+        "action's own cost, to compare with a run that has the node)",
     )
     gui.add_argument("--json", action="store_true", help="print JSON only (the default)")
     execs = sub.add_parser("executors", help="CPU per reply of a bare client, per executor")
@@ -449,13 +461,14 @@ def main(argv: list[str] | None = None) -> int:
             parser.error("need 0.1 <= --minutes <= 1440 and 0.5 <= --sample-seconds <= 600")
         result = bench_soak(args.minutes, args.sample_seconds)
     elif args.what == "gui":
-        from mm_pc.bench.gui import bench_gui
+        from mm_pc.bench.gui import bench_gui, stall_actions
 
         try:
             result = bench_gui(
                 hours=args.hours, rate_hz=args.rate, frames=args.frames,
                 live_seconds=args.live_seconds, polls=args.polls,
-                executor=args.executor,
+                executor=args.executor, node=not args.no_node,
+                stalls=stall_actions(args.stalls),
             )
         except ValueError as e:
             parser.error(str(e))

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["bench_gui", "cpu_figures"]
+__all__ = ["STALL_ACTIONS", "bench_gui", "cpu_figures", "stall_actions"]
 
 FRAME_HZ = 30.0
 GOAL_P95_MS = 16.0
@@ -97,6 +97,23 @@ STALL_MS = 100.0
 #: the actions of the stall phase, in order (see :func:`_stalls`)
 STALL_ACTIONS = ("tabs_500hz", "data_tab_500hz", "simulate_mowing_run", "csv_export",
                  "png_export", "replay", "replay_seek")
+
+
+def stall_actions(text: str) -> tuple[str, ...]:
+    """``--stalls``: 'all', 'none' or a comma list of :data:`STALL_ACTIONS` (ValueError
+    naming them otherwise)."""
+    if text.strip() == "all":
+        return STALL_ACTIONS
+    if text.strip() == "none":
+        return ()
+    names = tuple(n.strip() for n in text.split(","))
+    if not all(names) or any(n not in STALL_ACTIONS for n in names):
+        raise ValueError(
+            f"--stalls {text!r}: give 'all', 'none' or a comma list of {', '.join(STALL_ACTIONS)}"
+        )
+    return names
+
+
 #: how long the ``data_tab_500hz`` action keeps the Data tab open (s)
 DATA_TAB_S = 5.0
 
@@ -501,7 +518,7 @@ def bench_gui(
     live_seconds: float = 10.0,
     polls: str = "reply",
     executor: str = "events",
-    stalls: bool = True,
+    stalls: bool | tuple[str, ...] = True,
     gc_freeze: bool = True,
 ) -> dict:
     """Run the GUI benchmark (see the module doc); a JSON-ready dict.
@@ -517,8 +534,10 @@ def bench_gui(
     ``get_samples`` (one more call per sensor, the fallback for an older node);
     ``executor``: the bridge's rclpy executor (:data:`~mm_pc.monitor.ros_bridge.EXECUTORS`);
     ``stalls``: then the longest GUI-thread stalls during the user's heavy actions
-    (:func:`_stalls`, ``stalls`` in the JSON); ``gc_freeze``: freeze the start-up objects
-    once the window is shown, as mm-monitor does
+    (:func:`_stalls`, ``stalls`` in the JSON; True = every one of :data:`STALL_ACTIONS`, a
+    tuple = those, in that order; with ``node`` False they run without live data, to tell
+    an action's own cost from the live work it shares the GUI thread with); ``gc_freeze``:
+    freeze the start-up objects once the window is shown, as mm-monitor does
     (:func:`~mm_pc.monitor.app.freeze_startup_objects`; False to compare).
     """
     from mm_pc.monitor.ros_bridge import EXECUTORS, validate_rate
@@ -536,6 +555,13 @@ def bench_gui(
         raise ValueError(f"polls must be 'reply' or 'get_samples', got {polls!r}")
     if executor not in EXECUTORS:
         raise ValueError(f"executor must be one of {', '.join(EXECUTORS)}, got {executor!r}")
+    actions = STALL_ACTIONS if stalls is True else tuple(stalls or ())
+    unknown = [a for a in actions if a not in STALL_ACTIONS]
+    if unknown or len(set(actions)) != len(actions):
+        raise ValueError(
+            f"stalls must be True, False or distinct actions of {', '.join(STALL_ACTIONS)}; "
+            f"got {stalls!r}"
+        )
     os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
     from PySide6.QtWidgets import QApplication
 
@@ -572,9 +598,10 @@ def bench_gui(
             result["live_executor"] = bridge.executor
             result["live_poll_fetches"] = bridge.poll_fetches  # get_samples calls, whole run
             result["goal_live_cpu_percent"] = GOAL_LIVE_CPU_PERCENT
-        if stalls:
-            result["stalls"] = _stalls(window, bridge, app, tmp)
+        if actions:
+            result["stalls"] = _stalls(window, bridge, app, tmp, actions)
             result["stalls"]["gc_freeze"] = gc_freeze
+            result["stalls"]["live_node"] = node
     return result
 
 

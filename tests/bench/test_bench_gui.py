@@ -86,7 +86,8 @@ def test_bench_gui_refuses_bad_arguments(capsys):
     for bad in (
         {"hours": 0}, {"hours": -1.0}, {"rate_hz": 0}, {"frames": 0}, {"max_catch_up": -1},
         {"live_seconds": -1.0}, {"live_seconds": "x"}, {"polls": "both"},
-        {"executor": "asyncio"},
+        {"executor": "asyncio"}, {"stalls": ("csv_export", "nope")},
+        {"stalls": ("csv_export", "csv_export")},
     ):
         with pytest.raises(ValueError, match="must be"):
             bench_gui(**bad)
@@ -99,3 +100,20 @@ def test_bench_gui_refuses_bad_arguments(capsys):
     with pytest.raises(SystemExit) as e:
         bench_main(["gui", "--executor", "multi"])
     assert e.value.code == 2 and "invalid choice: 'multi'" in capsys.readouterr().err
+    for bad in ("nope", "csv_export,", ""):
+        with pytest.raises(SystemExit) as e:
+            bench_main(["gui", "--stalls", bad])
+        err = capsys.readouterr().err
+        assert e.value.code == 2 and "give 'all', 'none' or a comma list of" in err, err
+        assert "csv_export" in err.splitlines()[-1] and "Traceback" not in err
+
+
+def test_bench_gui_without_a_node_measures_the_chosen_stalls_alone(qapp):
+    """--no-node --stalls csv_export: the export's own cost, no live data beside it."""
+    r = bench_gui(hours=0.01, frames=3, node=False, stalls=("csv_export",))
+    st = r["stalls"]
+    assert set(st["by_action"]) == {"csv_export"} and st["live_node"] is False
+    assert "live" not in r and r["replies"] == 0
+    assert st["csv_rows"] == r["rows_after_history"] == 3600  # the history only, all of it
+    a = st["by_action"]["csv_export"]
+    assert "error" not in a and a["ticks"] > 0
