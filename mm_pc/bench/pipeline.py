@@ -186,8 +186,7 @@ def through_processes(
         for k, (m, hz) in nodes.items()
     }
     with _Stack() as stack:
-        client = start_pipeline(stack, odometry, beagle, env, log_dir, "mm_bench_pipeline")
-        t_start = time.monotonic()
+        client, t_start = start_pipeline(stack, odometry, beagle, env, log_dir, "mm_bench_pipeline")
         watch = FinalPoses(client, {**{k: f"{ns[k]}/mm_odometry/odom" for k in nodes},
                                     ONBOARD: "/mm_beagle/odom"})  # fmt: skip
         deadline = t_start + start_delay + motion_s + timeout
@@ -222,18 +221,21 @@ def through_processes(
 def start_pipeline(stack, odometry: dict, beagle: dict, env: dict, log_dir: Path, name: str):
     """Start one mm-odometry per key of ``odometry`` (key -> (namespace, parameters), log
     ``log_dir/KEY.log``) first, so each baselines on mm-beagle's first reply, then mm-beagle
-    (``beagle``'s parameters, ``beagle.log``), all stopped by ``stack``; a
-    :class:`~mm_beagle.tools.harness.BeagleClient` called ``name`` once mm-beagle answers."""
+    (``beagle``'s parameters, ``beagle.log``), all stopped by ``stack``. Returns a
+    :class:`~mm_beagle.tools.harness.BeagleClient` called ``name`` once mm-beagle answers,
+    and the ``time.monotonic()`` at mm-beagle's start (its ``sim_start_delay`` counts from
+    there, not from the client's first answer)."""
     from mm_beagle.tools.harness import BeagleClient, _child, beagle_process
 
     for k, (namespace, params) in odometry.items():
         stack.enter(_child(_odometry_command(namespace, params), env, str(log_dir / f"{k}.log")))
     stack.enter(beagle_process(beagle, env, str(log_dir / "beagle.log")))
+    started = time.monotonic()
     client = BeagleClient(name)
     stack.callback(client.close)
     if not client.wait(30):
         raise RuntimeError(f"mm-beagle did not come up (log: {log_dir / 'beagle.log'})")
-    return client
+    return client, started
 
 
 def pose_of(msg) -> tuple[float, float, float]:

@@ -64,8 +64,9 @@ def _run(path, log_dir):
     }
     set_at: list[tuple[float, int, list[int]]] = []
     with _Stack() as stack:
-        client = start_pipeline(stack, odometry, beagle, env, log_dir, "test_pipeline_cpi_change")
-        t_start = time.monotonic()
+        client, t_start = start_pipeline(
+            stack, odometry, beagle, env, log_dir, "test_pipeline_cpi_change"
+        )  # t_start: mm-beagle's start, the changes' times count from it as its start delay
         watch = FinalPoses(client, {**{k: f"{ns[k]}/mm_odometry/odom" for k in nodes},
                                     ONBOARD: "/mm_beagle/odom"})  # fmt: skip
         todo = list(CHANGES)
@@ -85,7 +86,7 @@ def _run(path, log_dir):
         time.sleep(1.5)  # one more /diagnostics round after the last polls
         rings = [client.call("get_samples", id=d, since_seq=0, max_samples=0, timeout=10.0,
                              retries=2) for d in DEVICES]  # fmt: skip
-    out: dict = {"set": set_at, "length_m": length, "rings": rings,
+    out: dict = {"set": set_at, "length_m": length, "motion_s": motion_s, "rings": rings,
                  "ring_cpis": sorted(set(rings[0].poll_cpi))}  # fmt: skip
     for k in watch.topics:
         msg = watch.finals.get(k)
@@ -139,6 +140,7 @@ def test_cpi_changes_while_driving_are_no_gap_and_keep_the_pose_exact(tmp_path):
     got = _run(path, tmp_path)
     # both changes made while the robot drove, on both sensors
     assert [(c, b) for _, c, b in got["set"]] == [(800, [800, 800]), (3200, [3200, 3200])], got
+    assert all(t + BETWEEN_S < got["motion_s"] for t, _, _ in got["set"]), got["set"]
     # mm-beagle's get_samples says each poll's CPI (its ring holds the whole run)
     assert got["ring_cpis"] == [800, 1600, 3200], got
     # the in-process per-poll figure at each of the CPIs used: the pose through the
